@@ -1,0 +1,40 @@
+#pragma once
+// The YAML configuration: one file describes the model to identify, the loop
+// (controller), and optionally the simulated plant and experiment. Every key is
+// documented in config/README.md; an unknown key, a wrong type or an invalid
+// value is an InputError naming the key and its line.
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "modalwatch/model.hpp"
+#include "modalwatch/prefilter.hpp"
+#include "modalwatch/simulator.hpp"
+#include "modalwatch/transfer_function.hpp"
+
+namespace modalwatch {
+
+struct SubmodelSettings {
+  double forgetting = 1.0;  // lambda in (0, 1], eq. (13)
+};
+
+struct Config {
+  std::string source;          // file name, for messages
+  double sample_time = 0.0;    // s (from sample_rate_hz)
+  AdditiveModel model;         // initial guesses / nominal model
+  std::vector<SubmodelSettings> submodel_settings;  // one per submodel
+  bool closed_loop = false;
+  DiscreteTransferFunction controller;
+  Hold output_hold = Hold::zoh;
+  std::optional<PlantSpec> plant;            // `plant:` section (simulate)
+  std::optional<ExperimentSpec> experiment;  // `simulation:` section (simulate)
+};
+
+Config load_config(const std::string& path);
+Config parse_config(const std::string& yaml_text, const std::string& source_name);
+
+// The configuration as YAML, with `model` in place of the configured one (for
+// `fit --out`: a fitted model that seeds the other commands).
+std::string config_to_yaml(const Config& config, const AdditiveModel& model);
+
+}  // namespace modalwatch

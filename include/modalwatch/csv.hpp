@@ -1,0 +1,36 @@
+#pragma once
+// CSV records: a header line, then numeric rows. Errors name the row (1-based
+// line number in the file) and the column.
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "modalwatch/record.hpp"
+
+namespace modalwatch {
+
+struct Table {
+  std::vector<std::string> columns;
+  Eigen::MatrixXd data;  // rows x columns
+  int column(const std::string& name) const;  // -1 when absent
+};
+
+// Reads a numeric table. Throws InputError naming the row and column for a
+// non-numeric field, NaN or Inf, a short or long row, or an empty file.
+Table read_table(const std::string& path);
+
+struct RecordColumns {
+  std::string t = "t", u = "u", y = "y", r = "r";
+};
+
+// Reads t, u, y (and r when present) and checks that time increases strictly and
+// evenly (within 1 % of the mean step). Throws InputError.
+Record read_record(const std::string& path, const RecordColumns& columns = {});
+
+// Writes atomically (temporary file, then rename), so a failure leaves nothing behind.
+void write_table(const std::string& path, const std::vector<std::string>& columns,
+                 const Eigen::MatrixXd& data);
+void write_record(const std::string& path, const Record& record);
+
+}  // namespace modalwatch

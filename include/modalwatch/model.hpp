@@ -1,0 +1,85 @@
+#pragma once
+// The additive continuous-time model of eqs. (5) and (8) of the paper:
+//
+//   G(p) = sum_i G_i(p),   G_i(p) = B_i(p) / (p^l_i A_i(p)),
+//   A_i(p) = a_{i,n} p^n + ... + a_{i,1} p + 1     (anti-monic, eq. 6)
+//   B_i(p) = b_{i,m} p^m + ... + b_{i,1} p + b_{i,0}
+//
+// with l_i poles at the origin for rigid-body submodels (section 4.6).
+// Coefficients are in physical units (time in seconds).
+#include <complex>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace modalwatch {
+
+// Natural frequency, damping ratio and DC gain of b0 / (p^2/wn^2 + 2 zeta/wn p + 1),
+// eq. (11). For a rigid-body submodel b0/p^l only `gain` is meaningful.
+struct ModalParameters {
+  double wn = 0.0;    // rad/s
+  double zeta = 0.0;  // -
+  double gain = 0.0;  // DC gain (b0), output units per input unit
+
+  double hz() const;  // wn / (2 pi)
+};
+
+struct Submodel {
+  std::string name;
+  int n = 2;            // order of A
+  int m = 0;            // order of B, m <= n (+l for rigid bodies)
+  int rigid_poles = 0;  // l: poles at the origin
+  Eigen::VectorXd a;    // a_1 .. a_n
+  Eigen::VectorXd b;    // b_0 .. b_m
+
+  int n_theta() const { return n + m + 1; }
+  // eq. (7): theta_i = [a_1 .. a_n, b_0 .. b_m]
+  Eigen::VectorXd theta() const;
+  void set_theta(const Eigen::VectorXd& theta);
+
+  // Ascending coefficients of A(p): [1, a_1, ..., a_n].
+  Eigen::VectorXd a_polynomial() const;
+  // Ascending coefficients of the full denominator p^l A(p).
+  Eigen::VectorXd denominator() const;
+
+  // G_i(j w), w in rad/s.
+  std::complex<double> response(double w) const;
+
+  // True when this is a plain second-order mode (n = 2, m = 0, no rigid poles).
+  bool is_mode() const { return n == 2 && m == 0 && rigid_poles == 0; }
+  // Throws std::invalid_argument when the sizes do not match n, m.
+  void check() const;
+};
+
+// A resonant mode b0 / (p^2/wn^2 + 2 zeta/wn p + 1).
+Submodel make_mode(const std::string& name, const ModalParameters& modal);
+// A rigid body b0 / p^l.
+Submodel make_rigid_body(const std::string& name, double gain, int rigid_poles = 2);
+
+// The modal view of a second-order submodel (n = 2). For m > 0 the gain is b0,
+// still the DC gain. For a rigid body, wn and zeta are those of A (0 if n < 2).
+ModalParameters modal_parameters(const Submodel& s);
+
+// Standard deviations of (wn, zeta, gain) from the covariance of theta_i,
+// by first-order propagation through the maps wn = a2^{-1/2},
+// zeta = a1 / (2 sqrt(a2)), gain = b0.
+ModalParameters modal_std(const Submodel& s, const Eigen::MatrixXd& theta_covariance);
+
+// Every resonance of a submodel of any order: the (wn, zeta) of each
+// complex-conjugate root pair of A, and real roots as zeta >= 1 entries, sorted by wn.
+std::vector<ModalParameters> resonances(const Submodel& s);
+
+struct AdditiveModel {
+  std::vector<Submodel> submodels;
+
+  int n_beta() const;  // sum of n_theta
+  // eq. (8): beta = [theta_1; ...; theta_K]
+  Eigen::VectorXd beta() const;
+  void set_beta(const Eigen::VectorXd& beta);
+  // Offset of theta_i inside beta.
+  int offset(int i) const;
+  std::complex<double> response(double w) const;
+};
+
+}  // namespace modalwatch

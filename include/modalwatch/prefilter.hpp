@@ -1,0 +1,79 @@
+#pragma once
+// Continuous-time prefilters on sampled data (DESIGN.md point 1).
+//
+// The filter 1/D(p), D(p) = d_0 + d_1 p + ... + d_N p^N (for a submodel,
+// D = p^l A(p)), is simulated in controllable canonical form: its state is
+// x = [w_f, p w_f, ..., p^{N-1} w_f] with w_f = w / D. The top derivative is not
+// integrated but follows algebraically from the current sample,
+//
+//   p^N w_f(t_k) = (w(t_k) - sum_{j<N} d_j p^j w_f(t_k)) / d_N,
+//
+// so that sum_j d_j p^j w_f(t_k) = w(t_k) exactly. The filter is discretised
+// exactly (matrix exponential) for the assumed intersample behaviour of w:
+// held (ZOH) or linearly interpolated (FOH).
+//
+// Time scaling (DESIGN.md point 3) is the caller's: pass D and T in normalised
+// time (t' = ws t) and the derivatives come out in that time unit.
+#include <Eigen/Core>
+
+namespace modalwatch {
+
+enum class Hold { zoh, foh };
+
+// Largest filter order N supported without heap allocation.
+inline constexpr int kMaxFilterOrder = 8;
+
+using FilterVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxFilterOrder + 1, 1>;
+using FilterMatrix =
+    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxFilterOrder, kMaxFilterOrder>;
+
+// x(t_{k+1}) = phi x(t_k) + gamma0 w_k + gamma1 (w_{k+1} - w_k)
+// (gamma1 = 0 for ZOH).
+struct Discretization {
+  FilterMatrix phi;
+  FilterVector gamma0;
+  FilterVector gamma1;
+};
+
+// Exact discretisation of 1/D(p) with sample time T. N = 1 and N = 2 with
+// d_0 != 0 use closed forms (no general matrix exponential); other orders use
+// the matrix exponential of an augmented matrix.
+Discretization discretize(const Eigen::Ref<const Eigen::VectorXd>& denominator, double T, Hold hold);
+
+class Prefilter {
+ public:
+  Prefilter() = default;
+  Prefilter(const Eigen::Ref<const Eigen::VectorXd>& denominator, double T, Hold hold);
+
+  // Re-discretises for a new denominator of the same order, keeping the state
+  // (the parameters are assumed to change only at sampling instants).
+  void set_denominator(const Eigen::Ref<const Eigen::VectorXd>& denominator);
+  void reset();  // zero state, zero past input
+
+  // Advances from t_{k-1} to t_k with the new sample w_k and returns
+  // [w_f, p w_f, ..., p^N w_f] at t_k (size N+1).
+  const FilterVector& step(double w);
+  const FilterVector& derivatives() const { return out_; }
+
+  // Output of B(p)/D(p) from the current derivatives: sum_j b_j p^j w_f.
+  double combine(const Eigen::Ref<const Eigen::VectorXd>& b) const;
+
+  int order() const { return order_; }
+  double sample_time() const { return T_; }
+  Hold hold() const { return hold_; }
+  const FilterVector& state() const { return x_; }
+  void set_state(const FilterVector& x, double previous_input);
+  double previous_input() const { return w_prev_; }
+
+ private:
+  int order_ = 0;
+  double T_ = 0.0;
+  Hold hold_ = Hold::zoh;
+  FilterVector d_;  // denominator, ascending
+  Discretization disc_;
+  FilterVector x_;
+  FilterVector out_;
+  double w_prev_ = 0.0;
+};
+
+}  // namespace modalwatch

@@ -1,0 +1,30 @@
+#pragma once
+// A sampled input/output record: t, u, y and, in closed loop, the reference r.
+#include <Eigen/Core>
+
+namespace modalwatch {
+
+struct Record {
+  Eigen::VectorXd t;  // s, strictly increasing, equidistant
+  Eigen::VectorXd u;  // plant input (controller output in closed loop)
+  Eigen::VectorXd y;  // measured output
+  Eigen::VectorXd r;  // reference; empty in open loop
+
+  Eigen::Index size() const { return t.size(); }
+  bool has_reference() const { return r.size() == t.size() && r.size() > 0; }
+  // Mean sample interval; records are assumed equidistant (the CSV reader checks).
+  double sample_time() const {
+    return t.size() > 1 ? (t(t.size() - 1) - t(0)) / static_cast<double>(t.size() - 1) : 0.0;
+  }
+  // Samples [begin, begin+count).
+  Record segment(Eigen::Index begin, Eigen::Index count) const {
+    Record s;
+    s.t = t.segment(begin, count);
+    s.u = u.segment(begin, count);
+    s.y = y.segment(begin, count);
+    if (has_reference()) s.r = r.segment(begin, count);
+    return s;
+  }
+};
+
+}  // namespace modalwatch

@@ -1,0 +1,71 @@
+#pragma once
+// Data from a plant described as a sum of modes whose parameters follow
+// piecewise-linear trajectories in time, exactly discretised under ZOH, in open
+// loop or in closed loop with a discrete controller C_d(q).
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "modalwatch/model.hpp"
+#include "modalwatch/record.hpp"
+#include "modalwatch/signals.hpp"
+#include "modalwatch/transfer_function.hpp"
+
+namespace modalwatch {
+
+// A quantity over time: piecewise linear through the points (t, value), held
+// constant before the first and after the last. Empty means constant `base`.
+struct Trajectory {
+  std::vector<std::pair<double, double>> points;
+  double at(double t, double base) const;
+};
+
+struct PlantMode {
+  // A resonant mode (wn, zeta, gain), or any submodel given by its coefficients
+  // (rigid bodies, higher orders), which then stays constant in time.
+  Submodel submodel;
+  bool resonant = true;   // trajectories apply to (wn, zeta, gain)
+  ModalParameters modal;  // nominal values when resonant
+  Trajectory wn, zeta, gain;
+};
+
+struct PlantSpec {
+  std::vector<PlantMode> modes;
+  // Output noise: white Gaussian with this variance, or set by snr_db
+  // (10 log10 of noise-free output power over noise power) when given.
+  double noise_variance = 0.0;
+  std::optional<double> snr_db;
+};
+
+struct ExperimentSpec {
+  double sample_time = 0.05;  // s
+  double duration = 10.0;     // s
+  std::uint64_t seed = 1;     // noise
+  bool closed_loop = false;
+  DiscreteTransferFunction controller;  // closed loop: u = C_d(q)(r - y)
+  SignalSpec excitation;                // input (open loop) or reference (closed loop)
+  // Samples of the excitation when it comes from a file (SignalSpec::Kind::csv),
+  // already on the time grid.
+  Eigen::VectorXd excitation_samples;
+};
+
+struct SimulationResult {
+  Record record;            // t, r (closed loop), u, y
+  Eigen::VectorXd y_clean;  // noise-free output
+  // Truth over time: one row per sample, columns per mode <name>_wn, <name>_zeta,
+  // <name>_gain (resonant modes) and theta entries otherwise.
+  std::vector<std::string> truth_columns;
+  Eigen::MatrixXd truth;
+  double noise_variance = 0.0;  // the variance actually used
+};
+
+SimulationResult simulate(const PlantSpec& plant, const ExperimentSpec& experiment);
+
+// The plant's model at time t (the truth the estimators are judged against).
+AdditiveModel plant_model_at(const PlantSpec& plant, double t);
+
+}  // namespace modalwatch

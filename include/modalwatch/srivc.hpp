@@ -1,0 +1,62 @@
+#pragma once
+// Offline estimators: SRIVC (K = 1) and additive SRIVC by block-coordinate
+// descent (Algorithm 0 of the paper with the SRIVC iterations of eq. (17) per
+// block; the paper's references gonzalez2023parsimonious and
+// gonzalez2023identification), in open and closed loop (instrument from
+// z = S_uo(q) r, eq. 29), with rigid-body submodels (eqs. 32-33) and stability
+// projection at every iteration. These seed the recursive estimator.
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "modalwatch/model.hpp"
+#include "modalwatch/prefilter.hpp"
+#include "modalwatch/record.hpp"
+#include "modalwatch/transfer_function.hpp"
+
+namespace modalwatch {
+
+struct SrivcOptions {
+  int max_iterations = 100;     // block-coordinate cycles over all submodels
+  int srivc_per_block = 1;      // SRIVC refinements of one submodel per cycle
+  double tolerance = 1e-10;     // on the relative change of beta per cycle
+  Hold output_hold = Hold::zoh; // intersample behaviour assumed for y in the prefilters
+  bool stability_projection = true;
+  // Closed loop: u = C_d(q)(r - y); the record must carry r.
+  bool closed_loop = false;
+  DiscreteTransferFunction controller;
+};
+
+struct FitResult {
+  AdditiveModel model;
+  // Covariance of beta (eq. 8), sigma^2 times the IV sandwich
+  // J^{-1} (sum psi_hat psi_hat^T) J^{-T}; in open loop this is sigma^2 P.
+  Eigen::MatrixXd covariance;
+  double noise_variance = 0.0;   // sigma^2 of the output error
+  double fit_percent = 0.0;      // 100 (1 - ||y - y_hat|| / ||y - mean(y)||)
+  int iterations = 0;
+  bool converged = false;
+  int projections = 0;           // stability projections applied
+  std::vector<double> change_history;  // relative change of beta per cycle
+  Eigen::VectorXd simulated;     // y_hat: the model's output on the record
+
+  // Covariance block of submodel i.
+  Eigen::MatrixXd theta_covariance(int i) const;
+};
+
+// Throws std::invalid_argument on a record too short for the number of
+// parameters, or a closed-loop fit without a reference or controller.
+FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const SrivcOptions& options);
+
+// Output of the model on the record: open loop, the simulated sum of submodels
+// driven by u (ZOH); closed loop with simulate_loop, the noise-free loop driven by r.
+Eigen::VectorXd simulate_model(const AdditiveModel& model, const Eigen::VectorXd& u, double T);
+// Noise-free closed loop with the known controller: returns z = S_uo(q) r (the
+// instrument input, eq. 29) and the loop output.
+void simulate_loop(const AdditiveModel& model, const DiscreteTransferFunction& controller,
+                   const Eigen::VectorXd& r, double T, Eigen::VectorXd& z, Eigen::VectorXd& y);
+
+double fit_percent(const Eigen::VectorXd& y, const Eigen::VectorXd& y_hat);
+
+}  // namespace modalwatch

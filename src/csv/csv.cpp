@@ -1,0 +1,322 @@
+// CSV records. The whole file is read into memory and parsed in place with
+// std::from_chars: iostream per field is an order of magnitude too slow for
+// records of millions of rows.
+#include "modalwatch/csv.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <string_view>
+#include <system_error>
+
+#include "modalwatch/error.hpp"
+
+namespace modalwatch {
+namespace {
+
+struct FileCloser {
+  void operator()(std::FILE* f) const { std::fclose(f); }
+};
+using File = std::unique_ptr<std::FILE, FileCloser>;
+
+std::string read_file(const std::string& path) {
+  File f(std::fopen(path.c_str(), "rb"));
+  if (!f) throw InputError(path, std::string("cannot open: ") + std::strerror(errno));
+  std::string text;
+  char buffer[1 << 16];
+  std::size_t got = 0;
+  while ((got = std::fread(buffer, 1, sizeof buffer, f.get())) > 0) text.append(buffer, got);
+  if (std::ferror(f.get())) throw InputError(path, std::string("cannot read: ") + std::strerror(errno));
+  return text;
+}
+
+std::string_view trim(std::string_view s) {
+  const auto blank = [](char c) { return c == ' ' || c == '\t' || c == '\r'; };
+  while (!s.empty() && blank(s.front())) s.remove_prefix(1);
+  while (!s.empty() && blank(s.back())) s.remove_suffix(1);
+  return s;
+}
+
+bool is_blank(std::string_view line) { return trim(line).empty(); }
+
+// Splits text into lines without copying; a final line without '\n' counts.
+class LineReader {
+ public:
+  explicit LineReader(std::string_view text) : rest_(text) {}
+  bool next(std::string_view& line) {
+    if (rest_.empty()) return false;
+    const std::size_t end = rest_.find('\n');
+    line = rest_.substr(0, end);
+    rest_.remove_prefix(end == std::string_view::npos ? rest_.size() : end + 1);
+    ++number_;
+    return true;
+  }
+  int number() const { return number_; }  // 1-based line number of the last line
+  std::string_view rest() const { return rest_; }
+
+ private:
+  std::string_view rest_;
+  int number_ = 0;
+};
+
+std::string row_location(const std::string& path, int row) {
+  return path + ": row " + std::to_string(row);
+}
+std::string cell_location(const std::string& path, int row, const std::string& column) {
+  return row_location(path, row) + ", column '" + column + "'";
+}
+
+std::string format_number(double v) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "%.17g", v);
+  return buffer;
+}
+
+std::string join(const std::vector<std::string>& names) {
+  std::string out;
+  for (const auto& n : names) out += (out.empty() ? "" : ", ") + n;
+  return out;
+}
+
+std::vector<std::string> parse_header(const std::string& path, std::string_view line) {
+  std::vector<std::string> columns;
+  std::size_t start = 0;
+  while (true) {
+    const std::size_t comma = line.find(',', start);
+    const std::string_view field = trim(line.substr(start, comma - start));
+    if (field.empty())
+      throw InputError(row_location(path, 1),
+                       "empty column name in header (column " + std::to_string(columns.size() + 1) + ")");
+    std::string name(field);
+    if (std::find(columns.begin(), columns.end(), name) != columns.end())
+      throw InputError(cell_location(path, 1, name), "duplicate column name");
+    columns.push_back(std::move(name));
+    if (comma == std::string_view::npos) break;
+    start = comma + 1;
+  }
+  return columns;
+}
+
+// Parses one field completely; from_chars rejects '+', so it is skipped here.
+bool parse_number(std::string_view field, double& value) {
+  if (field.size() > 1 && field.front() == '+' && field[1] != '-') field.remove_prefix(1);
+  const char* end = field.data() + field.size();
+  const auto [ptr, ec] = std::from_chars(field.data(), end, value);
+  return ec == std::errc() && ptr == end;
+}
+
+std::size_t count_newlines(std::string_view text) {
+  return static_cast<std::size_t>(std::count(text.begin(), text.end(), '\n'));
+}
+
+class TableParser {
+ public:
+  TableParser(const std::string& path, const std::vector<std::string>& columns, Eigen::MatrixXd& data)
+      : path_(path), columns_(columns), data_(data) {}
+
+  // Fills row `index` of data from the line with 1-based number `row`.
+  void parse_row(std::string_view line, int row, Eigen::Index index) {
+    const std::size_t n = columns_.size();
+    std::size_t start = 0;
+    for (std::size_t c = 0; c < n; ++c) {
+      const std::size_t comma = line.find(',', start);
+      if (comma == std::string_view::npos && c + 1 < n) short_row(row, c + 1);
+      const std::size_t end = c + 1 < n ? comma : line.size();
+      if (c + 1 == n && comma != std::string_view::npos) long_row(line, row);
+      data_(index, static_cast<Eigen::Index>(c)) = field(line.substr(start, end - start), row, c);
+      start = end + 1;
+    }
+  }
+
+ private:
+  double field(std::string_view text, int row, std::size_t c) const {
+    const std::string_view s = trim(text);
+    double value = 0.0;
+    if (!parse_number(s, value))
+      throw InputError(cell_location(path_, row, columns_[c]),
+                       s.empty() ? "empty field" : "not a number (got '" + std::string(s) + "')");
+    if (!std::isfinite(value))
+      throw InputError(cell_location(path_, row, columns_[c]),
+                       "not a finite number (got '" + std::string(s) + "')");
+    return value;
+  }
+  [[noreturn]] void short_row(int row, std::size_t fields) const {
+    throw InputError(cell_location(path_, row, columns_[fields]),
+                     "row has " + std::to_string(fields) + " fields, header has " +
+                         std::to_string(columns_.size()));
+  }
+  [[noreturn]] void long_row(std::string_view line, int row) const {
+    const std::size_t fields = static_cast<std::size_t>(std::count(line.begin(), line.end(), ',')) + 1;
+    throw InputError(row_location(path_, row), "row has " + std::to_string(fields) +
+                                                   " fields, header has " +
+                                                   std::to_string(columns_.size()));
+  }
+
+  const std::string& path_;
+  const std::vector<std::string>& columns_;
+  Eigen::MatrixXd& data_;
+};
+
+// Blank lines are accepted only at the end, so that data row k is file line k + 2.
+void check_trailing_blank(const std::string& path, LineReader& lines) {
+  std::string_view line;
+  const int first_blank = lines.number();
+  while (lines.next(line))
+    if (!is_blank(line))
+      throw InputError(row_location(path, first_blank), "empty row before more data");
+}
+
+std::string_view strip_bom(std::string_view text) {
+  if (text.substr(0, 3) == "\xEF\xBB\xBF") text.remove_prefix(3);
+  return text;
+}
+
+}  // namespace
+
+int Table::column(const std::string& name) const {
+  const auto it = std::find(columns.begin(), columns.end(), name);
+  return it == columns.end() ? -1 : static_cast<int>(it - columns.begin());
+}
+
+Table read_table(const std::string& path) {
+  const std::string text = read_file(path);
+  LineReader lines(strip_bom(text));
+  std::string_view line;
+  if (text.find_first_not_of(" \t\r\n\xEF\xBB\xBF") == std::string::npos || !lines.next(line))
+    throw InputError(path, "empty file (expected a header line of column names)");
+  Table table;
+  table.columns = parse_header(path, line);
+  table.data.resize(static_cast<Eigen::Index>(count_newlines(lines.rest()) + 1),
+                    static_cast<Eigen::Index>(table.columns.size()));
+  TableParser parser(path, table.columns, table.data);
+  Eigen::Index rows = 0;
+  while (lines.next(line)) {
+    if (is_blank(line)) {
+      check_trailing_blank(path, lines);
+      break;
+    }
+    parser.parse_row(line, lines.number(), rows++);
+  }
+  if (rows == 0) throw InputError(path, "no data rows after the header");
+  table.data.conservativeResize(rows, Eigen::NoChange);
+  return table;
+}
+
+namespace {
+
+int require_column(const std::string& path, const Table& table, const std::string& name) {
+  const int c = table.column(name);
+  if (c < 0)
+    throw InputError(path, "missing column '" + name + "' (available: " + join(table.columns) + ")");
+  return c;
+}
+
+// Row k of the data is line k + 2 of the file (header on line 1).
+int file_row(Eigen::Index k) { return static_cast<int>(k) + 2; }
+
+void check_time(const std::string& path, const std::string& name, const Eigen::VectorXd& t) {
+  const Eigen::Index n = t.size();
+  for (Eigen::Index k = 1; k < n; ++k)
+    if (!(t(k) > t(k - 1)))
+      throw InputError(cell_location(path, file_row(k), name),
+                       "time does not increase (got " + format_number(t(k)) + " after " +
+                           format_number(t(k - 1)) + ")");
+  if (n < 3) return;
+  const double mean = (t(n - 1) - t(0)) / static_cast<double>(n - 1);
+  for (Eigen::Index k = 1; k < n; ++k) {
+    const double step = t(k) - t(k - 1);
+    if (std::abs(step - mean) > 0.01 * mean) {
+      char msg[160];
+      std::snprintf(msg, sizeof msg, "uneven sampling: step %.9g differs from the mean step %.9g by more than 1 %%",
+                    step, mean);
+      throw InputError(cell_location(path, file_row(k), name), msg);
+    }
+  }
+}
+
+}  // namespace
+
+Record read_record(const std::string& path, const RecordColumns& columns) {
+  const Table table = read_table(path);
+  const int t = require_column(path, table, columns.t);
+  const int u = require_column(path, table, columns.u);
+  const int y = require_column(path, table, columns.y);
+  Record record;
+  record.t = table.data.col(t);
+  record.u = table.data.col(u);
+  record.y = table.data.col(y);
+  if (const int r = table.column(columns.r); r >= 0) record.r = table.data.col(r);
+  check_time(path, columns.t, record.t);
+  return record;
+}
+
+namespace {
+
+void write_rows(std::FILE* f, const std::vector<std::string>& columns, const Eigen::MatrixXd& data) {
+  std::fputs(join(columns).c_str(), f);
+  std::fputc('\n', f);
+  for (Eigen::Index i = 0; i < data.rows(); ++i) {
+    for (Eigen::Index j = 0; j < data.cols(); ++j)
+      std::fprintf(f, j == 0 ? "%.17g" : ",%.17g", data(i, j));
+    std::fputc('\n', f);
+  }
+}
+
+// The header has no quoting, so names that would split or shift columns are refused.
+void check_columns(const std::string& path, const std::vector<std::string>& columns,
+                   const Eigen::MatrixXd& data) {
+  if (static_cast<Eigen::Index>(columns.size()) != data.cols())
+    throw InputError(path, "cannot write: " + std::to_string(columns.size()) + " column names for " +
+                               std::to_string(data.cols()) + " columns");
+  for (const auto& name : columns)
+    if (name.empty() || name.find_first_of(",\n\r") != std::string::npos || trim(name) != name)
+      throw InputError(path, "cannot write: invalid column name '" + name + "'");
+}
+
+}  // namespace
+
+void write_table(const std::string& path, const std::vector<std::string>& columns,
+                 const Eigen::MatrixXd& data) {
+  check_columns(path, columns, data);
+  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
+  std::FILE* f = std::fopen(tmp.c_str(), "wb");
+  if (!f) throw InputError(path, std::string("cannot write: ") + std::strerror(errno));
+  write_rows(f, columns, data);
+  const bool failed = std::ferror(f) != 0;
+  const int saved = errno;
+  if (std::fclose(f) != 0 || failed) {
+    std::remove(tmp.c_str());
+    throw InputError(path, std::string("cannot write: ") + std::strerror(failed ? saved : errno));
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int err = errno;
+    std::remove(tmp.c_str());
+    throw InputError(path, std::string("cannot rename the temporary file: ") + std::strerror(err));
+  }
+}
+
+void write_record(const std::string& path, const Record& record) {
+  const bool with_r = record.has_reference();
+  const Eigen::Index n = record.size();
+  if (record.u.size() != n || record.y.size() != n)
+    throw InputError(path, "cannot write: t, u and y differ in length");
+  std::vector<std::string> columns{"t"};
+  Eigen::MatrixXd data(n, with_r ? 4 : 3);
+  data.col(0) = record.t;
+  if (with_r) {
+    columns.push_back("r");
+    data.col(1) = record.r;
+  }
+  columns.insert(columns.end(), {"u", "y"});
+  data.col(with_r ? 2 : 1) = record.u;
+  data.col(with_r ? 3 : 2) = record.y;
+  write_table(path, columns, data);
+}
+
+}  // namespace modalwatch
