@@ -52,10 +52,13 @@ void expect_step_response(const Eigen::VectorXd& d, double T, int samples) {
   }
   for (int k = 0; k < samples; ++k) {
     const auto& out = f.step(1.0);  // unit step applied at t_0, held
-    for (int j = 0; j < N; ++j)
+    for (int j = 0; j < N; ++j) {
       ASSERT_NEAR(out(j), analytic(d, 0, j, k * T), 1e-9 * scale) << "k=" << k << " j=" << j;
+    }
     // The top derivative is the algebraic one; for t > 0 it equals the true p^N w_f.
-    if (k > 0) ASSERT_NEAR(out(N), analytic(d, 0, N, k * T), 1e-9 * scale) << "top, k=" << k;
+    if (k > 0) {
+      ASSERT_NEAR(out(N), analytic(d, 0, N, k * T), 1e-9 * scale) << "top, k=" << k;
+    }
   }
 }
 
