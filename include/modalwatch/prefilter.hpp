@@ -53,6 +53,13 @@ class Prefilter {
   // Advances from t_{k-1} to t_k with the new sample w_k and returns
   // [w_f, p w_f, ..., p^N w_f] at t_k (size N+1).
   const FilterVector& step(double w);
+
+  // step(w) in two phases, for algebraic loops (a biproper controller around a
+  // plant with feedthrough): advance() moves the state to t_k with the held
+  // input (ZOH only); complete(w) then sets the derivatives for the sample w_k
+  // and may be called again with a corrected w_k.
+  void advance();
+  const FilterVector& complete(double w);
   const FilterVector& derivatives() const { return out_; }
 
   // Output of B(p)/D(p) from the current derivatives: sum_j b_j p^j w_f.

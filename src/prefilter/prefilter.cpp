@@ -156,13 +156,25 @@ void Prefilter::reset() {
 }
 
 const FilterVector& Prefilter::step(double w) {
-  const int N = order_;
-  if (N > 0) {
+  if (order_ > 0) {
     // x(t_k) from x(t_{k-1}) with the input held (ZOH) or ramped (FOH) over the interval.
     FilterVector next = disc_.phi * x_ + disc_.gamma0 * w_prev_;
     if (hold_ == Hold::foh) next += disc_.gamma1 * (w - w_prev_);
     x_ = next;
   }
+  return complete(w);
+}
+
+void Prefilter::advance() {
+  if (hold_ != Hold::zoh) throw std::logic_error("Prefilter::advance needs a held input (ZOH)");
+  if (order_ > 0) {
+    FilterVector next = disc_.phi * x_ + disc_.gamma0 * w_prev_;
+    x_ = next;
+  }
+}
+
+const FilterVector& Prefilter::complete(double w) {
+  const int N = order_;
   double top = w;
   for (int j = 0; j < N; ++j) {
     out_(j) = x_(j);

@@ -1,1 +1,295 @@
-// placeholder
+#include "modalwatch/srivc.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include <Eigen/QR>
+
+#include "modalwatch/polynomial.hpp"
+
+namespace modalwatch {
+namespace {
+
+// Per-submodel time normalisation (DESIGN.md point 3): with t' = ws t a mode's
+// coefficients become a'_j = a_j ws^j and b'_k = b_k ws^(k-l), so a'_n is of
+// order one whether the mode sits at 1 rad/s or at 700 Hz.
+double time_scale(const Submodel& s) {
+  if (s.n > 0 && s.a(s.n - 1) != 0.0) return std::pow(std::abs(s.a(s.n - 1)), -1.0 / s.n);
+  return 1.0;
+}
+
+// theta' = scaling .* theta
+Eigen::VectorXd scaling(const Submodel& s, double ws) {
+  Eigen::VectorXd d(s.n_theta());
+  for (int j = 1; j <= s.n; ++j) d(j - 1) = std::pow(ws, j);
+  for (int k = 0; k <= s.m; ++k) d(s.n + k) = std::pow(ws, k - s.rigid_poles);
+  return d;
+}
+
+// One submodel in normalised time: the filter 1/(p^l A') on a signal, and its
+// output B'/(p^l A') w.
+struct ScaledSubmodel {
+  const Submodel* shape = nullptr;
+  double ws = 1.0;
+  Eigen::VectorXd theta;  // normalised
+
+  Eigen::VectorXd a_poly() const {  // [1, a'_1 .. a'_n]
+    Eigen::VectorXd c(shape->n + 1);
+    c(0) = 1.0;
+    c.tail(shape->n) = theta.head(shape->n);
+    return c;
+  }
+  Eigen::VectorXd denominator() const {  // p^l A'
+    Eigen::VectorXd c = Eigen::VectorXd::Zero(shape->n + shape->rigid_poles + 1);
+    c.tail(shape->n + 1) = a_poly();
+    return c;
+  }
+  Eigen::VectorXd b() const { return theta.tail(shape->m + 1); }
+  // Feedthrough of B'/(p^l A'): nonzero only when biproper.
+  double feedthrough() const {
+    const int N = shape->n + shape->rigid_poles;
+    return shape->m == N ? theta(shape->n + shape->m) / denominator()(N) : 0.0;
+  }
+};
+
+// B/(p^l A) w under ZOH at the samples.
+Eigen::VectorXd simulate_scaled(const ScaledSubmodel& s, const Eigen::VectorXd& w, double T) {
+  Prefilter f(s.denominator(), s.ws * T, Hold::zoh);
+  const Eigen::VectorXd b = s.b();
+  Eigen::VectorXd x(w.size());
+  for (Eigen::Index k = 0; k < w.size(); ++k) {
+    f.step(w(k));
+    x(k) = f.combine(b);
+  }
+  return x;
+}
+
+std::vector<ScaledSubmodel> scale_model(const AdditiveModel& model) {
+  std::vector<ScaledSubmodel> out;
+  for (const auto& s : model.submodels) {
+    ScaledSubmodel z;
+    z.shape = &s;
+    z.ws = time_scale(s);
+    z.theta = s.theta().cwiseProduct(scaling(s, z.ws));
+    out.push_back(z);
+  }
+  return out;
+}
+
+void unscale_into(const std::vector<ScaledSubmodel>& scaled, AdditiveModel& model) {
+  for (std::size_t i = 0; i < scaled.size(); ++i) {
+    auto& s = model.submodels[i];
+    s.set_theta(scaled[i].theta.cwiseQuotient(scaling(s, scaled[i].ws)));
+  }
+}
+
+// The noise-free loop u = C_d(q)(r - y), y = sum_i G_i u, solved sample by
+// sample so that a biproper controller around a biproper submodel works too.
+void simulate_loop_scaled(const std::vector<ScaledSubmodel>& model, DiscreteTransferFunction controller,
+                          const Eigen::VectorXd& r, double T, Eigen::VectorXd& z, Eigen::VectorXd& y) {
+  controller.reset();
+  std::vector<Prefilter> filters;
+  std::vector<Eigen::VectorXd> bs;
+  double plant_feedthrough = 0.0;
+  for (const auto& s : model) {
+    filters.emplace_back(s.denominator(), s.ws * T, Hold::zoh);
+    bs.push_back(s.b());
+    plant_feedthrough += s.feedthrough();
+  }
+  const double c0 = controller.feedthrough();
+  z.resize(r.size());
+  y.resize(r.size());
+  for (Eigen::Index k = 0; k < r.size(); ++k) {
+    double y_free = 0.0;  // output at t_k for a zero input sample w_k
+    for (std::size_t i = 0; i < filters.size(); ++i) {
+      filters[i].advance();
+      filters[i].complete(0.0);
+      y_free += filters[i].combine(bs[i]);
+    }
+    // u = c0 (r - y_free - D u) + q with q the controller's memory.
+    const double q = controller.peek(0.0);
+    const double u = (c0 * (r(k) - y_free) + q) / (1.0 + c0 * plant_feedthrough);
+    const double yk = y_free + plant_feedthrough * u;
+    controller.step(r(k) - yk);
+    for (auto& f : filters) f.complete(u);
+    z(k) = u;
+    y(k) = yk;
+  }
+}
+
+// Filtered signals of one submodel for one SRIVC iteration (eqs. 18-20, 33):
+// regressor phi, instrument psi (both n_theta wide) and filtered output y_f.
+struct Filtered {
+  Eigen::MatrixXd phi, psi;
+  Eigen::VectorXd y_f;
+};
+
+Filtered filter_block(const ScaledSubmodel& s, const Eigen::VectorXd& y_tilde, const Eigen::VectorXd& u,
+                      const Eigen::VectorXd& x_hat, const Eigen::VectorXd& z, double T, Hold output_hold) {
+  const int n = s.shape->n, m = s.shape->m, nt = s.shape->n_theta();
+  const double Ts = s.ws * T;
+  const Eigen::VectorXd a = s.a_poly(), den = s.denominator();
+  Prefilter fy(a, Ts, output_hold), fx(a, Ts, output_hold);
+  Prefilter fu(den, Ts, Hold::zoh), fz(den, Ts, Hold::zoh);
+  const bool same_input = &u == &z;
+  const Eigen::Index N = y_tilde.size();
+  Filtered out;
+  out.phi.resize(N, nt);
+  out.psi.resize(N, nt);
+  out.y_f.resize(N);
+  for (Eigen::Index k = 0; k < N; ++k) {
+    const auto& dy = fy.step(y_tilde(k));
+    const auto& dx = fx.step(x_hat(k));
+    const auto& du = fu.step(u(k));
+    const auto& dz = same_input ? du : fz.step(z(k));
+    out.y_f(k) = dy(0);
+    for (int j = 1; j <= n; ++j) {
+      out.phi(k, j - 1) = -dy(j);
+      out.psi(k, j - 1) = -dx(j);
+    }
+    for (int j = 0; j <= m; ++j) {
+      out.phi(k, n + j) = du(j);
+      out.psi(k, n + j) = dz(j);
+    }
+  }
+  return out;
+}
+
+// Solves (sum psi phi^T) theta = sum psi y_f with column equilibration.
+Eigen::VectorXd iv_solve(const Filtered& f) {
+  const Eigen::MatrixXd R = f.psi.transpose() * f.phi;
+  const Eigen::VectorXd rhs = f.psi.transpose() * f.y_f;
+  Eigen::VectorXd colscale = R.colwise().norm().transpose();
+  for (auto& c : colscale) c = c > 0.0 ? 1.0 / c : 1.0;
+  const Eigen::VectorXd scaled = (R * colscale.asDiagonal()).colPivHouseholderQr().solve(rhs);
+  return scaled.cwiseProduct(colscale);
+}
+
+double relative_change(const Eigen::VectorXd& now, const Eigen::VectorXd& before) {
+  return (now - before).norm() / std::max(before.norm(), 1e-300);
+}
+
+}  // namespace
+
+Eigen::MatrixXd FitResult::theta_covariance(int i) const {
+  const int o = model.offset(i), n = model.submodels[i].n_theta();
+  return covariance.block(o, o, n, n);
+}
+
+double fit_percent(const Eigen::VectorXd& y, const Eigen::VectorXd& y_hat) {
+  const double den = (y.array() - y.mean()).matrix().norm();
+  return den > 0.0 ? 100.0 * (1.0 - (y - y_hat).norm() / den) : 0.0;
+}
+
+Eigen::VectorXd simulate_model(const AdditiveModel& model, const Eigen::VectorXd& u, double T) {
+  Eigen::VectorXd y = Eigen::VectorXd::Zero(u.size());
+  for (const auto& s : scale_model(model)) y += simulate_scaled(s, u, T);
+  return y;
+}
+
+void simulate_loop(const AdditiveModel& model, const DiscreteTransferFunction& controller,
+                   const Eigen::VectorXd& r, double T, Eigen::VectorXd& z, Eigen::VectorXd& y) {
+  simulate_loop_scaled(scale_model(model), controller, r, T, z, y);
+}
+
+FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const SrivcOptions& options) {
+  const Eigen::Index N = data.size();
+  if (initial.submodels.empty()) throw std::invalid_argument("fit: the model has no submodels");
+  for (const auto& s : initial.submodels) s.check();
+  if (N < 2 * initial.n_beta() + 2)
+    throw std::invalid_argument("fit: " + std::to_string(N) + " samples for " + std::to_string(initial.n_beta()) +
+                                " parameters; need at least " + std::to_string(2 * initial.n_beta() + 2));
+  if (options.closed_loop && (!data.has_reference() || options.controller.empty()))
+    throw std::invalid_argument("fit: closed loop needs the reference r in the data and a controller");
+  const double T = data.sample_time();
+  const Eigen::VectorXd& u = data.u;
+  const Eigen::VectorXd& y = data.y;
+
+  FitResult result;
+  result.model = initial;
+  std::vector<ScaledSubmodel> model = scale_model(result.model);
+  const std::size_t K = model.size();
+
+  std::vector<Eigen::VectorXd> x_hat(K);  // G_i u: the submodel outputs on the record
+  for (std::size_t i = 0; i < K; ++i) x_hat[i] = simulate_scaled(model[i], u, T);
+
+  auto beta_scaled = [&] {
+    Eigen::VectorXd b(result.model.n_beta());
+    for (std::size_t i = 0, o = 0; i < K; o += model[i].theta.size(), ++i) b.segment(o, model[i].theta.size()) = model[i].theta;
+    return b;
+  };
+
+  Eigen::VectorXd z = u, y_loop;  // instrument input: u in open loop, S_uo r in closed loop
+  for (int it = 1; it <= options.max_iterations; ++it) {
+    const Eigen::VectorXd before = beta_scaled();
+    for (std::size_t i = 0; i < K; ++i) {
+      for (int s = 0; s < options.srivc_per_block; ++s) {
+        // Residual output of this block (eq. 15): the data less the other submodels.
+        Eigen::VectorXd y_tilde = y;
+        for (std::size_t j = 0; j < K; ++j)
+          if (j != i) y_tilde -= x_hat[j];
+        if (options.closed_loop) simulate_loop_scaled(model, options.controller, data.r, T, z, y_loop);
+        const Eigen::VectorXd x_hat_z = options.closed_loop ? simulate_scaled(model[i], z, T) : x_hat[i];
+        const Filtered f = filter_block(model[i], y_tilde, u, x_hat_z, options.closed_loop ? z : u, T,
+                                        options.output_hold);
+        Eigen::VectorXd theta = iv_solve(f);
+        if (!theta.allFinite()) break;  // singular: keep the previous iterate
+        if (options.stability_projection && model[i].shape->n > 0) {
+          Eigen::VectorXd a = theta.head(model[i].shape->n);
+          if (project_stable(a)) {
+            theta.head(model[i].shape->n) = a;
+            ++result.projections;
+          }
+        }
+        model[i].theta = theta;
+        x_hat[i] = simulate_scaled(model[i], u, T);
+      }
+    }
+    const double change = relative_change(beta_scaled(), before);
+    result.change_history.push_back(change);
+    result.iterations = it;
+    if (change < options.tolerance) {
+      result.converged = true;
+      break;
+    }
+  }
+  unscale_into(model, result.model);
+
+  // Output error, noise variance and fit.
+  result.simulated = Eigen::VectorXd::Zero(N);
+  for (const auto& x : x_hat) result.simulated += x;
+  const Eigen::VectorXd e = y - result.simulated;
+  const int nb = result.model.n_beta();
+  result.noise_variance = e.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, N - nb));
+  result.fit_percent = fit_percent(y, result.simulated);
+
+  // Covariance (IV sandwich): J = sum psi_hat psi^T with psi the output-error
+  // gradient (driven by u) and psi_hat the instrument (driven by z); in open loop
+  // both coincide and this is sigma^2 (sum psi psi^T)^{-1}.
+  if (options.closed_loop) simulate_loop_scaled(model, options.controller, data.r, T, z, y_loop);
+  Eigen::MatrixXd Psi(N, nb), PsiHat(N, nb);
+  Eigen::VectorXd D(nb);  // physical = scaled .* D^{-1}
+  for (std::size_t i = 0, o = 0; i < K; ++i) {
+    const int nt = model[i].shape->n_theta();
+    const Eigen::VectorXd xz = options.closed_loop ? simulate_scaled(model[i], z, T) : x_hat[i];
+    // The gradient filters are 1/A_i on the submodel output and 1/(p^l A_i) on the
+    // input: exactly the regressor/instrument construction with noise-free signals.
+    const Filtered g = filter_block(model[i], x_hat[i], u, x_hat[i], u, T, options.output_hold);
+    const Filtered gh = filter_block(model[i], xz, z, xz, z, T, options.output_hold);
+    Psi.middleCols(o, nt) = g.psi;
+    PsiHat.middleCols(o, nt) = gh.psi;
+    D.segment(o, nt) = scaling(*model[i].shape, model[i].ws);
+    o += nt;
+  }
+  const Eigen::MatrixXd J = PsiHat.transpose() * Psi;
+  const Eigen::MatrixXd S = PsiHat.transpose() * PsiHat;
+  const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(J);
+  const Eigen::MatrixXd Jinv = cod.pseudoInverse();
+  const Eigen::MatrixXd cov_scaled = result.noise_variance * Jinv * S * Jinv.transpose();
+  const Eigen::VectorXd Dinv = D.cwiseInverse();
+  result.covariance = Dinv.asDiagonal() * cov_scaled * Dinv.asDiagonal();
+  return result;
+}
+
+}  // namespace modalwatch
