@@ -1,1 +1,177 @@
+// The modalwatch command line as a user meets it: real files, the real binary,
+// exit codes, and messages that say where the problem is.
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
 #include <gtest/gtest.h>
+
+#include "modalwatch/config.hpp"
+#include "modalwatch/csv.hpp"
+
+namespace fs = std::filesystem;
+
+namespace modalwatch {
+namespace {
+
+struct Outcome {
+  int code;
+  std::string output;  // stdout and stderr
+};
+
+Outcome run(const std::string& args) {
+  const std::string cmd = std::string(MODALWATCH_CLI) + " " + args + " 2>&1";
+  FILE* pipe = popen(cmd.c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buf{};
+  while (pipe && std::fgets(buf.data(), buf.size(), pipe)) out += buf.data();
+  const int status = pipe ? pclose(pipe) : -1;
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+class Cli : public ::testing::Test {
+ public:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("modalwatch_cli_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  std::string write(const std::string& name, const std::string& text) const {
+    std::ofstream(path(name)) << text;
+    return path(name);
+  }
+  static std::string config(const std::string& name) {
+    return std::string(MODALWATCH_SOURCE_DIR) + "/config/" + name;
+  }
+
+ protected:
+  fs::path dir_;
+};
+
+bool contains(const std::string& text, const std::string& what) { return text.find(what) != std::string::npos; }
+
+TEST_F(Cli, SimulateThenFitPrintsTheModalTableAndWritesAReusableModel) {
+  const Outcome sim = run("simulate --config " + config("paper-sim.yaml") + " --out " + path("d.csv") + " --truth " +
+                      path("truth.csv") + " --duration 200");
+  ASSERT_EQ(sim.code, 0) << sim.output;
+  const Record r = read_record(path("d.csv"));
+  EXPECT_EQ(r.size(), 4000);
+  EXPECT_TRUE(r.has_reference());
+  const Table truth = read_table(path("truth.csv"));
+  EXPECT_EQ(truth.column("mode3_wn"), 7);
+
+  const Outcome fit = run("fit --config " + config("paper-sim.yaml") + " --data " + path("d.csv") + " --to 90 --out " +
+                      path("fitted.yaml"));
+  ASSERT_EQ(fit.code, 0) << fit.output;
+  for (const char* s : {"mode1", "mode2", "mode3", "f [Hz]", "zeta", "fit on the data"})
+    EXPECT_TRUE(contains(fit.output, s)) << s << "\n" << fit.output;
+  // The written model seeds the next command.
+  const Config fitted = load_config(path("fitted.yaml"));
+  ASSERT_EQ(fitted.model.submodels.size(), 3u);
+  EXPECT_NEAR(modal_parameters(fitted.model.submodels[1]).wn, 5.0, 0.05);
+  const Outcome again = run("fit --config " + path("fitted.yaml") + " --data " + path("d.csv") + " --to 90");
+  EXPECT_EQ(again.code, 0) << again.output;
+}
+
+// Bad records: exit code 2, a message naming row and column, nothing written.
+void expect_rejected(const Cli& t, const std::string& csv_text, const std::string& must_say1,
+                     const std::string& must_say2) {
+  const std::string data = t.write("bad.csv", csv_text);
+  const std::string out = t.path("out.yaml");
+  const Outcome r = run("fit --config " + Cli::config("paper-sim.yaml") + " --data " + data + " --out " + out);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_TRUE(contains(r.output, must_say1)) << r.output;
+  EXPECT_TRUE(contains(r.output, must_say2)) << r.output;
+  EXPECT_FALSE(fs::exists(out));
+}
+
+std::string good_rows(int n, int skip = -1) {
+  std::ostringstream s;
+  for (int k = 0; k < n; ++k)
+    if (k != skip) s << k * 0.05 << ",0.1," << (k % 3) * 0.2 << "," << (k % 5) * 0.1 << "\n";
+  return s.str();
+}
+
+TEST_F(Cli, RecordWithNaNIsRejectedNamingRowAndColumn) {
+  expect_rejected(*this, "t,r,u,y\n" + good_rows(3) + "0.15,0.1,0.2,nan\n" + good_rows(30).substr(0, 0), "row 5",
+                  "'y'");
+}
+
+TEST_F(Cli, RecordWithNonNumericFieldIsRejectedNamingRowAndColumn) {
+  expect_rejected(*this, "t,r,u,y\n0,0,0,0\n0.05,0,abc,0\n", "row 3", "'u'");
+}
+
+TEST_F(Cli, RecordWithMissingColumnIsRejectedNamingIt) {
+  expect_rejected(*this, "t,r,y\n0,0,0\n0.05,0,0\n", "'u'", "missing");
+}
+
+TEST_F(Cli, RecordWithNonIncreasingTimeIsRejectedNamingRow) {
+  expect_rejected(*this, "t,r,u,y\n0,0,0,0\n0.05,0,0,0\n0.05,0,0,0\n", "row 4", "'t'");
+}
+
+TEST_F(Cli, RecordWithFewerSamplesThanParametersIsRejected) {
+  expect_rejected(*this, "t,r,u,y\n" + good_rows(8), "8 samples", "9 parameters");
+}
+
+// Bad configurations: exit code 2, the key and its line.
+void expect_config_rejected(const Cli& t, const std::string& from, const std::string& to, const std::string& key,
+                            int line) {
+  std::ifstream in(Cli::config("paper-sim.yaml"));
+  std::stringstream ss;
+  ss << in.rdbuf();
+  std::string text = ss.str();
+  const auto pos = text.find(from);
+  ASSERT_NE(pos, std::string::npos) << from;
+  text.replace(pos, from.size(), to);
+  const std::string cfg = t.write("bad.yaml", text);
+  const std::string out = t.path("sim.csv");
+  const Outcome r = run("simulate --config " + cfg + " --out " + out);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_TRUE(contains(r.output, "key '" + key + "'")) << r.output;
+  EXPECT_TRUE(contains(r.output, "bad.yaml:" + std::to_string(line) + ":")) << r.output;
+  EXPECT_FALSE(fs::exists(out));
+}
+
+int line_of(const std::string& needle) {
+  std::ifstream in(Cli::config("paper-sim.yaml"));
+  std::string line;
+  for (int n = 1; std::getline(in, line); ++n)
+    if (line.find(needle) != std::string::npos) return n;
+  return -1;
+}
+
+TEST_F(Cli, ConfigWithUnknownKeyNamesKeyAndLine) {
+  const int line = line_of("sample_rate_hz");
+  expect_config_rejected(*this, "sample_rate_hz:", "sample_rate_hz: 20\nsampel_rate:", "sampel_rate", line + 1);
+}
+
+TEST_F(Cli, ConfigWithWrongTypeNamesKeyAndLine) {
+  expect_config_rejected(*this, "sample_rate_hz: 20", "sample_rate_hz: fast", "sample_rate_hz",
+                         line_of("sample_rate_hz"));
+}
+
+TEST_F(Cli, ConfigWithForgettingOutsideUnitIntervalNamesKeyAndLine) {
+  const int line = line_of("forgetting");
+  ASSERT_GT(line, 0);
+  expect_config_rejected(*this, "forgetting: 0.999", "forgetting: 1.5", "model.submodels[0].forgetting", line);
+}
+
+TEST_F(Cli, ConfigWithNonPositiveFrequencyNamesKeyAndLine) {
+  const int line = line_of("wn: 2");
+  ASSERT_GT(line, 0);
+  expect_config_rejected(*this, "wn: 2", "wn: -2", "model.submodels[0].wn", line);
+}
+
+TEST_F(Cli, UnknownOptionIsBadInput) {
+  const Outcome r = run("fit --config x.yaml --data y.csv --bogus");
+  EXPECT_EQ(r.code, 2) << r.output;
+}
+
+}  // namespace
+}  // namespace modalwatch
