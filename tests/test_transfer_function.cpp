@@ -109,7 +109,7 @@ TEST(TransferFunction, ResponseMatchesSteadyStateSinusoid) {
   EXPECT_NEAR(std::abs(tf.response(std::numbers::pi, 1.0) + 2.0 / 3.0), 0.0, 1e-15);
 }
 
-TEST(ClosedLoopSpectralRadius, ScalarPlantsAnalytic) {
+TEST(TransferFunctionClosedLoop, ScalarPlantsAnalytic) {
   const Eigen::MatrixXd phi = Eigen::MatrixXd::Constant(1, 1, 0.9);
   const Eigen::MatrixXd one = Eigen::MatrixXd::Ones(1, 1);
   // Static gain K: pole a - K; with plant feedthrough d: a - K / (1 + K d).
@@ -146,7 +146,7 @@ PaperPlant paper_plant(double T) {
 
 // Section 5: the printed -0.2058 destabilises the loop; -0.02058 is what the
 // paper's closed-loop data must have used.
-TEST(ClosedLoopSpectralRadius, PaperExample) {
+TEST(TransferFunctionClosedLoop, PaperExample) {
   const PaperPlant p = paper_plant(0.05);
   const DiscreteTransferFunction good({0.02329, -0.02058, 0.00454}, {1.0, -1.0, 0.0});
   const double rho = closed_loop_spectral_radius(good, p.phi, p.gamma, p.c, 0.0);
@@ -156,6 +156,8 @@ TEST(ClosedLoopSpectralRadius, PaperExample) {
   const double rho_printed = closed_loop_spectral_radius(printed, p.phi, p.gamma, p.c, 0.0);
   EXPECT_GT(rho_printed, 1.0);
   EXPECT_NEAR(rho_printed, 1.25, 0.05);
+  RecordProperty("rho", std::to_string(rho));
+  RecordProperty("rho_printed", std::to_string(rho_printed));
 }
 
 }  // namespace
