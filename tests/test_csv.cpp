@@ -1,1 +1,326 @@
+// CSV records: parsing, the errors (row and column named), atomic writing, and
+// the shared measured records read in place.
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <random>
+#include <string>
+
 #include <gtest/gtest.h>
+
+#include "modalwatch/csv.hpp"
+#include "modalwatch/error.hpp"
+
+namespace fs = std::filesystem;
+using modalwatch::InputError;
+using modalwatch::read_record;
+using modalwatch::read_table;
+
+namespace {
+
+#define EXPECT_CONTAINS(text, part) \
+  EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
+
+// The message of the InputError thrown by f (fails the test when none is thrown).
+std::string error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "expected an InputError";
+  return "";
+}
+
+class CsvTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    std::random_device rd;
+    dir_ = fs::temp_directory_path() /
+           ("modalwatch-csv-" + std::to_string(::getpid()) + "-" + std::to_string(rd()));
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  std::string file(const std::string& name, const std::string& content) const {
+    const std::string path = (dir_ / name).string();
+    std::ofstream(path, std::ios::binary) << content;
+    return path;
+  }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  // Files in the directory, to check that writes leave no temporaries.
+  int entries() const {
+    return static_cast<int>(std::distance(fs::directory_iterator(dir_), fs::directory_iterator()));
+  }
+
+  fs::path dir_;
+};
+
+TEST_F(CsvTest, ReadsHeaderAndNumbers) {
+  const auto p = file("a.csv", " t , u,y \n0,1.5,-2\n0.1,+3e-2,4E1\n");
+  const auto table = read_table(p);
+  ASSERT_EQ(table.columns, (std::vector<std::string>{"t", "u", "y"}));
+  ASSERT_EQ(table.data.rows(), 2);
+  EXPECT_EQ(table.data(0, 1), 1.5);
+  EXPECT_EQ(table.data(0, 2), -2.0);
+  EXPECT_EQ(table.data(1, 1), 0.03);
+  EXPECT_EQ(table.data(1, 2), 40.0);
+  EXPECT_EQ(table.column("y"), 2);
+  EXPECT_EQ(table.column("r"), -1);
+}
+
+TEST_F(CsvTest, AcceptsCrLfMissingFinalNewlineAndTrailingBlankLines) {
+  EXPECT_EQ(read_table(file("crlf.csv", "t,u,y\r\n0,1,2\r\n1,3,4\r\n")).data(1, 2), 4.0);
+  EXPECT_EQ(read_table(file("nofinal.csv", "t,u,y\n0,1,2\n1,3,4")).data.rows(), 2);
+  EXPECT_EQ(read_table(file("blank.csv", "t,u,y\n0,1,2\n1,3,4\n\n  \n")).data.rows(), 2);
+}
+
+TEST_F(CsvTest, NonNumericFieldNamesRowAndColumn) {
+  const auto p = file("bad.csv", "t,u,y\n0,1,2\n0.1,abc,3\n");
+  const auto msg = error_of([&] { read_table(p); });
+  EXPECT_CONTAINS(msg, p + ": row 3, column 'u'");
+  EXPECT_CONTAINS(msg, "not a number (got 'abc')");
+}
+
+TEST_F(CsvTest, TrailingGarbageInFieldIsRejected) {
+  const auto msg = error_of([&] { read_table(file("g.csv", "t,u,y\n0,1.5x,2\n")); });
+  EXPECT_CONTAINS(msg, "row 2, column 'u'");
+  EXPECT_CONTAINS(msg, "1.5x");
+  EXPECT_CONTAINS(error_of([&] { read_table(file("h.csv", "t,u,y\n0,0x10,2\n")); }), "row 2, column 'u'");
+}
+
+TEST_F(CsvTest, NanAndInfAreRejected) {
+  for (const std::string bad : {"nan", "NaN", "inf", "-inf", "Infinity", "1e999"}) {
+    const auto p = file("n.csv", "t,u,y\n0,1,2\n0.1,2,3\n0.2,4," + bad + "\n");
+    const auto msg = error_of([&] { read_table(p); });
+    EXPECT_CONTAINS(msg, "row 4, column 'y'");
+    EXPECT_CONTAINS(msg, bad);
+  }
+}
+
+TEST_F(CsvTest, EmptyFieldIsRejected) {
+  const auto msg = error_of([&] { read_table(file("e.csv", "t,u,y\n0,,2\n")); });
+  EXPECT_CONTAINS(msg, "row 2, column 'u'");
+  EXPECT_CONTAINS(msg, "empty field");
+}
+
+TEST_F(CsvTest, ShortRowNamesFirstMissingColumn) {
+  const auto msg = error_of([&] { read_table(file("s.csv", "t,u,y\n0,1,2\n0.1,2\n")); });
+  EXPECT_CONTAINS(msg, "row 3, column 'y'");
+  EXPECT_CONTAINS(msg, "row has 2 fields, header has 3");
+}
+
+TEST_F(CsvTest, LongRowIsRejected) {
+  const auto msg = error_of([&] { read_table(file("l.csv", "t,u,y\n0,1,2\n0.1,2,3,4\n")); });
+  EXPECT_CONTAINS(msg, "row 3");
+  EXPECT_CONTAINS(msg, "row has 4 fields, header has 3");
+}
+
+TEST_F(CsvTest, EmptyFileHeaderOnlyAndBadHeader) {
+  EXPECT_CONTAINS(error_of([&] { read_table(file("empty.csv", "")); }), "empty file");
+  EXPECT_CONTAINS(error_of([&] { read_table(file("ws.csv", " \n\n")); }), "empty file");
+  EXPECT_CONTAINS(error_of([&] { read_table(file("h.csv", "t,u,y\n")); }), "no data rows");
+  const auto dup = error_of([&] { read_table(file("d.csv", "t,u,u\n0,1,2\n")); });
+  EXPECT_CONTAINS(dup, "row 1, column 'u'");
+  EXPECT_CONTAINS(dup, "duplicate column name");
+  EXPECT_CONTAINS(error_of([&] { read_table(file("x.csv", "t,,y\n0,1,2\n")); }), "empty column name");
+}
+
+TEST_F(CsvTest, BlankLineBetweenRowsIsRejected) {
+  const auto msg = error_of([&] { read_table(file("b.csv", "t,u,y\n0,1,2\n\n1,3,4\n")); });
+  EXPECT_CONTAINS(msg, "row 3");
+  EXPECT_CONTAINS(msg, "empty row");
+}
+
+TEST_F(CsvTest, MissingFileNamesPath) {
+  const auto p = path("nope.csv");
+  const auto msg = error_of([&] { read_table(p); });
+  EXPECT_CONTAINS(msg, p);
+  EXPECT_CONTAINS(msg, "cannot open");
+}
+
+TEST_F(CsvTest, ReadRecordWithAndWithoutReference) {
+  const auto open = read_record(file("o.csv", "t,u,y,extra\n0,1,2,9\n0.5,3,4,9\n1,5,6,9\n"));
+  EXPECT_EQ(open.size(), 3);
+  EXPECT_FALSE(open.has_reference());
+  EXPECT_EQ(open.u(1), 3.0);
+  EXPECT_EQ(open.y(2), 6.0);
+  EXPECT_DOUBLE_EQ(open.sample_time(), 0.5);
+
+  const auto closed = read_record(file("c.csv", "y,r,u,t\n2,7,1,0\n4,8,3,0.5\n"));
+  ASSERT_TRUE(closed.has_reference());
+  EXPECT_EQ(closed.r(1), 8.0);
+  EXPECT_EQ(closed.t(1), 0.5);
+  EXPECT_EQ(closed.u(1), 3.0);
+}
+
+TEST_F(CsvTest, ReadRecordWithOtherColumnNames) {
+  modalwatch::RecordColumns cols;
+  cols.t = "time";
+  cols.u = "voltage";
+  cols.y = "position";
+  const auto rec = read_record(file("n.csv", "time,voltage,position\n0,1,2\n1,3,4\n"), cols);
+  EXPECT_EQ(rec.y(1), 4.0);
+}
+
+TEST_F(CsvTest, MissingColumnIsNamedWithAvailableOnes) {
+  const auto msg = error_of([&] { read_record(file("m.csv", "t,u,force\n0,1,2\n1,3,4\n")); });
+  EXPECT_CONTAINS(msg, "missing column 'y'");
+  EXPECT_CONTAINS(msg, "available: t, u, force");
+}
+
+TEST_F(CsvTest, NonIncreasingTimeNamesRowAndColumn) {
+  const auto back = error_of([&] { read_record(file("t.csv", "t,u,y\n0,1,2\n1,1,2\n0.5,1,2\n")); });
+  EXPECT_CONTAINS(back, "row 4, column 't'");
+  EXPECT_CONTAINS(back, "does not increase");
+  const auto equal = error_of([&] { read_record(file("e.csv", "t,u,y\n0,1,2\n1,1,2\n1,1,2\n")); });
+  EXPECT_CONTAINS(equal, "row 4, column 't'");
+}
+
+TEST_F(CsvTest, UnevenSamplingNamesRow) {
+  // Steps of 1 s and one of 1.1 s (t = 6.1, row 8): the mean is 1.01 s, so only
+  // the long step is off by more than 1 %.
+  const auto msg = error_of([&] {
+    read_record(file("u.csv", "t,u,y\n0,0,0\n1,0,0\n2,0,0\n3,0,0\n4,0,0\n5,0,0\n6.1,0,0\n7.1,0,0\n"
+                              "8.1,0,0\n9.1,0,0\n10.1,0,0\n"));
+  });
+  EXPECT_CONTAINS(msg, "row 8, column 't'");
+  EXPECT_CONTAINS(msg, "uneven sampling");
+  // Jitter well inside 1 % is accepted.
+  EXPECT_NO_THROW(read_record(file("j.csv", "t,u,y\n0,0,0\n1.001,0,0\n2,0,0\n2.999,0,0\n")));
+}
+
+TEST_F(CsvTest, ReadOptionsAllowNonFiniteSamplesButNotTime) {
+  modalwatch::RecordReadOptions options;
+  options.allow_nonfinite = true;
+  const auto p = file("nan.csv", "t,u,y,r\n0,nan,1,2\n1,1,inf,-inf\n2,1,2,3\n");
+  const auto rec = read_record(p, {}, options);
+  EXPECT_TRUE(std::isnan(rec.u(0)));
+  EXPECT_TRUE(std::isinf(rec.y(1)));
+  EXPECT_TRUE(std::isinf(rec.r(1)));
+  EXPECT_CONTAINS(error_of([&] { read_record(p); }), "row 2, column 'u'");  // default: rejected
+  const auto bad_t = file("nant.csv", "t,u,y\n0,1,1\nnan,1,1\n");
+  EXPECT_CONTAINS(error_of([&] { read_record(bad_t, {}, options); }), "row 3, column 't'");
+  // Non-numeric text stays an error.
+  EXPECT_CONTAINS(error_of([&] { read_record(file("txt.csv", "t,u,y\n0,x,1\n"), {}, options); }),
+                  "row 2, column 'u'");
+}
+
+TEST_F(CsvTest, ReadOptionsAllowGaps) {
+  modalwatch::RecordReadOptions options;
+  options.allow_gaps = true;
+  // A gap of 3 steps after t = 2 (row 4 -> row 5), otherwise steps of 1.
+  const auto p = file("gap.csv", "t,u,y\n0,0,0\n1,0,0\n2,0,0\n5,0,0\n6,0,0\n7,0,0\n");
+  EXPECT_EQ(read_record(p, {}, options).size(), 6);
+  EXPECT_CONTAINS(error_of([&] { read_record(p); }), "uneven sampling");
+  // A step shorter than the nominal one is still an error, with the median or a given step.
+  const auto short_step = file("short.csv", "t,u,y\n0,0,0\n1,0,0\n1.5,0,0\n2.5,0,0\n3.5,0,0\n");
+  const auto msg = error_of([&] { read_record(short_step, {}, options); });
+  EXPECT_CONTAINS(msg, "row 4, column 't'");
+  EXPECT_CONTAINS(msg, "shorter than the nominal step 1 ");
+  options.sample_time = 2.0;
+  EXPECT_CONTAINS(error_of([&] { read_record(p, {}, options); }), "row 3, column 't'");
+  // Time must still increase.
+  options.sample_time = 0.0;
+  EXPECT_CONTAINS(error_of([&] { read_record(file("dec.csv", "t,u,y\n0,0,0\n1,0,0\n1,0,0\n"), {}, options); }),
+                  "does not increase");
+}
+
+TEST_F(CsvTest, WriteRecordRoundTripsExactly) {
+  modalwatch::Record rec;
+  rec.t = Eigen::VectorXd::LinSpaced(5, 0.0, 0.4);
+  rec.u = Eigen::VectorXd::Random(5);
+  rec.y = Eigen::VectorXd::Random(5) * 1e-7;
+  rec.y(3) = 1.0 / 3.0;
+  const auto p = path("rec.csv");
+  modalwatch::write_record(p, rec);
+  EXPECT_EQ(entries(), 1);  // no temporary left behind
+  std::ifstream in(p);
+  std::string header;
+  std::getline(in, header);
+  EXPECT_EQ(header, "t,u,y");
+  const auto back = read_record(p);
+  EXPECT_EQ(back.t, rec.t);
+  EXPECT_EQ(back.u, rec.u);
+  EXPECT_EQ(back.y, rec.y);
+  EXPECT_FALSE(back.has_reference());
+
+  rec.r = Eigen::VectorXd::Random(5);
+  modalwatch::write_record(p, rec);  // replaces the file
+  std::ifstream in2(p);
+  std::getline(in2, header);
+  EXPECT_EQ(header, "t,r,u,y");
+  EXPECT_EQ(read_record(p).r, rec.r);
+}
+
+TEST_F(CsvTest, WriteTableRoundTripsLargeTable) {
+  const Eigen::Index n = 200000;
+  Eigen::MatrixXd data(n, 3);
+  data.col(0) = Eigen::VectorXd::LinSpaced(n, 0.0, static_cast<double>(n - 1) * 1e-3);
+  data.rightCols(2).setRandom();
+  const auto p = path("big.csv");
+  modalwatch::write_table(p, {"t", "a", "b"}, data);
+  const auto table = read_table(p);
+  EXPECT_EQ(table.data, data);
+}
+
+TEST_F(CsvTest, WriteFailureThrowsAndLeavesNothing) {
+  const auto p = (dir_ / "no-such-dir" / "x.csv").string();
+  const auto msg = error_of([&] { modalwatch::write_table(p, {"a"}, Eigen::MatrixXd::Zero(2, 1)); });
+  EXPECT_CONTAINS(msg, p);
+  EXPECT_EQ(entries(), 0);
+  // Renaming onto a directory fails after the temporary was written: it is removed.
+  fs::create_directory(dir_ / "adir");
+  const auto onto_dir = (dir_ / "adir").string();
+  EXPECT_CONTAINS(error_of([&] { modalwatch::write_table(onto_dir, {"a"}, Eigen::MatrixXd::Zero(2, 1)); }),
+                  onto_dir);
+  EXPECT_EQ(entries(), 1);
+  EXPECT_CONTAINS(error_of([&] { modalwatch::write_table(path("y.csv"), {"a", "b"}, Eigen::MatrixXd::Zero(2, 1)); }),
+                  "2 column names for 1 columns");
+  EXPECT_CONTAINS(error_of([&] { modalwatch::write_table(path("y.csv"), {"a,b"}, Eigen::MatrixXd::Zero(2, 1)); }),
+                  "invalid column name");
+  EXPECT_EQ(entries(), 1);
+}
+
+// ---------------------------------------------------------------- shared data
+
+std::string shared(const std::string& name) { return std::string(MODALWATCH_SHARED_DATA) + "/" + name; }
+
+#if defined(__SANITIZE_ADDRESS__)
+constexpr bool kSanitized = true;  // ASan slows parsing several-fold
+#else
+constexpr bool kSanitized = false;
+#endif
+
+double seconds_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+TEST(CsvShared, SilverboxLoadsFast) {
+  const auto p = shared("silverbox_snls80mv.csv");
+  if (!fs::exists(p)) GTEST_SKIP() << "shared data not found: " << p;
+  const auto start = std::chrono::steady_clock::now();
+  const auto rec = read_record(p);
+  const double elapsed = seconds_since(start);
+  EXPECT_EQ(rec.size(), 131072);
+  EXPECT_FALSE(rec.has_reference());
+  const double T = 1.0 / 610.3515625;
+  EXPECT_NEAR(rec.sample_time(), T, 1e-9 * T);
+  EXPECT_LT(elapsed, kSanitized ? 5.0 : 0.5) << "131072 rows took " << elapsed << " s";
+}
+
+TEST(CsvShared, EmpsTrainHasReference) {
+  const auto p = shared("emps_train.csv");
+  if (!fs::exists(p)) GTEST_SKIP() << "shared data not found: " << p;
+  const auto rec = read_record(p);
+  EXPECT_EQ(rec.size(), 24841);
+  EXPECT_TRUE(rec.has_reference());
+  EXPECT_NEAR(rec.sample_time(), 0.001, 1e-9 * 0.001);
+  EXPECT_EQ(read_table(p).columns, (std::vector<std::string>{"t", "u", "y", "r", "force"}));
+}
+
+}  // namespace

@@ -49,26 +49,22 @@ std::string render(const YAML::Node& node) {
   if (!node.IsDefined() || node.IsNull()) return "null";
   if (node.IsScalar()) return node.Tag() == "!" ? "\"" + node.Scalar() + "\"" : node.Scalar();
   YAML::Emitter out;
-  out << YAML::Flow << node;
+  out.SetSeqFormat(YAML::Flow);
+  out.SetMapFormat(YAML::Flow);
+  out << node;
   std::string text = out.c_str();
   return text.size() > 60 ? text.substr(0, 57) + "..." : text;
 }
 
-// Plain (unquoted) scalars only: `wn: "2"` is a string, not a number.
-bool parse_double(const YAML::Node& node, double& value) {
+// Plain (unquoted) scalars only: `wn: "2"` is a string, not a number. The whole
+// scalar must be consumed, so `2 rad/s` is rejected rather than read as 2.
+template <typename T>
+bool parse_plain(const YAML::Node& node, T& value) {
   if (!node.IsScalar() || node.Tag() == "!") return false;
   std::string_view s = node.Scalar();
-  if (s.size() > 1 && s.front() == '+' && s[1] != '-') s.remove_prefix(1);
+  if (s.size() > 1 && s.front() == '+' && s[1] != '-') s.remove_prefix(1);  // from_chars rejects '+'
   const auto [ptr, ec] = std::from_chars(s.data(), s.data() + s.size(), value);
-  return ec == std::errc() && ptr == s.data() + s.size() && !s.empty();
-}
-
-bool parse_integer(const YAML::Node& node, long long& value) {
-  if (!node.IsScalar() || node.Tag() == "!") return false;
-  std::string_view s = node.Scalar();
-  if (s.size() > 1 && s.front() == '+' && s[1] != '-') s.remove_prefix(1);
-  const auto [ptr, ec] = std::from_chars(s.data(), s.data() + s.size(), value);
-  return ec == std::errc() && ptr == s.data() + s.size() && !s.empty();
+  return !s.empty() && ec == std::errc() && ptr == s.data() + s.size();
 }
 
 // One node of the document with its place: the file, the 1-based line and
@@ -98,7 +94,7 @@ class Value {
 
   double number() const {
     double v = 0.0;
-    if (!parse_double(node_, v)) fail("expected a number");
+    if (!parse_plain(node_, v)) fail("expected a number");
     if (!std::isfinite(v)) fail("must be a finite number");
     return v;
   }
@@ -114,11 +110,12 @@ class Value {
   }
   long long integer(long long lo, long long hi) const {
     long long v = 0;
-    if (!parse_integer(node_, v)) fail("expected an integer");
-    if (v < lo || v > hi)
-      fail(hi == std::numeric_limits<long long>::max() ? "must be >= " + std::to_string(lo)
-                                                        : "must be in " + std::to_string(lo) + ".." +
-                                                              std::to_string(hi));
+    if (!parse_plain(node_, v)) fail("expected an integer");
+    if (v < lo || v > hi) {
+      const bool open_ended = hi >= std::numeric_limits<int>::max();  // no useful upper bound to show
+      fail(open_ended ? "must be >= " + std::to_string(lo)
+                      : "must be in " + std::to_string(lo) + ".." + std::to_string(hi));
+    }
     return v;
   }
   std::string text() const {
@@ -235,7 +232,7 @@ struct SubmodelEntry {
   Submodel submodel;
   bool mode = false;
   ModalParameters modal;
-  int line = 0;
+  int line = 0;  // of the name, for duplicate-name messages
 };
 
 Submodel parse_transfer_function(const Map& m, const std::string& name, int rigid_poles) {
@@ -295,10 +292,13 @@ SubmodelEntry parse_submodel(const Map& m, const Keys& extra) {
   if (kind != "mode")
     if (const auto t = m.get("trajectory"))
       t->fail_plain("a trajectory is only allowed for kind mode (this submodel is kind " + kind + ")");
-  m.allow(submodel_keys(kind, extra), "kind " + kind);
+  Keys keys = submodel_keys(kind, extra);
+  if (kind != "mode") keys.erase(std::remove(keys.begin(), keys.end(), "trajectory"), keys.end());
+  m.allow(keys, "kind " + kind);
   SubmodelEntry e;
-  e.line = m.self().line();
-  const std::string name = parse_name(m.require("name"));
+  const Value name_value = m.require("name");
+  const std::string name = parse_name(name_value);
+  e.line = name_value.line();
   const auto poles = m.get("rigid_poles");
   const int rigid_poles = poles ? static_cast<int>(poles->integer(0, 2)) : (kind == "rigid_body" ? 2 : 0);
   if (kind == "mode") {
@@ -478,7 +478,7 @@ void parse_multisine(const Map& m, SignalSpec& s, const SignalContext& ctx) {
 void parse_prbs(const Map& m, SignalSpec& s) {
   m.allow({"type", "register_bits", "clock_period", "amplitude"}, "type prbs");
   s.register_bits = static_cast<int>(m.require("register_bits").integer(2, 31));
-  s.clock_period = static_cast<int>(m.require("clock_period").integer(1, 1'000'000'000));
+  s.clock_period = static_cast<int>(m.require("clock_period").integer(1, std::numeric_limits<int>::max()));
   s.amplitude = m.require("amplitude").positive();
 }
 
@@ -502,15 +502,12 @@ Eigen::VectorXd interpolate(const Value& where, const Eigen::VectorXd& t, const 
   if (t(0) > slack || t(t.size() - 1) < end - slack)
     where.fail("the file covers t in [" + format_number(t(0)) + ", " + format_number(t(t.size() - 1)) +
                "] s but the simulation needs [0, " + format_number(end) + "] s");
+  if (t.size() == 1) return Eigen::VectorXd::Constant(n, x(0));
   Eigen::VectorXd out(n);
-  Eigen::Index j = 0;
+  Eigen::Index j = 0;  // the segment [t_j, t_{j+1}] holding t_k; the grid only moves forward
   for (Eigen::Index k = 0; k < n; ++k) {
     const double tk = std::clamp(static_cast<double>(k) * T, t(0), t(t.size() - 1));
     while (j + 2 < t.size() && t(j + 1) < tk) ++j;
-    if (t.size() == 1) {
-      out(k) = x(0);
-      continue;
-    }
     const double w = (tk - t(j)) / (t(j + 1) - t(j));
     out(k) = x(j) + std::clamp(w, 0.0, 1.0) * (x(j + 1) - x(j));
   }
@@ -606,6 +603,18 @@ void parse_document(const Map& top, Config& config, const std::filesystem::path&
   if (const auto s = top.get("simulation")) config.experiment = parse_simulation(Map(*s), config, dir);
 }
 
+// The estimator settings that the other sections already determine (the
+// `estimator:` section itself is not yet specified in config/README.md).
+void complete_estimator(Config& config) {
+  EstimatorSettings& e = config.estimator;
+  e.sample_time = config.sample_time;
+  e.closed_loop = config.closed_loop;
+  e.controller = config.controller;
+  e.output_hold = config.output_hold;
+  e.forgetting.clear();
+  for (const auto& s : config.submodel_settings) e.forgetting.push_back(s.forgetting);
+}
+
 YAML::Node load_yaml(const std::string& text, const std::string& source) {
   try {
     return YAML::Load(text);
@@ -625,6 +634,7 @@ Config parse_config(const std::string& yaml_text, const std::string& source_name
   config.source = source_name;
   const Map top(Value(source_name, root, "", line));
   parse_document(top, config, std::filesystem::path(source_name).parent_path());
+  complete_estimator(config);
   return config;
 }
 

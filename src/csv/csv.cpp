@@ -28,10 +28,18 @@ using File = std::unique_ptr<std::FILE, FileCloser>;
 std::string read_file(const std::string& path) {
   File f(std::fopen(path.c_str(), "rb"));
   if (!f) throw InputError(path, std::string("cannot open: ") + std::strerror(errno));
+  // One allocation of the file's size, then one read (growing a string chunk
+  // by chunk costs as much as parsing).
   std::string text;
-  char buffer[1 << 16];
-  std::size_t got = 0;
-  while ((got = std::fread(buffer, 1, sizeof buffer, f.get())) > 0) text.append(buffer, got);
+  if (std::fseek(f.get(), 0, SEEK_END) == 0) {
+    const long size = std::ftell(f.get());
+    if (size > 0) text.resize(static_cast<std::size_t>(size));
+    std::rewind(f.get());
+  }
+  std::size_t used = std::fread(text.data(), 1, text.size(), f.get());
+  text.resize(used);
+  char buffer[1 << 16];  // the file may have grown, or not be seekable
+  for (std::size_t got = 0; (got = std::fread(buffer, 1, sizeof buffer, f.get())) > 0;) text.append(buffer, got);
   if (std::ferror(f.get())) throw InputError(path, std::string("cannot read: ") + std::strerror(errno));
   return text;
 }
@@ -117,8 +125,11 @@ std::size_t count_newlines(std::string_view text) {
 
 class TableParser {
  public:
-  TableParser(const std::string& path, const std::vector<std::string>& columns, Eigen::MatrixXd& data)
-      : path_(path), columns_(columns), data_(data) {}
+  // nonfinite_ok[c]: column c may hold nan/inf (records passed on to the
+  // estimator, which counts them).
+  TableParser(const std::string& path, const std::vector<std::string>& columns, Eigen::MatrixXd& data,
+              std::vector<bool> nonfinite_ok)
+      : path_(path), columns_(columns), data_(data), nonfinite_ok_(std::move(nonfinite_ok)) {}
 
   // Fills row `index` of data from the line with 1-based number `row`.
   void parse_row(std::string_view line, int row, Eigen::Index index) {
@@ -141,7 +152,7 @@ class TableParser {
     if (!parse_number(s, value))
       throw InputError(cell_location(path_, row, columns_[c]),
                        s.empty() ? "empty field" : "not a number (got '" + std::string(s) + "')");
-    if (!std::isfinite(value))
+    if (!std::isfinite(value) && !nonfinite_ok_[c])
       throw InputError(cell_location(path_, row, columns_[c]),
                        "not a finite number (got '" + std::string(s) + "')");
     return value;
@@ -161,6 +172,7 @@ class TableParser {
   const std::string& path_;
   const std::vector<std::string>& columns_;
   Eigen::MatrixXd& data_;
+  std::vector<bool> nonfinite_ok_;
 };
 
 // Blank lines are accepted only at the end, so that data row k is file line k + 2.
@@ -184,7 +196,11 @@ int Table::column(const std::string& name) const {
   return it == columns.end() ? -1 : static_cast<int>(it - columns.begin());
 }
 
-Table read_table(const std::string& path) {
+namespace {
+
+// read_table, with nan/inf accepted in every column except `finite_column`
+// when allow_nonfinite is set.
+Table parse_table(const std::string& path, bool allow_nonfinite, const std::string& finite_column) {
   const std::string text = read_file(path);
   LineReader lines(strip_bom(text));
   std::string_view line;
@@ -194,7 +210,9 @@ Table read_table(const std::string& path) {
   table.columns = parse_header(path, line);
   table.data.resize(static_cast<Eigen::Index>(count_newlines(lines.rest()) + 1),
                     static_cast<Eigen::Index>(table.columns.size()));
-  TableParser parser(path, table.columns, table.data);
+  std::vector<bool> nonfinite_ok(table.columns.size(), allow_nonfinite);
+  if (const int c = table.column(finite_column); c >= 0) nonfinite_ok[static_cast<std::size_t>(c)] = false;
+  TableParser parser(path, table.columns, table.data, std::move(nonfinite_ok));
   Eigen::Index rows = 0;
   while (lines.next(line)) {
     if (is_blank(line)) {
@@ -208,6 +226,10 @@ Table read_table(const std::string& path) {
   return table;
 }
 
+}  // namespace
+
+Table read_table(const std::string& path) { return parse_table(path, false, ""); }
+
 namespace {
 
 int require_column(const std::string& path, const Table& table, const std::string& name) {
@@ -220,30 +242,58 @@ int require_column(const std::string& path, const Table& table, const std::strin
 // Row k of the data is line k + 2 of the file (header on line 1).
 int file_row(Eigen::Index k) { return static_cast<int>(k) + 2; }
 
-void check_time(const std::string& path, const std::string& name, const Eigen::VectorXd& t) {
-  const Eigen::Index n = t.size();
-  for (Eigen::Index k = 1; k < n; ++k)
+void check_increasing(const std::string& path, const std::string& name, const Eigen::VectorXd& t) {
+  for (Eigen::Index k = 1; k < t.size(); ++k)
     if (!(t(k) > t(k - 1)))
       throw InputError(cell_location(path, file_row(k), name),
                        "time does not increase (got " + format_number(t(k)) + " after " +
                            format_number(t(k - 1)) + ")");
+}
+
+[[noreturn]] void bad_step(const std::string& path, const std::string& name, Eigen::Index k,
+                           const std::string& what) {
+  throw InputError(cell_location(path, file_row(k), name), "uneven sampling: " + what);
+}
+
+// Every step within 1 % of the mean step.
+void check_even(const std::string& path, const std::string& name, const Eigen::VectorXd& t) {
+  const Eigen::Index n = t.size();
   if (n < 3) return;
   const double mean = (t(n - 1) - t(0)) / static_cast<double>(n - 1);
   for (Eigen::Index k = 1; k < n; ++k) {
     const double step = t(k) - t(k - 1);
-    if (std::abs(step - mean) > 0.01 * mean) {
-      char msg[160];
-      std::snprintf(msg, sizeof msg, "uneven sampling: step %.9g differs from the mean step %.9g by more than 1 %%",
-                    step, mean);
-      throw InputError(cell_location(path, file_row(k), name), msg);
-    }
+    if (std::abs(step - mean) > 0.01 * mean)
+      bad_step(path, name, k,
+               "step " + format_number(step) + " differs from the mean step " + format_number(mean) +
+                   " by more than 1 %");
+  }
+}
+
+double median_step(const Eigen::VectorXd& t) {
+  std::vector<double> steps(static_cast<std::size_t>(t.size() - 1));
+  for (Eigen::Index k = 1; k < t.size(); ++k) steps[static_cast<std::size_t>(k - 1)] = t(k) - t(k - 1);
+  const auto mid = steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2);
+  std::nth_element(steps.begin(), mid, steps.end());
+  return *mid;
+}
+
+// Gaps allowed: a step may be longer than the nominal one, never shorter by more than 1 %.
+void check_gaps(const std::string& path, const std::string& name, const Eigen::VectorXd& t, double nominal) {
+  if (t.size() < 2) return;
+  if (!(nominal > 0.0)) nominal = median_step(t);
+  for (Eigen::Index k = 1; k < t.size(); ++k) {
+    const double step = t(k) - t(k - 1);
+    if (step < 0.99 * nominal)
+      bad_step(path, name, k,
+               "step " + format_number(step) + " is shorter than the nominal step " + format_number(nominal) +
+                   " by more than 1 %");
   }
 }
 
 }  // namespace
 
-Record read_record(const std::string& path, const RecordColumns& columns) {
-  const Table table = read_table(path);
+Record read_record(const std::string& path, const RecordColumns& columns, const RecordReadOptions& options) {
+  const Table table = parse_table(path, options.allow_nonfinite, columns.t);
   const int t = require_column(path, table, columns.t);
   const int u = require_column(path, table, columns.u);
   const int y = require_column(path, table, columns.y);
@@ -252,20 +302,36 @@ Record read_record(const std::string& path, const RecordColumns& columns) {
   record.u = table.data.col(u);
   record.y = table.data.col(y);
   if (const int r = table.column(columns.r); r >= 0) record.r = table.data.col(r);
-  check_time(path, columns.t, record.t);
+  check_increasing(path, columns.t, record.t);
+  if (options.allow_gaps)
+    check_gaps(path, columns.t, record.t, options.sample_time);
+  else
+    check_even(path, columns.t, record.t);
   return record;
 }
 
 namespace {
 
+// std::to_chars with precision 17 prints what %.17g prints, several times faster
+// than fprintf; rows are buffered and written in large blocks.
 void write_rows(std::FILE* f, const std::vector<std::string>& columns, const Eigen::MatrixXd& data) {
-  std::fputs(join(columns).c_str(), f);
-  std::fputc('\n', f);
+  std::string out;
+  for (std::size_t j = 0; j < columns.size(); ++j) (out += j == 0 ? "" : ",") += columns[j];
+  out += '\n';
+  char field[64];
   for (Eigen::Index i = 0; i < data.rows(); ++i) {
-    for (Eigen::Index j = 0; j < data.cols(); ++j)
-      std::fprintf(f, j == 0 ? "%.17g" : ",%.17g", data(i, j));
-    std::fputc('\n', f);
+    for (Eigen::Index j = 0; j < data.cols(); ++j) {
+      if (j > 0) out += ',';
+      const auto end = std::to_chars(field, field + sizeof field, data(i, j), std::chars_format::general, 17).ptr;
+      out.append(field, end);
+    }
+    out += '\n';
+    if (out.size() > (1 << 16)) {
+      std::fwrite(out.data(), 1, out.size(), f);
+      out.clear();
+    }
   }
+  std::fwrite(out.data(), 1, out.size(), f);
 }
 
 // The header has no quoting, so names that would split or shift columns are refused.
