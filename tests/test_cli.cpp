@@ -159,7 +159,7 @@ TEST_F(Cli, ConfigWithWrongTypeNamesKeyAndLine) {
 TEST_F(Cli, ConfigWithForgettingOutsideUnitIntervalNamesKeyAndLine) {
   const int line = line_of("forgetting");
   ASSERT_GT(line, 0);
-  expect_config_rejected(*this, "forgetting: 0.999", "forgetting: 1.5", "model.submodels[0].forgetting", line);
+  expect_config_rejected(*this, "forgetting: 0.998", "forgetting: 1.5", "model.submodels[0].forgetting", line);
 }
 
 TEST_F(Cli, ConfigWithNonPositiveFrequencyNamesKeyAndLine) {

@@ -165,6 +165,130 @@ TEST(Config, EstimatorSettingsFollowTheOtherSections) {
   const Config b = parse_config(kBase, "test.yaml");
   EXPECT_EQ(b.estimator.forgetting, (std::vector<double>{0.99, 1.0}));
   EXPECT_FALSE(b.estimator.closed_loop);
+  // One slot per submodel, empty where no initial_covariance is given.
+  ASSERT_EQ(b.estimator.initial_covariance.size(), 2u);
+  EXPECT_EQ(b.estimator.initial_covariance[0].size(), 0);
+  EXPECT_EQ(b.estimator.initial_covariance[1].size(), 0);
+}
+
+// The EstimatorSettings keys of the `estimator:` section (not those the other
+// sections fill in) are those of a default EstimatorSettings.
+void expect_estimator_defaults(const modalwatch::EstimatorSettings& e, int warmup_samples) {
+  const modalwatch::EstimatorSettings d;
+  EXPECT_EQ(e.block_iterations, d.block_iterations);
+  EXPECT_EQ(e.refinements, d.refinements);
+  EXPECT_EQ(e.update_divisor, d.update_divisor);
+  EXPECT_EQ(e.warmup_samples, warmup_samples);
+  EXPECT_EQ(e.fit_on_warmup, d.fit_on_warmup);
+  EXPECT_EQ(e.warmup_iterations, d.warmup_iterations);
+  EXPECT_EQ(e.initial_covariance_relative, d.initial_covariance_relative);
+  EXPECT_EQ(e.random_walk, d.random_walk);
+  EXPECT_EQ(e.covariance_bound, d.covariance_bound);
+  EXPECT_EQ(e.divergence_ratio, d.divergence_ratio);
+  EXPECT_EQ(e.gap_factor, d.gap_factor);
+  EXPECT_EQ(e.outlier_sigma, d.outlier_sigma);
+  EXPECT_EQ(e.residual_window, d.residual_window);
+  EXPECT_EQ(e.low_excitation_ratio, d.low_excitation_ratio);
+  EXPECT_EQ(e.low_excitation_window, d.low_excitation_window);
+}
+
+// Every `estimator:` key with a value other than its default; appended to
+// kBase, so the section starts on line 15.
+const std::string kEstimator =
+    "estimator:\n"                          // 15
+    "  block_iterations: 3\n"               // 16
+    "  refinements: 2\n"                    // 17
+    "  update_divisor: 4\n"                 // 18
+    "  warmup: 12.5\n"                      // 19
+    "  fit_on_warmup: false\n"              // 20
+    "  warmup_iterations: 20\n"             // 21
+    "  initial_covariance_relative: 0.5\n"  // 22
+    "  random_walk: 1.0e-4\n"               // 23
+    "  covariance_bound: 50\n"              // 24
+    "  divergence_ratio: 4\n"               // 25
+    "  gap_factor: 2.5\n"                   // 26
+    "  outlier_sigma: 6\n"                  // 27
+    "  residual_window: 30\n"               // 28
+    "  low_excitation_ratio: 0.2\n"         // 29
+    "  low_excitation_window: 8\n";         // 30
+
+TEST(Config, EstimatorDefaultsWithoutTheSection) {
+  expect_estimator_defaults(parse_config(kBase, "test.yaml").estimator, 0);
+  expect_estimator_defaults(parse_config(kBase + "estimator: {}\n", "test.yaml").estimator, 0);
+}
+
+TEST(Config, EstimatorParsesEveryKey) {
+  const Config c = parse_config(kBase + kEstimator, "test.yaml");
+  const auto& e = c.estimator;
+  EXPECT_EQ(e.block_iterations, 3);
+  EXPECT_EQ(e.refinements, 2);
+  EXPECT_EQ(e.update_divisor, 4);
+  EXPECT_EQ(e.warmup_samples, 250);  // 12.5 s at 20 Hz
+  EXPECT_FALSE(e.fit_on_warmup);
+  EXPECT_EQ(e.warmup_iterations, 20);
+  EXPECT_DOUBLE_EQ(e.initial_covariance_relative, 0.5);
+  EXPECT_DOUBLE_EQ(e.random_walk, 1e-4);
+  EXPECT_DOUBLE_EQ(e.covariance_bound, 50.0);
+  EXPECT_DOUBLE_EQ(e.divergence_ratio, 4.0);
+  EXPECT_DOUBLE_EQ(e.gap_factor, 2.5);
+  EXPECT_DOUBLE_EQ(e.outlier_sigma, 6.0);
+  EXPECT_DOUBLE_EQ(e.residual_window, 30.0);
+  EXPECT_DOUBLE_EQ(e.low_excitation_ratio, 0.2);
+  EXPECT_DOUBLE_EQ(e.low_excitation_window, 8.0);
+  // Still completed from the other sections.
+  EXPECT_DOUBLE_EQ(e.sample_time, 0.05);
+  EXPECT_EQ(e.forgetting, (std::vector<double>{0.99, 1.0}));
+  // Boundary values that are allowed.
+  const std::string edge = edit(edit(edit(edit(edit(kEstimator, "refinements: 2", "refinements: 0"), "warmup: 12.5",
+                                                  "warmup: 0"),
+                                             "random_walk: 1.0e-4", "random_walk: 0"),
+                                        "low_excitation_ratio: 0.2", "low_excitation_ratio: 0"),
+                                   "residual_window: 30", "residual_window: 0");
+  const Config z = parse_config(kBase + edge, "test.yaml");
+  EXPECT_EQ(z.estimator.refinements, 0);
+  EXPECT_EQ(z.estimator.warmup_samples, 0);
+  EXPECT_EQ(z.estimator.random_walk, 0.0);
+  EXPECT_EQ(z.estimator.low_excitation_ratio, 0.0);
+  EXPECT_EQ(z.estimator.residual_window, 0.0);
+  EXPECT_TRUE(parse_config(kBase + "estimator:\n  fit_on_warmup: true\n", "test.yaml").estimator.fit_on_warmup);
+}
+
+TEST(Config, EstimatorWarmupIsRoundedToSamples) {
+  const auto samples = [](const std::string& warmup) {
+    return parse_config(kBase + "estimator:\n  warmup: " + warmup + "\n", "test.yaml").estimator.warmup_samples;
+  };
+  EXPECT_EQ(samples("50"), 1000);
+  EXPECT_EQ(samples("0.03"), 1);   // 0.6 samples
+  EXPECT_EQ(samples("1.024"), 20);  // 20.48 samples
+  EXPECT_EQ(samples("1.026"), 21);  // 20.52 samples
+  const Config beam = parse_config(edit(kBase, "sample_rate_hz: 20", "sample_rate_hz: 4096") +
+                                       "estimator:\n  warmup: 5\n",
+                                   "test.yaml");
+  EXPECT_EQ(beam.estimator.warmup_samples, 20480);
+}
+
+TEST(Config, InitialCovariancePerSubmodel) {
+  const Config c = parse_config(
+      edit(kBase, "      forgetting: 0.99", "      forgetting: 0.99\n      initial_covariance: [1.0e-4, 2.0e-3, 0.5]"),
+      "test.yaml");
+  const auto& cov = c.estimator.initial_covariance;
+  ASSERT_EQ(cov.size(), 2u);
+  ASSERT_EQ(cov[0].size(), 3);
+  EXPECT_DOUBLE_EQ(cov[0](0), 1e-4);
+  EXPECT_DOUBLE_EQ(cov[0](1), 2e-3);
+  EXPECT_DOUBLE_EQ(cov[0](2), 0.5);
+  EXPECT_EQ(cov[1].size(), 0);
+  // n_theta = n + m + 1 for the other kinds: a rigid body has b_0 only.
+  const std::string yaml =
+      "sample_rate_hz: 100\n"
+      "model:\n"
+      "  submodels:\n"
+      "    - {name: tf, kind: transfer_function, a: [0.1, 0.01], b: [1, 0.5], initial_covariance: [1, 2, 3, 4]}\n"
+      "    - {name: rb, kind: rigid_body, gain: 0.5, initial_covariance: [0.01]}\n";
+  const Config t = parse_config(yaml, "test.yaml");
+  ASSERT_EQ(t.estimator.initial_covariance.size(), 2u);
+  EXPECT_EQ(t.estimator.initial_covariance[0], Eigen::Vector4d(1, 2, 3, 4));
+  EXPECT_EQ(t.estimator.initial_covariance[1], Eigen::VectorXd::Constant(1, 0.01));
 }
 
 TEST(Config, TransferFunctionAndRigidBody) {
@@ -211,8 +335,17 @@ TEST(Config, ShippedPaperSim) {
     EXPECT_NEAR(p.gain, gain[i], 1e-12);
     EXPECT_NEAR(s.a(1), a2[i], 1e-15);
     EXPECT_NEAR(s.a(0), a1[i], 1e-15);
-    EXPECT_DOUBLE_EQ(c.submodel_settings[static_cast<std::size_t>(i)].forgetting, 0.999);
   }
+  // The paper uses 0.999 for all three.
+  const std::vector<double> forgetting{0.998, 0.999, 0.9985};
+  for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(c.submodel_settings[i].forgetting, forgetting[i]) << i;
+  EXPECT_EQ(c.estimator.forgetting, forgetting);
+  // estimator: 50 s of warm-up at 20 Hz, the rest at the defaults.
+  expect_estimator_defaults(c.estimator, 1000);
+  EXPECT_TRUE(c.estimator.closed_loop);
+  EXPECT_DOUBLE_EQ(c.estimator.sample_time, 0.05);
+  ASSERT_EQ(c.estimator.initial_covariance.size(), 3u);
+  for (const auto& p0 : c.estimator.initial_covariance) EXPECT_EQ(p0.size(), 0);
   ASSERT_FALSE(c.controller.empty());
   EXPECT_NEAR(c.controller.numerator()[1], -0.02058, 1e-15);
   ASSERT_TRUE(c.plant.has_value());
@@ -228,6 +361,17 @@ TEST(Config, ShippedPaperSim) {
   EXPECT_EQ(c.experiment->seed, 1u);
   EXPECT_EQ(c.experiment->excitation.amplitudes, (std::vector<double>{3, 1, 1, 1}));
   EXPECT_EQ(c.experiment->excitation.frequencies_rad_s, (std::vector<double>{0.005, 2, 5, 17.5}));
+}
+
+TEST(Config, ShippedEstimatorSections) {
+  const Config beam = modalwatch::load_config(MODALWATCH_SOURCE_DIR "/config/flexible-beam.yaml");
+  expect_estimator_defaults(beam.estimator, 20480);  // 5 s at 4096 Hz
+  EXPECT_EQ(beam.estimator.forgetting, (std::vector<double>{0.9999, 0.999}));
+  EXPECT_TRUE(beam.estimator.closed_loop);
+  const Config stage = modalwatch::load_config(MODALWATCH_SOURCE_DIR "/config/motion-stage.yaml");
+  expect_estimator_defaults(stage.estimator, 10000);  // 1 s at 10 kHz
+  EXPECT_EQ(stage.estimator.forgetting, (std::vector<double>{0.9999, 0.999, 0.999}));
+  EXPECT_TRUE(stage.estimator.closed_loop);
 }
 
 TEST(Config, EveryShippedConfigLoads) {
@@ -279,7 +423,7 @@ TEST(ConfigErrors, UnknownKeys) {
   const auto model = parse_error(edit(kBase, "  loop: open", "  loop: open\n  order: 2"));
   EXPECT_CONTAINS(model, "test.yaml:4: key 'model.order': unknown key");
   const auto est = parse_error(kBase + "estimator:\n  type: rsrivc\n");
-  EXPECT_CONTAINS(est, "test.yaml:15: key 'estimator': reserved");
+  EXPECT_CONTAINS(est, "test.yaml:16: key 'estimator.type': unknown key for estimator (allowed: block_iterations, ");
 }
 
 TEST(ConfigErrors, DuplicateKey) {
@@ -336,6 +480,75 @@ TEST(ConfigErrors, Forgetting) {
   EXPECT_NO_THROW(parse_config(edit(kBase, "forgetting: 0.99", "forgetting: 1"), "test.yaml"));
 }
 
+TEST(ConfigErrors, EstimatorValues) {
+  EXPECT_NO_THROW(parse_config(kBase + kEstimator, "test.yaml"));
+  struct Case {
+    std::string from, to, message;
+  };
+  const std::vector<Case> cases = {
+      {"block_iterations: 3", "block_iterations: 0",
+       "test.yaml:16: key 'estimator.block_iterations': must be >= 1 (got 0)"},
+      {"block_iterations: 3", "block_iterations: 1.5",
+       "test.yaml:16: key 'estimator.block_iterations': expected an integer (got 1.5)"},
+      {"block_iterations: 3", "block_iterations: 3000000000",
+       "test.yaml:16: key 'estimator.block_iterations': must be >= 1 (got 3000000000)"},
+      {"refinements: 2", "refinements: -1", "test.yaml:17: key 'estimator.refinements': must be >= 0 (got -1)"},
+      {"refinements: 2", "refinements: two",
+       "test.yaml:17: key 'estimator.refinements': expected an integer (got two)"},
+      {"update_divisor: 4", "update_divisor: 0",
+       "test.yaml:18: key 'estimator.update_divisor': must be >= 1 (got 0)"},
+      {"warmup: 12.5", "warmup: -1", "test.yaml:19: key 'estimator.warmup': must be >= 0 (got -1)"},
+      {"warmup: 12.5", "warmup: 0.02",
+       "test.yaml:19: key 'estimator.warmup': shorter than one sample period (use 0 for no warm-up) (got 0.02)"},
+      {"warmup: 12.5", "warmup: 10 s", "test.yaml:19: key 'estimator.warmup': expected a number (got 10 s)"},
+      {"warmup: 12.5", "warmup: 1.0e9",
+       "test.yaml:19: key 'estimator.warmup': too long: more than 2147483647 samples (got 1.0e9)"},
+      {"fit_on_warmup: false", "fit_on_warmup: yes",
+       "test.yaml:20: key 'estimator.fit_on_warmup': expected true or false (got yes)"},
+      {"fit_on_warmup: false", "fit_on_warmup: \"true\"",
+       "test.yaml:20: key 'estimator.fit_on_warmup': expected true or false (got \"true\")"},
+      {"fit_on_warmup: false", "fit_on_warmup: 1",
+       "test.yaml:20: key 'estimator.fit_on_warmup': expected true or false (got 1)"},
+      {"warmup_iterations: 20", "warmup_iterations: 0",
+       "test.yaml:21: key 'estimator.warmup_iterations': must be >= 1 (got 0)"},
+      {"initial_covariance_relative: 0.5", "initial_covariance_relative: 0",
+       "test.yaml:22: key 'estimator.initial_covariance_relative': must be > 0 (got 0)"},
+      {"random_walk: 1.0e-4", "random_walk: -1.0e-4",
+       "test.yaml:23: key 'estimator.random_walk': must be >= 0 (got -1.0e-4)"},
+      {"covariance_bound: 50", "covariance_bound: 1",
+       "test.yaml:24: key 'estimator.covariance_bound': must be > 1 (got 1)"},
+      {"divergence_ratio: 4", "divergence_ratio: 0.5",
+       "test.yaml:25: key 'estimator.divergence_ratio': must be > 1 (got 0.5)"},
+      {"gap_factor: 2.5", "gap_factor: 1", "test.yaml:26: key 'estimator.gap_factor': must be > 1 (got 1)"},
+      {"outlier_sigma: 6", "outlier_sigma: 0", "test.yaml:27: key 'estimator.outlier_sigma': must be > 0 (got 0)"},
+      {"outlier_sigma: 6", "outlier_sigma: .inf",
+       "test.yaml:27: key 'estimator.outlier_sigma': expected a number (got .inf)"},
+      {"residual_window: 30", "residual_window: -30",
+       "test.yaml:28: key 'estimator.residual_window': must be >= 0 (got -30)"},
+      {"low_excitation_ratio: 0.2", "low_excitation_ratio: 1",
+       "test.yaml:29: key 'estimator.low_excitation_ratio': must be in [0, 1) (got 1)"},
+      {"low_excitation_ratio: 0.2", "low_excitation_ratio: -0.1",
+       "test.yaml:29: key 'estimator.low_excitation_ratio': must be in [0, 1) (got -0.1)"},
+      {"low_excitation_window: 8", "low_excitation_window: -8",
+       "test.yaml:30: key 'estimator.low_excitation_window': must be >= 0 (got -8)"},
+  };
+  for (const auto& c : cases) EXPECT_EQ(parse_error(kBase + edit(kEstimator, c.from, c.to)), c.message) << c.to;
+}
+
+TEST(ConfigErrors, EstimatorKeysAndShape) {
+  const auto unknown = parse_error(kBase + kEstimator + "  forgetting: 0.99\n");
+  EXPECT_EQ(unknown,
+            "test.yaml:31: key 'estimator.forgetting': unknown key for estimator (allowed: block_iterations, "
+            "refinements, update_divisor, warmup, fit_on_warmup, warmup_iterations, initial_covariance_relative, "
+            "random_walk, covariance_bound, divergence_ratio, gap_factor, outlier_sigma, residual_window, "
+            "low_excitation_ratio, low_excitation_window)");
+  EXPECT_EQ(parse_error(kBase + kEstimator + "  warmup: 3\n"),
+            "test.yaml:31: key 'estimator.warmup': duplicate key (first at line 19)");
+  EXPECT_EQ(parse_error(kBase + "estimator: rsrivc\n"),
+            "test.yaml:15: key 'estimator': expected a map of keys (got rsrivc)");
+  EXPECT_EQ(parse_error(kBase + "estimator:\n"), "test.yaml:15: key 'estimator': expected a map of keys (got null)");
+}
+
 TEST(ConfigErrors, NamesRequiredUniqueAndSafe) {
   EXPECT_EQ(parse_error(edit(kBase, "name: m2", "name: m1")),
             "test.yaml:11: key 'model.submodels[1].name': duplicate name (first used at line 5) (got m1)");
@@ -384,7 +597,35 @@ TEST(ConfigErrors, TransferFunctionOrders) {
             "test.yaml:4: key 'model.submodels[0].a': missing required key (kind transfer_function)");
   EXPECT_EQ(parse_error(edit(kTf, "a: [0.1, 0.01]", "wn: 3")),
             "test.yaml:6: key 'model.submodels[0].wn': unknown key for kind transfer_function (allowed: name, "
-            "kind, a, b, rigid_poles, forgetting)");
+            "kind, a, b, rigid_poles, forgetting, initial_covariance)");
+}
+
+TEST(ConfigErrors, InitialCovariance) {
+  const auto with = [](const std::string& value) {
+    return edit(kBase, "      forgetting: 0.99", "      forgetting: 0.99\n      initial_covariance: " + value);
+  };
+  EXPECT_NO_THROW(parse_config(with("[1, 2, 3]"), "test.yaml"));
+  EXPECT_EQ(parse_error(with("[1, 2]")),
+            "test.yaml:11: key 'model.submodels[0].initial_covariance': must have n + m + 1 = 2 + 0 + 1 = 3 "
+            "entries, one per parameter of theta = [a_1 .. a_n, b_0 .. b_m] (got [1, 2])");
+  EXPECT_EQ(parse_error(with("[1, 0, 3]")),
+            "test.yaml:11: key 'model.submodels[0].initial_covariance[1]': must be > 0 (got 0)");
+  EXPECT_EQ(parse_error(with("[1, -2, 3]")),
+            "test.yaml:11: key 'model.submodels[0].initial_covariance[1]': must be > 0 (got -2)");
+  EXPECT_EQ(parse_error(with("[1, x, 3]")),
+            "test.yaml:11: key 'model.submodels[0].initial_covariance[1]': expected a number (got x)");
+  EXPECT_EQ(parse_error(with("0.1")),
+            "test.yaml:11: key 'model.submodels[0].initial_covariance': expected a list (got 0.1)");
+  EXPECT_EQ(parse_error(with("[]")),
+            "test.yaml:11: key 'model.submodels[0].initial_covariance': must have n + m + 1 = 2 + 0 + 1 = 3 "
+            "entries, one per parameter of theta = [a_1 .. a_n, b_0 .. b_m] (got [])");
+  // A transfer function with n = 2, m = 1.
+  const auto tf = parse_error(edit(kTf, "b: [1, 0.5]", "b: [1, 0.5]\n      initial_covariance: [1, 1, 1]"));
+  EXPECT_CONTAINS(tf, "test.yaml:8: key 'model.submodels[0].initial_covariance': must have n + m + 1 = 2 + 1 + 1 = 4 "
+                      "entries");
+  // Not a key of the true plant.
+  EXPECT_CONTAINS(parse_error(edit(kClosed, "      gain: 0.01", "      gain: 0.01\n      initial_covariance: [1]")),
+                  "test.yaml:21: key 'plant.modes[1].initial_covariance': unknown key for kind rigid_body");
 }
 
 TEST(ConfigErrors, RigidPoles) {
@@ -645,6 +886,30 @@ void expect_same_config(const Config& a, const Config& b) {
   }
   EXPECT_EQ(a.controller.numerator(), b.controller.numerator());
   EXPECT_EQ(a.controller.denominator(), b.controller.denominator());
+  const auto &sa = a.estimator, &sb = b.estimator;
+  EXPECT_NEAR(sa.sample_time, sb.sample_time, 1e-15 * sb.sample_time);
+  EXPECT_EQ(sa.closed_loop, sb.closed_loop);
+  EXPECT_EQ(sa.output_hold, sb.output_hold);
+  EXPECT_EQ(sa.controller.numerator(), sb.controller.numerator());
+  EXPECT_EQ(sa.forgetting, sb.forgetting);
+  EXPECT_EQ(sa.block_iterations, sb.block_iterations);
+  EXPECT_EQ(sa.refinements, sb.refinements);
+  EXPECT_EQ(sa.update_divisor, sb.update_divisor);
+  EXPECT_EQ(sa.warmup_samples, sb.warmup_samples);
+  EXPECT_EQ(sa.fit_on_warmup, sb.fit_on_warmup);
+  EXPECT_EQ(sa.warmup_iterations, sb.warmup_iterations);
+  EXPECT_EQ(sa.initial_covariance_relative, sb.initial_covariance_relative);
+  EXPECT_EQ(sa.random_walk, sb.random_walk);
+  EXPECT_EQ(sa.covariance_bound, sb.covariance_bound);
+  EXPECT_EQ(sa.divergence_ratio, sb.divergence_ratio);
+  EXPECT_EQ(sa.gap_factor, sb.gap_factor);
+  EXPECT_EQ(sa.outlier_sigma, sb.outlier_sigma);
+  EXPECT_EQ(sa.residual_window, sb.residual_window);
+  EXPECT_EQ(sa.low_excitation_ratio, sb.low_excitation_ratio);
+  EXPECT_EQ(sa.low_excitation_window, sb.low_excitation_window);
+  ASSERT_EQ(sa.initial_covariance.size(), sb.initial_covariance.size());
+  for (std::size_t i = 0; i < sa.initial_covariance.size(); ++i)
+    EXPECT_EQ(sa.initial_covariance[i], sb.initial_covariance[i]) << i;
   ASSERT_EQ(a.plant.has_value(), b.plant.has_value());
   if (a.plant) {
     EXPECT_EQ(a.plant->noise_variance, b.plant->noise_variance);
@@ -691,6 +956,55 @@ Config round_trip(const Config& c, const modalwatch::AdditiveModel& model) {
 TEST(ConfigRoundTrip, PaperSim) {
   const Config c = modalwatch::load_config(MODALWATCH_SOURCE_DIR "/config/paper-sim.yaml");
   expect_same_config(round_trip(c, c.model), c);
+}
+
+TEST(ConfigRoundTrip, EveryShippedConfig) {
+  for (const char* name : {"paper-sim.yaml", "flexible-beam.yaml", "motion-stage.yaml"}) {
+    SCOPED_TRACE(name);
+    const Config c = modalwatch::load_config(std::string(MODALWATCH_SOURCE_DIR "/config/") + name);
+    expect_same_config(round_trip(c, c.model), c);
+  }
+}
+
+TEST(ConfigRoundTrip, EstimatorSectionAndInitialCovariance) {
+  const std::string yaml =
+      edit(kBase, "      forgetting: 0.99",
+           "      forgetting: 0.99\n      initial_covariance: [1.0e-4, 0.0020000000000000001, 0.3333333333333333]") +
+      kEstimator;
+  const Config c = parse_config(yaml, "test.yaml");
+  const std::string written = modalwatch::config_to_yaml(c, c.model);
+  EXPECT_CONTAINS(written, "\nestimator:\n  block_iterations: 3\n");
+  EXPECT_CONTAINS(written, "\n  warmup: 12.5\n");
+  EXPECT_CONTAINS(written, "\n  fit_on_warmup: false\n");
+  // Only the submodel that has one.
+  EXPECT_EQ(written.find("initial_covariance:"), written.rfind("initial_covariance:")) << written;
+  const Config back = round_trip(c, c.model);
+  expect_same_config(back, c);
+  ASSERT_EQ(back.estimator.initial_covariance[0].size(), 3);
+  EXPECT_EQ(back.estimator.initial_covariance[0](2), 1.0 / 3.0);
+  // Defaults are written too, and read back as such.
+  const Config d = parse_config(kBase, "test.yaml");
+  EXPECT_CONTAINS(modalwatch::config_to_yaml(d, d.model), "\n  low_excitation_ratio: 0.050000000000000003\n");
+  expect_estimator_defaults(round_trip(d, d.model).estimator, 0);
+}
+
+TEST(ConfigRoundTrip, InitialCovarianceFollowsTheSubmodelName) {
+  const std::string yaml =
+      edit(kBase, "      forgetting: 0.99", "      forgetting: 0.99\n      initial_covariance: [1, 2, 3]");
+  const Config c = parse_config(yaml, "test.yaml");
+  // A model written in another order keeps each submodel's covariance.
+  modalwatch::AdditiveModel swapped = c.model;
+  std::swap(swapped.submodels[0], swapped.submodels[1]);
+  const Config back = round_trip(c, swapped);
+  ASSERT_EQ(back.estimator.initial_covariance.size(), 2u);
+  EXPECT_EQ(back.estimator.initial_covariance[0].size(), 0);
+  EXPECT_EQ(back.estimator.initial_covariance[1], Eigen::Vector3d(1, 2, 3));
+  EXPECT_EQ(back.submodel_settings[1].forgetting, 0.99);
+  // A submodel written with another number of parameters drops a covariance that no longer fits.
+  modalwatch::AdditiveModel other = c.model;
+  other.submodels[0] = modalwatch::make_rigid_body("m1", 2.0);
+  const Config dropped = round_trip(c, other);
+  EXPECT_EQ(dropped.estimator.initial_covariance[0].size(), 0);
 }
 
 TEST(ConfigRoundTrip, ClosedLoopWithRigidBody) {

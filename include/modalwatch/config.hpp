@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "modalwatch/estimator.hpp"
 #include "modalwatch/model.hpp"
 #include "modalwatch/prefilter.hpp"
 #include "modalwatch/simulator.hpp"
@@ -28,6 +29,10 @@ struct Config {
   Hold output_hold = Hold::zoh;
   std::optional<PlantSpec> plant;            // `plant:` section (simulate)
   std::optional<ExperimentSpec> experiment;  // `simulation:` section (simulate)
+  // `estimator:` section (track, daemon), completed from the rest of the file:
+  // sample_time, closed_loop, controller, output_hold, forgetting and the
+  // per-submodel initial_covariance come from the sections above.
+  EstimatorSettings estimator;
 };
 
 Config load_config(const std::string& path);

@@ -48,6 +48,10 @@ class Prefilter {
   // Re-discretises for a new denominator of the same order, keeping the state
   // (the parameters are assumed to change only at sampling instants).
   void set_denominator(const Eigen::Ref<const Eigen::VectorXd>& denominator);
+  // The same with a discretisation already computed for this denominator, T and
+  // hold (filters sharing a denominator discretise once).
+  void set_denominator(const Eigen::Ref<const Eigen::VectorXd>& denominator, const Discretization& discretization);
+  const Discretization& discretization() const { return disc_; }
   void reset();  // zero state, zero past input
 
   // Advances from t_{k-1} to t_k with the new sample w_k and returns

@@ -23,6 +23,12 @@ struct SrivcOptions {
   double tolerance = 1e-10;     // on the relative change of beta per cycle
   Hold output_hold = Hold::zoh; // intersample behaviour assumed for y in the prefilters
   bool stability_projection = true;
+  // Trust region: a block's natural frequency moves by at most this factor per
+  // iteration (1 or less: no limit). Keeps blocks on their own modes from a rough start.
+  double max_frequency_step = 1.25;
+  // For K >= 2 resonant modes, also start from the partial fractions of an
+  // unfactored (K = 1) SRIVC fit and keep the start with the lower output error.
+  bool unfactored_start = true;
   // Closed loop: u = C_d(q)(r - y); the record must carry r.
   bool closed_loop = false;
   DiscreteTransferFunction controller;
@@ -38,6 +44,8 @@ struct FitResult {
   int iterations = 0;
   bool converged = false;
   int projections = 0;           // stability projections applied
+  int damped_steps = 0;          // iterations shortened by the frequency trust region
+  std::string start = "configured";  // which start won: "configured" or "unfactored"
   std::vector<double> change_history;  // relative change of beta per cycle
   Eigen::VectorXd simulated;     // y_hat: the model's output on the record
 

@@ -108,6 +108,24 @@ class Value {
     if (v == 0.0) fail("must be != 0");
     return v;
   }
+  double at_least(double lo) const {
+    const double v = number();
+    if (!(v >= lo)) fail("must be >= " + format_number(lo));
+    return v;
+  }
+  double above(double lo) const {
+    const double v = number();
+    if (!(v > lo)) fail("must be > " + format_number(lo));
+    return v;
+  }
+  // Plain `true` or `false` only: YAML 1.1's yes/no/on/off are too easy to mistype.
+  bool boolean() const {
+    if (node_.IsScalar() && node_.Tag() != "!") {
+      if (node_.Scalar() == "true") return true;
+      if (node_.Scalar() == "false") return false;
+    }
+    fail("expected true or false");
+  }
   long long integer(long long lo, long long hi) const {
     long long v = 0;
     if (!parse_plain(node_, v)) fail("expected an integer");
@@ -326,6 +344,19 @@ void check_unique_names(const std::vector<Value>& items, const std::vector<Submo
 
 // ---------------------------------------------------------------- model
 
+// `initial_covariance` of a submodel: the diagonal of P_i(t0), one entry per
+// element of theta_i = [a_1 .. a_n, b_0 .. b_m].
+Eigen::VectorXd parse_initial_covariance(const Value& v, const Submodel& s) {
+  const std::vector<Value> items = v.items();
+  const int nt = s.n_theta();
+  if (static_cast<int>(items.size()) != nt)
+    v.fail("must have n + m + 1 = " + std::to_string(s.n) + " + " + std::to_string(s.m) + " + 1 = " +
+           std::to_string(nt) + " entries, one per parameter of theta = [a_1 .. a_n, b_0 .. b_m]");
+  Eigen::VectorXd out(nt);
+  for (int j = 0; j < nt; ++j) out(j) = items[static_cast<std::size_t>(j)].positive();
+  return out;
+}
+
 void parse_model(const Map& model, Config& config) {
   model.allow({"loop", "output_hold", "submodels"}, "model");
   if (const auto loop = model.get("loop")) config.closed_loop = loop->choice({"open", "closed"}) == "closed";
@@ -337,12 +368,15 @@ void parse_model(const Map& model, Config& config) {
   std::vector<SubmodelEntry> entries;
   for (const auto& item : items) {
     const Map m(item);
-    entries.push_back(parse_submodel(m, {"forgetting"}));
+    entries.push_back(parse_submodel(m, {"forgetting", "initial_covariance"}));
     SubmodelSettings settings;
     if (const auto f = m.get("forgetting")) {
       settings.forgetting = f->number();
       if (!(settings.forgetting > 0.0 && settings.forgetting <= 1.0)) f->fail("must be in (0, 1]");
     }
+    const auto cov = m.get("initial_covariance");
+    config.estimator.initial_covariance.push_back(
+        cov ? parse_initial_covariance(*cov, entries.back().submodel) : Eigen::VectorXd());
     config.model.submodels.push_back(entries.back().submodel);
     config.submodel_settings.push_back(settings);
   }
@@ -588,12 +622,49 @@ ExperimentSpec parse_simulation(const Map& sim, const Config& config, const std:
   return e;
 }
 
+// ---------------------------------------------------------------- estimator
+
+// The `estimator:` keys; every one is optional and defaults to EstimatorSettings'.
+void parse_estimator(const Map& est, double sample_time, EstimatorSettings& e) {
+  est.allow({"block_iterations", "refinements", "update_divisor", "warmup", "fit_on_warmup",
+             "warmup_iterations", "initial_covariance_relative", "random_walk", "covariance_bound",
+             "divergence_ratio", "gap_factor", "outlier_sigma", "residual_window", "low_excitation_ratio",
+             "low_excitation_window"},
+            "estimator");
+  constexpr long long kIntMax = std::numeric_limits<int>::max();
+  const auto count = [&](std::string_view key, long long lo, int& out) {
+    if (const auto v = est.get(key)) out = static_cast<int>(v->integer(lo, kIntMax));
+  };
+  count("block_iterations", 1, e.block_iterations);
+  count("refinements", 0, e.refinements);
+  count("update_divisor", 1, e.update_divisor);
+  count("warmup_iterations", 1, e.warmup_iterations);
+  if (const auto w = est.get("warmup")) {
+    const double seconds = w->at_least(0.0);
+    const double samples = std::round(seconds / sample_time);
+    if (seconds > 0.0 && samples < 1.0) w->fail("shorter than one sample period (use 0 for no warm-up)");
+    if (samples > static_cast<double>(kIntMax)) w->fail("too long: more than " + std::to_string(kIntMax) + " samples");
+    e.warmup_samples = static_cast<int>(samples);
+  }
+  if (const auto v = est.get("fit_on_warmup")) e.fit_on_warmup = v->boolean();
+  if (const auto v = est.get("initial_covariance_relative")) e.initial_covariance_relative = v->positive();
+  if (const auto v = est.get("random_walk")) e.random_walk = v->at_least(0.0);
+  if (const auto v = est.get("covariance_bound")) e.covariance_bound = v->above(1.0);
+  if (const auto v = est.get("divergence_ratio")) e.divergence_ratio = v->above(1.0);
+  if (const auto v = est.get("gap_factor")) e.gap_factor = v->above(1.0);
+  if (const auto v = est.get("outlier_sigma")) e.outlier_sigma = v->positive();
+  if (const auto v = est.get("residual_window")) e.residual_window = v->at_least(0.0);
+  if (const auto v = est.get("low_excitation_ratio")) {
+    e.low_excitation_ratio = v->number();
+    if (!(e.low_excitation_ratio >= 0.0 && e.low_excitation_ratio < 1.0)) v->fail("must be in [0, 1)");
+  }
+  if (const auto v = est.get("low_excitation_window")) e.low_excitation_window = v->at_least(0.0);
+}
+
 // ---------------------------------------------------------------- document
 
 void parse_document(const Map& top, Config& config, const std::filesystem::path& dir) {
-  if (const auto est = top.get("estimator"))
-    est->fail_plain("reserved for the recursive estimator (issue 3); not yet accepted");
-  top.allow({"sample_rate_hz", "model", "controller", "plant", "simulation"}, "");
+  top.allow({"sample_rate_hz", "model", "controller", "plant", "simulation", "estimator"}, "");
   config.sample_time = 1.0 / top.require("sample_rate_hz").positive();
   parse_model(Map(top.require("model")), config);
   if (const auto c = top.get("controller")) config.controller = parse_controller(Map(*c));
@@ -601,10 +672,11 @@ void parse_document(const Map& top, Config& config, const std::filesystem::path&
     top.missing("controller", "model.loop is closed");
   if (const auto p = top.get("plant")) config.plant = parse_plant(Map(*p));
   if (const auto s = top.get("simulation")) config.experiment = parse_simulation(Map(*s), config, dir);
+  if (const auto e = top.get("estimator")) parse_estimator(Map(*e), config.sample_time, config.estimator);
 }
 
-// The estimator settings that the other sections already determine (the
-// `estimator:` section itself is not yet specified in config/README.md).
+// The estimator settings that the other sections determine (the `estimator:`
+// section and the submodels' initial_covariance are already in place).
 void complete_estimator(Config& config) {
   EstimatorSettings& e = config.estimator;
   e.sample_time = config.sample_time;
@@ -719,11 +791,13 @@ void write_submodel(YamlWriter& w, int indent, const Submodel& s) {
   }
 }
 
-double forgetting_of(const Config& config, const std::string& name, std::size_t index) {
+// The configured submodel that the index-th submodel of a written model stands
+// for: the one of the same name, else the one at the same place.
+std::size_t configured_index(const Config& config, const std::string& name, std::size_t index) {
   const auto& subs = config.model.submodels;
-  for (std::size_t i = 0; i < subs.size() && i < config.submodel_settings.size(); ++i)
-    if (subs[i].name == name) return config.submodel_settings[i].forgetting;
-  return index < config.submodel_settings.size() ? config.submodel_settings[index].forgetting : 1.0;
+  for (std::size_t i = 0; i < subs.size(); ++i)
+    if (subs[i].name == name) return i;
+  return index;
 }
 
 void write_model(YamlWriter& w, const Config& config, const AdditiveModel& model) {
@@ -731,9 +805,15 @@ void write_model(YamlWriter& w, const Config& config, const AdditiveModel& model
   w.key(1, "loop", config.closed_loop ? "closed" : "open");
   w.key(1, "output_hold", config.output_hold == Hold::foh ? "foh" : "zoh");
   w.line(1, "submodels:");
+  const auto& covariances = config.estimator.initial_covariance;
   for (std::size_t i = 0; i < model.submodels.size(); ++i) {
-    write_submodel(w, 2, model.submodels[i]);
-    w.number(3, "forgetting", forgetting_of(config, model.submodels[i].name, i));
+    const Submodel& s = model.submodels[i];
+    const std::size_t c = configured_index(config, s.name, i);
+    write_submodel(w, 2, s);
+    w.number(3, "forgetting", c < config.submodel_settings.size() ? config.submodel_settings[c].forgetting : 1.0);
+    // Only when it still fits theta_i (a written model of another order would not load).
+    if (c < covariances.size() && covariances[c].size() > 0 && covariances[c].size() == s.n_theta())
+      w.key(3, "initial_covariance", flow_list(covariances[c]));
   }
 }
 
@@ -803,6 +883,26 @@ void write_signal(YamlWriter& w, int in, const SignalSpec& s) {
   }
 }
 
+// Every key, defaults included, so that the file shows what a run uses.
+void write_estimator(YamlWriter& w, const EstimatorSettings& e, double sample_time) {
+  w.line(0, "estimator:");
+  w.key(1, "block_iterations", std::to_string(e.block_iterations));
+  w.key(1, "refinements", std::to_string(e.refinements));
+  w.key(1, "update_divisor", std::to_string(e.update_divisor));
+  w.number(1, "warmup", static_cast<double>(e.warmup_samples) * sample_time);
+  w.key(1, "fit_on_warmup", e.fit_on_warmup ? "true" : "false");
+  w.key(1, "warmup_iterations", std::to_string(e.warmup_iterations));
+  w.number(1, "initial_covariance_relative", e.initial_covariance_relative);
+  w.number(1, "random_walk", e.random_walk);
+  w.number(1, "covariance_bound", e.covariance_bound);
+  w.number(1, "divergence_ratio", e.divergence_ratio);
+  w.number(1, "gap_factor", e.gap_factor);
+  w.number(1, "outlier_sigma", e.outlier_sigma);
+  w.number(1, "residual_window", e.residual_window);
+  w.number(1, "low_excitation_ratio", e.low_excitation_ratio);
+  w.number(1, "low_excitation_window", e.low_excitation_window);
+}
+
 void write_simulation(YamlWriter& w, const ExperimentSpec& e) {
   w.line(0, "simulation:");
   w.number(1, "duration", e.duration);
@@ -823,6 +923,7 @@ std::string config_to_yaml(const Config& config, const AdditiveModel& model) {
   if (!config.controller.empty()) write_controller(w, config.controller);
   if (config.plant) write_plant(w, *config.plant);
   if (config.experiment) write_simulation(w, *config.experiment);
+  write_estimator(w, config.estimator, config.sample_time);
   return w.str();
 }
 

@@ -100,11 +100,13 @@ Discretization general(const Eigen::Ref<const Eigen::VectorXd>& d, double T) {
   FilterMatrix A;
   FilterVector B;
   companion(d, A, B);
-  Eigen::MatrixXd M = Eigen::MatrixXd::Zero(N + 2, N + 2);
+  // Fixed capacity: no heap allocation, so the recursive estimator may call this per sample.
+  using Augmented = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxFilterOrder + 2, kMaxFilterOrder + 2>;
+  Augmented M = Augmented::Zero(N + 2, N + 2);
   M.topLeftCorner(N, N) = A * T;
   M.block(0, N, N, 1) = B * T;
   M(N, N + 1) = 1.0;
-  const Eigen::MatrixXd E = M.exp();
+  const Augmented E = M.exp();
   Discretization z;
   z.phi = E.topLeftCorner(N, N);
   z.gamma0 = E.block(0, N, N, 1);
@@ -147,6 +149,12 @@ void Prefilter::set_denominator(const Eigen::Ref<const Eigen::VectorXd>& denomin
   if (denominator.size() != order_ + 1) throw std::invalid_argument("Prefilter: order changed");
   d_ = denominator;
   disc_ = discretize(denominator, T_, hold_);
+}
+
+void Prefilter::set_denominator(const Eigen::Ref<const Eigen::VectorXd>& denominator,
+                                const Discretization& discretization) {
+  d_ = denominator;
+  disc_ = discretization;
 }
 
 void Prefilter::reset() {

@@ -166,6 +166,24 @@ Eigen::VectorXd iv_solve(const Filtered& f) {
   return scaled.cwiseProduct(colscale);
 }
 
+// Trust region on the natural frequency of a block per iteration: far from the
+// solution, a block's residual can be dominated by a neighbouring mode whose own
+// block is still wrong, and an undamped step lands the block on that mode (two
+// blocks on one mode: a local minimum of the block-coordinate descent). Moving
+// sqrt(a_n) by at most a factor `max_step` per iteration lets each block walk to
+// its own mode. Returns true when the step was shortened.
+bool damp_step(const ScaledSubmodel& s, Eigen::VectorXd& theta, double max_step) {
+  const int n = s.shape->n;
+  if (n == 0 || !(max_step > 1.0)) return false;
+  const double before = s.theta(n - 1), after = theta(n - 1);
+  if (!(before > 0.0) || !(after > 0.0)) return false;
+  const double ratio = std::abs(std::log(after / before)) / n;  // log of the frequency ratio
+  const double limit = std::log(max_step);
+  if (ratio <= limit) return false;
+  theta = s.theta + (limit / ratio) * (theta - s.theta);
+  return true;
+}
+
 double relative_change(const Eigen::VectorXd& now, const Eigen::VectorXd& before) {
   return (now - before).norm() / std::max(before.norm(), 1e-300);
 }
@@ -193,6 +211,77 @@ void simulate_loop(const AdditiveModel& model, const DiscreteTransferFunction& c
   simulate_loop_scaled(scale_model(model), controller, r, T, z, y);
 }
 
+namespace {
+
+FitResult fit_additive(const Record& data, const AdditiveModel& initial, const SrivcOptions& options);
+
+Eigen::VectorXd multiply(const Eigen::VectorXd& x, const Eigen::VectorXd& y) {
+  Eigen::VectorXd z = Eigen::VectorXd::Zero(x.size() + y.size() - 1);
+  for (Eigen::Index i = 0; i < x.size(); ++i) z.segment(i, y.size()) += x(i) * y;
+  return z;
+}
+
+// A second start for a model of K resonant modes: the unfactored K = 1 SRIVC has
+// no block coupling, so it cannot put two blocks on one mode. Its partial
+// fractions, matched to the blocks by frequency, start the additive fit again.
+// Returns false when the unfactored fit does not give K resonant pole pairs.
+bool unfactored_start(const Record& data, const AdditiveModel& initial, const SrivcOptions& options,
+                      AdditiveModel& start) {
+  const std::size_t K = initial.submodels.size();
+  Eigen::VectorXd A = Eigen::VectorXd::Ones(1);
+  for (const auto& s : initial.submodels) A = multiply(A, s.a_polynomial());
+  const int n = static_cast<int>(A.size()) - 1;
+  Eigen::VectorXd B = Eigen::VectorXd::Zero(n - 1);
+  for (std::size_t i = 0; i < K; ++i) {
+    Eigen::VectorXd term = initial.submodels[i].b;
+    for (std::size_t j = 0; j < K; ++j)
+      if (j != i) term = multiply(term, initial.submodels[j].a_polynomial());
+    B.head(term.size()) += term;
+  }
+  Submodel all;
+  all.name = "unfactored";
+  all.n = n;
+  all.m = n - 2;
+  all.a = A.tail(n);
+  all.b = B;
+  AdditiveModel k1;
+  k1.submodels = {all};
+  SrivcOptions o = options;
+  o.unfactored_start = false;
+  const FitResult fit = fit_additive(data, k1, o);
+  const Submodel& g = fit.model.submodels[0];
+  if (!g.theta().allFinite()) return false;
+  const Eigen::VectorXcd poles = roots(g.a_polynomial());
+  std::vector<std::complex<double>> pairs;
+  for (const auto& p : poles)
+    if (p.imag() > 0.0) pairs.push_back(p);
+  if (pairs.size() != K) return false;
+  std::sort(pairs.begin(), pairs.end(), [](auto x, auto y) { return std::abs(x) < std::abs(y); });
+  std::vector<std::size_t> order(K);
+  for (std::size_t i = 0; i < K; ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) {
+    return initial.submodels[x].a(1) > initial.submodels[y].a(1);  // ascending wn
+  });
+  // Derivative of A (ascending) for the residues B(s)/A'(s).
+  const Eigen::VectorXd a_full = g.a_polynomial();
+  start = initial;
+  for (std::size_t k = 0; k < K; ++k) {
+    const std::complex<double> s = pairs[k];
+    std::complex<double> num = 0.0, den = 0.0, pk = 1.0;
+    for (Eigen::Index j = 0; j < g.b.size(); ++j, pk *= s) num += g.b(j) * pk;
+    pk = 1.0;
+    for (Eigen::Index j = 1; j < a_full.size(); ++j, pk *= s) den += static_cast<double>(j) * a_full(j) * pk;
+    const std::complex<double> c = num / den;
+    const double mag2 = std::norm(s);
+    Submodel& blk = start.submodels[order[k]];
+    blk.a << -2.0 * s.real() / mag2, 1.0 / mag2;
+    blk.b << -2.0 * (c * std::conj(s)).real() / mag2;
+  }
+  return true;
+}
+
+}  // namespace
+
 FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const SrivcOptions& options) {
   const Eigen::Index N = data.size();
   if (initial.submodels.empty()) throw std::invalid_argument("fit: the model has no submodels");
@@ -202,6 +291,24 @@ FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const Sriv
                                 " parameters; need at least " + std::to_string(2 * initial.n_beta() + 2));
   if (options.closed_loop && (!data.has_reference() || options.controller.empty()))
     throw std::invalid_argument("fit: closed loop needs the reference r in the data and a controller");
+  FitResult best = fit_additive(data, initial, options);
+  const std::size_t K = initial.submodels.size();
+  bool eligible = options.unfactored_start && K >= 2 && 2 * K <= static_cast<std::size_t>(kMaxFilterOrder);
+  for (const auto& s : initial.submodels) eligible = eligible && s.is_mode();
+  if (!eligible) return best;
+  AdditiveModel start;
+  if (!unfactored_start(data, initial, options, start)) return best;
+  FitResult other = fit_additive(data, start, options);
+  other.start = "unfactored";
+  // The lower output error wins (the cost both starts minimise).
+  if (other.model.beta().allFinite() && other.noise_variance < best.noise_variance) return other;
+  return best;
+}
+
+namespace {
+
+FitResult fit_additive(const Record& data, const AdditiveModel& initial, const SrivcOptions& options) {
+  const Eigen::Index N = data.size();
   const double T = data.sample_time();
   const Eigen::VectorXd& u = data.u;
   const Eigen::VectorXd& y = data.y;
@@ -235,6 +342,7 @@ FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const Sriv
                                         options.output_hold);
         Eigen::VectorXd theta = iv_solve(f);
         if (!theta.allFinite()) break;  // singular: keep the previous iterate
+        if (damp_step(model[i], theta, options.max_frequency_step)) ++result.damped_steps;
         if (options.stability_projection && model[i].shape->n > 0) {
           Eigen::VectorXd a = theta.head(model[i].shape->n);
           if (project_stable(a)) {
@@ -291,5 +399,7 @@ FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const Sriv
   result.covariance = Dinv.asDiagonal() * cov_scaled * Dinv.asDiagonal();
   return result;
 }
+
+}  // namespace
 
 }  // namespace modalwatch

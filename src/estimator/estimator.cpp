@@ -1,0 +1,676 @@
+#include "modalwatch/estimator.hpp"
+
+#include <Eigen/LU>
+#include <Eigen/QR>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <stdexcept>
+
+#include "modalwatch/polynomial.hpp"
+#include "modalwatch/record.hpp"
+#include "modalwatch/srivc.hpp"
+
+namespace modalwatch {
+namespace {
+
+// theta_i has at most n + m + 1 <= 2 kMaxFilterOrder + 1 entries; fixed capacity
+// keeps step() free of heap allocation.
+constexpr int kMaxTheta = 2 * kMaxFilterOrder + 1;
+using ThetaVec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxTheta, 1>;
+using ThetaMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxTheta, kMaxTheta>;
+
+// Per-submodel time normalisation, as in the offline fit (DESIGN.md point 3).
+double time_scale(const Submodel& s) {
+  if (s.n > 0 && s.a(s.n - 1) != 0.0) return std::pow(std::abs(s.a(s.n - 1)), -1.0 / s.n);
+  return 1.0;
+}
+
+// Stability projection of an anti-monic A (section 4.7). Orders 1 and 2 in
+// closed form without allocation; higher orders through the general routine
+// (allocates, only when A is unstable).
+bool project(Eigen::Ref<ThetaVec> a_part, int n) {
+  constexpr double margin = 1e-6;
+  if (n == 1) {
+    if (a_part(0) > 0.0) return false;
+    a_part(0) = a_part(0) < 0.0 ? -a_part(0) : margin;
+    return true;
+  }
+  if (n == 2) {
+    double& a1 = a_part(0);
+    double& a2 = a_part(1);
+    if (a1 > 0.0 && a2 > 0.0) return false;
+    if (a2 > 0.0) {
+      // Both roots in the closed right half plane: reflecting both flips their sum.
+      a1 = a1 < 0.0 ? -a1 : 2.0 * margin * std::sqrt(a2);
+    } else if (a2 < 0.0) {
+      // Real roots of opposite sign: reflect the positive one.
+      a1 = std::sqrt(a1 * a1 - 4.0 * a2);
+      a2 = -a2;
+    } else {
+      return false;  // degenerate (order drop): caller rejects
+    }
+    return true;
+  }
+  Eigen::VectorXd a = a_part.head(n);
+  if (!project_stable(a)) return false;
+  a_part.head(n) = a;
+  return true;
+}
+
+struct Block {
+  int n = 0, m = 0, l = 0, nt = 0;
+  double ws = 1.0, lambda = 1.0;
+  ThetaVec scale;  // theta' = scale .* theta (physical)
+  ThetaVec theta;  // theta-bar, normalised
+  ThetaMat P;      // P-bar, normalised
+  ThetaVec p_bound;  // per-direction bound on diag(P): covariance_bound x diag(P(t0))
+  Prefilter fy, fx;  // 1/A on the residual output and on the auxiliary output (instrument)
+  Prefilter fu, fz;  // 1/(p^l A) on u and on the instrument input z
+  double xu = 0.0, xz = 0.0;  // B/(p^l A) driven by u and by z, at t_k
+  ThetaVec good_theta;
+  ThetaMat good_P;
+  ThetaVec phi, psi, Ppsi;
+
+  FilterVector a_poly() const {
+    FilterVector c(n + 1);
+    c(0) = 1.0;
+    c.tail(n) = theta.head(n);
+    return c;
+  }
+  FilterVector denominator() const {
+    FilterVector c = FilterVector::Zero(n + l + 1);
+    c.tail(n + 1) = a_poly();
+    return c;
+  }
+  double output(const Prefilter& f) const {
+    double s = 0.0;
+    const auto& d = f.derivatives();
+    for (int j = 0; j <= m; ++j) s += theta(n + j) * d(j);
+    return s;
+  }
+  double feedthrough() const {
+    return m == n + l ? theta(n + m) / (n > 0 ? theta(n - 1) : 1.0) : 0.0;
+  }
+};
+
+}  // namespace
+
+struct RecursiveEstimator::Impl {
+  EstimatorSettings cfg;
+  AdditiveModel initial;
+  std::vector<Block> blocks;
+  std::vector<Prefilter> snapshot;  // filters at t_{k-1}, for refinements
+  DiscreteTransferFunction controller;
+  EstimatorStatus status;
+
+  // Warm-up window, preallocated.
+  Eigen::VectorXd wt, wu, wy, wr;
+  int buffered = 0;
+
+  double t_prev = 0.0;
+  bool have_prev = false;
+  double last_u = 0.0, last_r = 0.0;  // held in place of a non-finite sample
+  std::uint64_t since_update = 0;
+  std::uint64_t updates_since_good = 0;
+
+  double e_var = 0.0;        // output-error variance (EWMA over the residual window)
+  double e_alpha = 0.0;      // its forgetting
+  std::uint64_t e_count = 0;
+  double e_short = 0.0;      // the same over a few samples: divergence detector
+  double e_short_alpha = 0.0;
+  double e_var_good = 0.0;   // e_var when the last good state was saved
+  std::uint64_t rearm = 0;   // samples until the divergence detector is armed again
+  int outlier_run = 0;       // consecutive samples replaced as outliers
+  double pow_short = 0.0, pow_ref = 0.0, pow_alpha = 0.0;
+  std::uint64_t pow_count = 0;
+
+  void build(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>* fit_covariance, double fit_sigma2,
+             double y_var);
+  void rediscretise(Block& b);
+  void reset_filters();
+  void save_good();
+  void restore_good(const char* reason);
+  unsigned advance(const Sample& s, bool allow_update);
+  bool update_block(Block& b, double y_f, double& theta_change);
+  void finish_warmup();
+};
+
+void RecursiveEstimator::Impl::rediscretise(Block& b) {
+  const FilterVector a = b.a_poly(), den = b.denominator();
+  const double Ts = b.ws * cfg.sample_time;
+  const Discretization da = discretize(a, Ts, cfg.output_hold);
+  b.fy.set_denominator(a, da);
+  b.fx.set_denominator(a, da);
+  const Discretization dd = discretize(den, Ts, Hold::zoh);
+  b.fu.set_denominator(den, dd);
+  b.fz.set_denominator(den, dd);
+}
+
+void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>* fit_cov,
+                                     double fit_sigma2, double y_var) {
+  blocks.clear();
+  const double T = cfg.sample_time;
+  for (std::size_t i = 0; i < model.submodels.size(); ++i) {
+    const Submodel& s = model.submodels[i];
+    Block b;
+    b.n = s.n;
+    b.m = s.m;
+    b.l = s.rigid_poles;
+    b.nt = s.n_theta();
+    b.ws = time_scale(s);
+    b.lambda = cfg.forgetting.empty() ? 1.0 : cfg.forgetting[i];
+    b.scale.resize(b.nt);
+    for (int j = 1; j <= b.n; ++j) b.scale(j - 1) = std::pow(b.ws, j);
+    for (int k = 0; k <= b.m; ++k) b.scale(b.n + k) = std::pow(b.ws, k - b.l);
+    b.theta = s.theta().cwiseProduct(Eigen::VectorXd(b.scale));
+    // P(t0): given, from the warm-up fit, or relative to the parameter size.
+    b.P = ThetaMat::Zero(b.nt, b.nt);
+    if (i < cfg.initial_covariance.size() && cfg.initial_covariance[i].size() == b.nt) {
+      for (int j = 0; j < b.nt; ++j) b.P(j, j) = cfg.initial_covariance[i](j) * b.scale(j) * b.scale(j);
+    } else if (fit_cov && fit_sigma2 > 0.0) {
+      const Eigen::MatrixXd& c = (*fit_cov)[i];
+      for (int j = 0; j < b.nt; ++j)
+        for (int k = 0; k < b.nt; ++k) b.P(j, k) = c(j, k) * b.scale(j) * b.scale(k) / fit_sigma2;
+    } else {
+      const double rho = cfg.initial_covariance_relative;
+      for (int j = 0; j < b.nt; ++j) {
+        const double v = rho * std::max(std::abs(b.theta(j)), 1e-3);
+        b.P(j, j) = v * v / std::max(y_var, 1e-300);
+      }
+    }
+    b.p_bound = cfg.covariance_bound * b.P.diagonal().cwiseMax(1e-300);
+    const FilterVector a = b.a_poly(), den = b.denominator();
+    b.fy = Prefilter(a, b.ws * T, cfg.output_hold);
+    b.fx = Prefilter(a, b.ws * T, cfg.output_hold);
+    b.fu = Prefilter(den, b.ws * T, Hold::zoh);
+    b.fz = Prefilter(den, b.ws * T, Hold::zoh);
+    b.phi.resize(b.nt);
+    b.psi.resize(b.nt);
+    b.Ppsi.resize(b.nt);
+    blocks.push_back(std::move(b));
+  }
+  snapshot.resize(4 * blocks.size());
+  controller = cfg.controller;
+  controller.reset();
+  save_good();
+}
+
+void RecursiveEstimator::Impl::reset_filters() {
+  for (auto& b : blocks) {
+    b.fy.reset();
+    b.fx.reset();
+    b.fu.reset();
+    b.fz.reset();
+    b.xu = b.xz = 0.0;
+  }
+  controller.reset();
+}
+
+void RecursiveEstimator::Impl::save_good() {
+  for (auto& b : blocks) {
+    b.good_theta = b.theta;
+    b.good_P = b.P;
+  }
+  e_var_good = e_var;
+  updates_since_good = 0;
+}
+
+void RecursiveEstimator::Impl::restore_good(const char* reason) {
+  for (auto& b : blocks) {
+    b.theta = b.good_theta;
+    b.P = b.good_P;
+    rediscretise(b);
+  }
+  reset_filters();
+  e_var = e_short = e_var_good;
+  e_count = 0;  // outlier statistics restart with the filters
+  outlier_run = 0;
+  // The filters restart from rest: give them one residual window before judging again.
+  rearm = static_cast<std::uint64_t>(1.0 / (1.0 - e_alpha));
+  ++status.resets;
+  status.last_reset_reason = reason;
+}
+
+// eqs. (23)-(25) for one block from theta-bar(t_{k-1}), P-bar(t_{k-1}); the
+// filtered regressor phi and instrument psi are already in b.
+bool RecursiveEstimator::Impl::update_block(Block& b, double y_f, double& change) {
+  b.Ppsi.noalias() = b.P * b.psi;
+  const double denom = b.lambda + b.phi.dot(b.Ppsi);
+  if (!std::isfinite(denom) || std::abs(denom) < 1e-300) return false;
+  const double eps = y_f - b.phi.dot(b.theta);
+  ThetaVec theta = b.theta + b.Ppsi * (eps / denom);  // eq. (24), K = P psi / denom (eq. 23)
+  // eq. (25): P = (P - K phi^T P) / lambda
+  ThetaVec phiP = b.P.transpose() * b.phi;
+  b.P.noalias() -= (b.Ppsi / denom) * phiP.transpose();
+  b.P /= b.lambda;
+  if (b.n > 0 && project(theta.head(b.n), b.n)) ++status.projections;
+  if (b.n > 0 && theta(b.n - 1) == 0.0) return false;
+  change = (theta - b.theta).squaredNorm() / std::max(b.theta.squaredNorm(), 1e-300);
+  b.theta = theta;
+  // Guards: symmetry, random walk (CONTSID's Kalman-filter adaptation), bounded trace.
+  b.P = 0.5 * (b.P + b.P.transpose());
+  // Q is a parameter covariance; P carries theta^2 per output^2 (cov = sigma^2 P).
+  if (cfg.random_walk > 0.0 && e_var > 0.0)
+    for (int j = 0; j < b.nt; ++j) b.P(j, j) += std::pow(cfg.random_walk * b.theta(j), 2) / e_var;
+  // Per-direction bound: D P D with D = diag(min(1, sqrt(bound/P_jj))) keeps P
+  // symmetric positive definite while stopping wind-up in unexcited directions.
+  bool clamped = false;
+  for (int j = 0; j < b.nt; ++j) {
+    if (b.P(j, j) > b.p_bound(j)) {
+      const double f = std::sqrt(b.p_bound(j) / b.P(j, j));
+      b.P.row(j) *= f;
+      b.P.col(j) *= f;
+      clamped = true;
+    }
+  }
+  if (clamped) ++status.covariance_clamps;
+  return std::isfinite(b.P.trace()) && b.theta.allFinite();
+}
+
+unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
+  unsigned flags = 0;
+  const bool refine = cfg.refinements > 0 || cfg.block_iterations > 1;
+  if (refine && allow_update) {
+    for (std::size_t i = 0; i < blocks.size(); ++i) {
+      snapshot[4 * i + 0] = blocks[i].fy;
+      snapshot[4 * i + 1] = blocks[i].fx;
+      snapshot[4 * i + 2] = blocks[i].fu;
+      snapshot[4 * i + 3] = blocks[i].fz;
+    }
+  }
+  // 1. Instrument input z_k = S_uo(q, t_k) r_k: the noise-free loop with the
+  //    known controller and the current model (eq. 29), solved for a biproper
+  //    controller. In open loop z = u.
+  double z = s.u;
+  if (cfg.closed_loop) {
+    double free = 0.0, D = 0.0;
+    for (auto& b : blocks) {
+      b.fz.advance();
+      b.fz.complete(0.0);
+      free += b.output(b.fz);
+      D += b.feedthrough();
+    }
+    const double c0 = controller.feedthrough();
+    z = (c0 * (s.r - free) + controller.peek(0.0)) / (1.0 + c0 * D);
+    controller.step(s.r - (free + D * z));
+    for (auto& b : blocks) {
+      b.fz.complete(z);
+      b.xz = b.output(b.fz);
+    }
+  }
+  double y_hat = 0.0;
+  for (auto& b : blocks) {
+    b.fu.step(s.u);
+    b.xu = b.output(b.fu);
+    if (!cfg.closed_loop) b.xz = b.xu;
+    y_hat += b.xu;
+  }
+  if (!std::isfinite(y_hat) || !std::isfinite(z)) {
+    restore_good("non-finite auxiliary model or instrument output");
+    return flags | kReset;
+  }
+  // The instrument's loop (eq. 29) runs the current model with the controller; a
+  // wrong model can make that loop unstable even when every mode is stable.
+  if (cfg.closed_loop && pow_ref > 0.0 && z * z > 1e8 * pow_ref) {
+    restore_good("the instrument's closed loop with the current model is unstable");
+    return flags | kReset;
+  }
+  // 2. Outliers: a sample far outside the residual spread is replaced by the
+  //    model's output so that it does not enter the filter states.
+  double y = s.y;
+  const double e = std::isfinite(s.y) ? s.y - y_hat : 0.0;
+  bool update = allow_update;
+  // A run of more than kOutlierRun "outliers" is not outliers but a mismatch
+  // (a restart, a changed plant): accept it, or the estimator would lock up.
+  constexpr int kOutlierRun = 10;
+  if (!std::isfinite(s.y)) {
+    y = y_hat;
+  } else if (e_count > 100 && outlier_run < kOutlierRun && e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var) {
+    y = y_hat;
+    ++outlier_run;
+    ++status.outliers;
+    flags |= kOutlier;
+    update = false;
+  } else {
+    outlier_run = 0;
+    e_var = e_count == 0 ? e * e : e_alpha * e_var + (1.0 - e_alpha) * e * e;
+    e_short = e_count == 0 ? e * e : e_short_alpha * e_short + (1.0 - e_short_alpha) * e * e;
+    ++e_count;
+  }
+  // Divergence: the output error an order of magnitude above what it was when
+  // the last good state was saved (DESIGN.md point 4). Plant changes that the
+  // estimator can follow raise it far less.
+  if (rearm > 0) {
+    --rearm;
+  } else if (allow_update && e_var_good > 0.0 && e_short > cfg.divergence_ratio * cfg.divergence_ratio * e_var_good) {
+    restore_good("output error diverged (residual RMS above divergence_ratio x its last good value)");
+    return flags | kReset;
+  }
+  // 3. Excitation: without input power the update only winds P up.
+  pow_short = pow_count == 0 ? z * z : pow_alpha * pow_short + (1.0 - pow_alpha) * z * z;
+  ++pow_count;
+  const bool low = pow_ref > 0.0 && pow_short < cfg.low_excitation_ratio * pow_ref;
+  status.low_excitation = low;
+  if (low) {
+    ++status.low_excitation_samples;
+    flags |= kLowExcitation;
+    update = false;
+  }
+  if (update && ++since_update < static_cast<std::uint64_t>(cfg.update_divisor)) update = false;
+  if (!update) {
+    for (auto& b : blocks) {
+      b.fy.step(y - (y_hat - b.xu));
+      b.fx.step(b.xz);
+    }
+    return flags;
+  }
+  since_update = 0;
+
+  // 4. Algorithm 1: M_l block-coordinate iterations, M_s refinements per block.
+  bool healthy = true;
+  for (int l = 0; l < cfg.block_iterations && healthy; ++l) {
+    for (std::size_t i = 0; i < blocks.size() && healthy; ++i) {
+      Block& b = blocks[i];
+      const ThetaVec theta_bar = b.theta;
+      const ThetaMat P_bar = b.P;
+      ThetaVec theta_iter = theta_bar;
+      ThetaMat P_iter = P_bar;
+      for (int s_it = 0; s_it <= cfg.refinements; ++s_it) {
+        // Residual output of this block (eq. 15), other blocks at their latest b.
+        double y_tilde = y;
+        for (std::size_t j = 0; j < blocks.size(); ++j)
+          if (j != i) y_tilde -= blocks[j].xu;
+        if (l > 0 || s_it > 0) {
+          // Refinement: the prefilter is the latest iterate; redo this sample.
+          b.fy = snapshot[4 * i + 0];
+          b.fx = snapshot[4 * i + 1];
+          b.fu = snapshot[4 * i + 2];
+          b.fz = snapshot[4 * i + 3];
+          b.theta = theta_iter;
+          rediscretise(b);
+          b.fu.step(s.u);
+          if (cfg.closed_loop) b.fz.step(z);
+          b.theta = theta_bar;
+        }
+        const auto& dy = b.fy.step(y_tilde);
+        const auto& dx = b.fx.step(b.xz);
+        const auto& du = b.fu.derivatives();
+        const auto& dz = cfg.closed_loop ? b.fz.derivatives() : du;
+        for (int j = 1; j <= b.n; ++j) {
+          b.phi(j - 1) = -dy(j);
+          b.psi(j - 1) = -dx(j);
+        }
+        for (int j = 0; j <= b.m; ++j) {
+          b.phi(b.n + j) = du(j);
+          b.psi(b.n + j) = dz(j);
+        }
+        b.theta = theta_bar;
+        b.P = P_bar;
+        double change = 0.0;
+        if (!update_block(b, dy(0), change)) {
+          healthy = false;
+          break;
+        }
+        theta_iter = b.theta;
+        P_iter = b.P;
+      }
+      if (!healthy) break;
+      b.theta = theta_iter;
+      b.P = P_iter;
+      b.xu = b.output(b.fu);  // G_i(theta^{l+1}) u for the next blocks' residuals
+    }
+  }
+  if (!healthy) {
+    restore_good("non-finite or degenerate update (NaN/Inf in theta, P or the gain)");
+    return flags | kReset;
+  }
+  for (auto& b : blocks) rediscretise(b);
+  ++status.updates;
+  flags |= kUpdated;
+  if (++updates_since_good >= 256 && e_short < 4.0 * e_var) save_good();
+  return flags;
+}
+
+void RecursiveEstimator::Impl::finish_warmup() {
+  const int N = buffered;
+  Record window;
+  window.t = wt.head(N);
+  window.u = wu.head(N);
+  window.y = wy.head(N);
+  if (cfg.closed_loop) window.r = wr.head(N);
+  const double y_var = (window.y.array() - window.y.mean()).square().mean();
+  AdditiveModel model = initial;
+  std::vector<Eigen::MatrixXd> cov;
+  double sigma2 = 0.0;
+  if (cfg.fit_on_warmup) {
+    try {
+      SrivcOptions o;
+      o.closed_loop = cfg.closed_loop;
+      o.controller = cfg.controller;
+      o.output_hold = cfg.output_hold;
+      o.max_iterations = cfg.warmup_iterations;
+      const FitResult fit = fit_srivc(window, initial, o);
+      bool ok = fit.model.beta().allFinite() && fit.covariance.allFinite() && fit.noise_variance > 0.0;
+      for (const auto& s : fit.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
+      if (ok) {
+        // theta(t0), P(t0): the configured model as a prior (relative std rho per
+        // parameter) fused with the fit and its covariance C, per submodel:
+        //   C0 = (Cp^-1 + C^-1)^-1,  theta0 = C0 (Cp^-1 theta_cfg + C^-1 theta_fit).
+        // Where the window is informative the fit dominates; along directions it
+        // leaves undetermined (a setpoint with few frequencies) the prior holds.
+        sigma2 = fit.noise_variance;
+        const double rho = cfg.initial_covariance_relative;
+        for (std::size_t i = 0; i < model.submodels.size(); ++i) {
+          const Eigen::VectorXd th_cfg = initial.submodels[i].theta(), th_fit = fit.model.submodels[i].theta();
+          const Eigen::MatrixXd C = fit.theta_covariance(static_cast<int>(i));
+          Eigen::VectorXd prior_var(th_cfg.size());
+          for (Eigen::Index j = 0; j < th_cfg.size(); ++j) prior_var(j) = std::pow(rho * std::max(std::abs(th_cfg(j)), 1e-12), 2);
+          const Eigen::MatrixXd Cinv = C.completeOrthogonalDecomposition().pseudoInverse();
+          Eigen::MatrixXd info = Cinv;
+          info.diagonal() += prior_var.cwiseInverse();
+          const Eigen::MatrixXd C0 = info.inverse();
+          Eigen::VectorXd th0 = C0 * (prior_var.cwiseInverse().cwiseProduct(th_cfg) + Cinv * th_fit);
+          Submodel s = initial.submodels[i];
+          s.set_theta(th0);
+          if (s.n > 0) {
+            Eigen::VectorXd a = s.a;
+            project_stable(a);
+            s.a = a;
+          }
+          model.submodels[i] = s;
+          cov.push_back(0.5 * (C0 + C0.transpose()));
+        }
+        status.warmup_fit_used = true;
+      }
+    } catch (const std::exception&) {
+      // Fall back to the configured model: reported through warmup_fit_used.
+    }
+  }
+  build(model, cov.empty() ? nullptr : &cov, sigma2, y_var);
+  if (sigma2 > 0.0) {
+    e_var = e_short = e_var_good = sigma2;
+    e_count = 1000;
+  }
+  // Run the filters over the window with theta(t0), without updating (section 4.7).
+  double p = 0.0;
+  for (int k = 0; k < N; ++k) {
+    advance({wt(k), wu(k), wy(k), cfg.closed_loop ? wr(k) : 0.0}, false);
+    p += wu(k) * wu(k);
+  }
+  pow_ref = p / std::max(N, 1);
+  status.warming_up = false;
+}
+
+RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const EstimatorSettings& settings)
+    : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.cfg = settings;
+  m.initial = initial;
+  if (!(settings.sample_time > 0.0)) throw std::invalid_argument("estimator: sample_time must be > 0");
+  if (initial.submodels.empty()) throw std::invalid_argument("estimator: no submodels");
+  for (const auto& s : initial.submodels) {
+    s.check();
+    if (s.n + s.rigid_poles > kMaxFilterOrder || s.n_theta() > kMaxTheta)
+      throw std::invalid_argument("estimator: submodel '" + s.name + "' exceeds the maximum order");
+  }
+  if (!settings.forgetting.empty() && settings.forgetting.size() != initial.submodels.size())
+    throw std::invalid_argument("estimator: one forgetting factor per submodel");
+  for (double l : settings.forgetting)
+    if (!(l > 0.0 && l <= 1.0)) throw std::invalid_argument("estimator: forgetting factor outside (0, 1]");
+  if (settings.block_iterations < 1 || settings.refinements < 0 || settings.update_divisor < 1)
+    throw std::invalid_argument("estimator: M_l >= 1, M_s >= 0 and the update divisor >= 1");
+  if (settings.closed_loop && settings.controller.empty())
+    throw std::invalid_argument("estimator: closed loop needs the controller");
+  m.cfg.forgetting.resize(initial.submodels.size(), 1.0);
+  if (settings.forgetting.empty()) std::fill(m.cfg.forgetting.begin(), m.cfg.forgetting.end(), 1.0);
+
+  const double lambda_min = *std::min_element(m.cfg.forgetting.begin(), m.cfg.forgetting.end());
+  const double T = settings.sample_time;
+  const double e_window = settings.residual_window > 0.0 ? settings.residual_window / T
+                                                          : (lambda_min < 1.0 ? 1.0 / (1.0 - lambda_min) : 1000.0);
+  m.e_alpha = 1.0 - 1.0 / std::max(e_window, 2.0);
+  m.e_short_alpha = 1.0 - 1.0 / std::max(0.05 * e_window, 2.0);
+  double w_min = std::numeric_limits<double>::infinity();
+  for (const auto& s : initial.submodels)
+    if (s.n == 2 && s.a(1) > 0.0) w_min = std::min(w_min, 1.0 / std::sqrt(s.a(1)));
+  const double pw = settings.low_excitation_window > 0.0
+                        ? settings.low_excitation_window / T
+                        : (std::isfinite(w_min) ? 2.0 * std::numbers::pi / w_min / T : 1000.0);
+  m.pow_alpha = 1.0 - 1.0 / std::max(pw, 2.0);
+
+  if (settings.warmup_samples > 0) {
+    m.wt.resize(settings.warmup_samples);
+    m.wu.resize(settings.warmup_samples);
+    m.wy.resize(settings.warmup_samples);
+    m.wr.resize(settings.warmup_samples);
+    m.status.warming_up = true;
+  } else {
+    m.build(initial, nullptr, 0.0, 1.0);
+    m.status.warming_up = false;
+  }
+}
+
+RecursiveEstimator::~RecursiveEstimator() = default;
+RecursiveEstimator::RecursiveEstimator(RecursiveEstimator&&) noexcept = default;
+RecursiveEstimator& RecursiveEstimator::operator=(RecursiveEstimator&&) noexcept = default;
+
+unsigned RecursiveEstimator::step(const Sample& s) noexcept {
+  Impl& m = *impl_;
+  if (!std::isfinite(s.t)) {
+    ++m.status.rejected_nonfinite;
+    return kRejectedNonFinite;
+  }
+  Sample sample = s;
+  unsigned flags = 0;
+  const bool bad_values =
+      !std::isfinite(s.u) || !std::isfinite(s.y) || (m.cfg.closed_loop && !std::isfinite(s.r));
+  if (bad_values) {
+    // Keep the time slot so that the filters stay on the sample grid: hold the
+    // inputs, let the model stand in for y, and do not update on it.
+    ++m.status.rejected_nonfinite;
+    flags |= kRejectedNonFinite;
+    sample.u = m.last_u;
+    sample.r = m.last_r;
+    sample.y = std::numeric_limits<double>::quiet_NaN();  // replaced by y_hat in advance()
+  }
+  const double T = m.cfg.sample_time;
+  if (m.have_prev) {
+    const double dt = s.t - m.t_prev;
+    if (dt < 0.5 * T) {  // duplicate or out of order
+      ++m.status.rejected_out_of_order;
+      return kRejectedOutOfOrder;
+    }
+    if (dt > m.cfg.gap_factor * T) {
+      // The prefilter states no longer describe the signals: restart them, keep theta and P.
+      ++m.status.gaps;
+      flags |= kGap;
+      if (m.status.warming_up) m.buffered = 0;
+      else m.reset_filters();
+    }
+  }
+  m.t_prev = s.t;
+  m.have_prev = true;
+  if (bad_values && (m.status.warming_up || m.blocks.empty())) return flags;
+  m.last_u = sample.u;
+  m.last_r = sample.r;
+  ++m.status.samples;
+  if (m.status.warming_up) {
+    m.wt(m.buffered) = s.t;
+    m.wu(m.buffered) = s.u;
+    m.wy(m.buffered) = s.y;
+    m.wr(m.buffered) = s.r;
+    if (++m.buffered == m.cfg.warmup_samples) {
+      try {
+        m.finish_warmup();
+      } catch (...) {
+        // Allocation failure while building: stay in warm-up and try again later.
+        m.buffered = 0;
+      }
+    }
+    return flags | kWarmingUp;
+  }
+  return flags | m.advance(sample, !bad_values);
+}
+
+int RecursiveEstimator::submodels() const { return static_cast<int>(impl_->initial.submodels.size()); }
+
+Submodel RecursiveEstimator::submodel(int i) const {
+  Submodel s = impl_->initial.submodels[i];
+  if (impl_->blocks.empty()) return s;
+  const Block& b = impl_->blocks[i];
+  s.set_theta(Eigen::VectorXd(b.theta.cwiseQuotient(b.scale)));
+  return s;
+}
+
+AdditiveModel RecursiveEstimator::model() const {
+  AdditiveModel m = impl_->initial;
+  for (int i = 0; i < submodels(); ++i) m.submodels[i] = submodel(i);
+  return m;
+}
+
+ModeEstimate RecursiveEstimator::mode(int i) const noexcept {
+  ModeEstimate est;
+  const Impl& m = *impl_;
+  if (m.blocks.empty()) {
+    est.value = modal_parameters(m.initial.submodels[i]);
+    return est;
+  }
+  const Block& b = m.blocks[i];
+  est.value.gain = b.theta(b.n) / b.scale(b.n);
+  const double s2 = m.e_var;
+  est.std.gain = std::sqrt(std::max(0.0, s2 * b.P(b.n, b.n))) / b.scale(b.n);
+  if (b.n == 2) {
+    const double a1 = b.theta(0) / b.scale(0), a2 = b.theta(1) / b.scale(1);
+    if (a2 > 0.0) {
+      est.value.wn = 1.0 / std::sqrt(a2);
+      est.value.zeta = 0.5 * a1 * est.value.wn;
+      // First-order propagation of sigma^2 P through wn = a2^-1/2, zeta = a1/(2 sqrt a2).
+      const double c11 = s2 * b.P(0, 0) / (b.scale(0) * b.scale(0));
+      const double c22 = s2 * b.P(1, 1) / (b.scale(1) * b.scale(1));
+      const double c12 = s2 * b.P(0, 1) / (b.scale(0) * b.scale(1));
+      const double dw2 = -0.5 * std::pow(a2, -1.5);
+      const double dz1 = 0.5 / std::sqrt(a2), dz2 = -0.25 * a1 * std::pow(a2, -1.5);
+      est.std.wn = std::sqrt(std::max(0.0, dw2 * dw2 * c22));
+      est.std.zeta = std::sqrt(std::max(0.0, dz1 * dz1 * c11 + 2 * dz1 * dz2 * c12 + dz2 * dz2 * c22));
+    }
+  }
+  return est;
+}
+
+Eigen::MatrixXd RecursiveEstimator::covariance(int i) const {
+  const Impl& m = *impl_;
+  const Block& b = m.blocks.at(i);
+  Eigen::MatrixXd c = m.e_var * Eigen::MatrixXd(b.P);
+  for (int j = 0; j < b.nt; ++j)
+    for (int k = 0; k < b.nt; ++k) c(j, k) /= b.scale(j) * b.scale(k);
+  return c;
+}
+
+double RecursiveEstimator::residual_rms() const noexcept { return std::sqrt(impl_->e_var); }
+double RecursiveEstimator::noise_variance() const noexcept { return impl_->e_var; }
+const EstimatorStatus& RecursiveEstimator::status() const noexcept { return impl_->status; }
+
+}  // namespace modalwatch

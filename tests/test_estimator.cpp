@@ -1,0 +1,418 @@
+// The recursive additive RSRIVC estimator (Algorithm 1) against known truth:
+// exact on noise-free data, the offline estimate with lambda = 1, tracking of
+// the seed's time-varying example, robustness over random plants, and bad
+// samples that never turn into NaN.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <numbers>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "modalwatch/config.hpp"
+#include "modalwatch/estimator.hpp"
+#include "modalwatch/prefilter.hpp"
+#include "modalwatch/transfer_function.hpp"
+#include "modalwatch/simulator.hpp"
+#include "modalwatch/srivc.hpp"
+
+namespace modalwatch {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+Config paper_config() { return load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/paper-sim.yaml"); }
+
+EstimatorSettings settings_for(const Config& c, std::vector<double> forgetting, int warmup) {
+  EstimatorSettings s = c.estimator;
+  s.sample_time = c.sample_time;
+  s.closed_loop = c.closed_loop;
+  s.controller = c.controller;
+  s.output_hold = c.output_hold;
+  s.forgetting = std::move(forgetting);
+  s.warmup_samples = warmup;
+  return s;
+}
+
+PlantSpec time_invariant(PlantSpec p, double noise_variance) {
+  for (auto& m : p.modes) m.wn.points.clear(), m.zeta.points.clear(), m.gain.points.clear();
+  p.noise_variance = noise_variance;
+  return p;
+}
+
+SignalSpec prbs(double amplitude, int bits = 12, int clock = 2) {
+  SignalSpec s;
+  s.kind = SignalSpec::Kind::prbs;
+  s.register_bits = bits;
+  s.clock_period = clock;
+  s.amplitude = amplitude;
+  return s;
+}
+
+void run(RecursiveEstimator& est, const Record& r) {
+  for (Eigen::Index k = 0; k < r.size(); ++k)
+    est.step({r.t(k), r.u(k), r.y(k), r.has_reference() ? r.r(k) : 0.0});
+}
+
+// Relative errors of wn and zeta per mode over time (after t_from), against the truth table.
+struct Tracking {
+  std::vector<std::vector<double>> wn, zeta;
+  double percentile(const std::vector<double>& v, double q) const {
+    std::vector<double> s = v;
+    std::sort(s.begin(), s.end());
+    return 100.0 * s[static_cast<std::size_t>(q * static_cast<double>(s.size() - 1))];
+  }
+};
+
+Tracking track(RecursiveEstimator& est, const SimulationResult& sim, double t_from) {
+  const int K = est.submodels();
+  Tracking tr;
+  tr.wn.resize(K);
+  tr.zeta.resize(K);
+  const Record& r = sim.record;
+  for (Eigen::Index k = 0; k < r.size(); ++k) {
+    est.step({r.t(k), r.u(k), r.y(k), r.has_reference() ? r.r(k) : 0.0});
+    if (r.t(k) < t_from || est.status().warming_up) continue;
+    for (int i = 0; i < K; ++i) {
+      const ModeEstimate m = est.mode(i);
+      EXPECT_TRUE(std::isfinite(m.value.wn) && std::isfinite(m.std.wn)) << "k=" << k;
+      tr.wn[i].push_back(std::abs(m.value.wn / sim.truth(k, 3 * i) - 1.0));
+      tr.zeta[i].push_back(std::abs(m.value.zeta / sim.truth(k, 3 * i + 1) - 1.0));
+    }
+  }
+  return tr;
+}
+
+void print_table(const char* title, const Tracking& tr) {
+  std::printf("%s\n  mode   wn median  wn p95   zeta median  zeta p95   [%%]\n", title);
+  for (std::size_t i = 0; i < tr.wn.size(); ++i)
+    std::printf("  mode%zu  %8.3f  %8.3f  %10.2f  %9.2f\n", i + 1, tr.percentile(tr.wn[i], 0.5),
+                tr.percentile(tr.wn[i], 0.95), tr.percentile(tr.zeta[i], 0.5), tr.percentile(tr.zeta[i], 0.95));
+}
+
+// ------------------------------------------------------------------ exactness
+
+TEST(RecursiveEstimator, NoiseFreeDataKeepTheTrueParametersExactlyInClosedLoop) {
+  const Config c = paper_config();
+  ExperimentSpec e = *c.experiment;
+  e.duration = 200.0;
+  const auto sim = simulate(time_invariant(*c.plant, 0.0), e);
+  RecursiveEstimator est(c.model, settings_for(c, {0.999, 0.999, 0.999}, 0));
+  run(est, sim.record);
+  for (int i = 0; i < 3; ++i) {
+    const auto truth = modal_parameters(c.model.submodels[i]);
+    EXPECT_NEAR(est.mode(i).value.wn / truth.wn, 1.0, 1e-9);
+    EXPECT_NEAR(est.mode(i).value.zeta / truth.zeta, 1.0, 1e-8);
+    EXPECT_NEAR(est.mode(i).value.gain / truth.gain, 1.0, 1e-9);
+  }
+  EXPECT_EQ(est.status().updates, 4000u);
+}
+
+TEST(RecursiveEstimator, NoiseFreeDataTakeAWrongStartToTheTruthInOpenLoop) {
+  const Config c = paper_config();
+  ExperimentSpec e = *c.experiment;
+  e.closed_loop = false;
+  e.excitation = prbs(1.0);
+  e.duration = 1000.0;
+  const auto sim = simulate(time_invariant(*c.plant, 0.0), e);
+  AdditiveModel start = c.model;
+  for (auto& s : start.submodels) {
+    auto p = modal_parameters(s);
+    p.wn *= 1.05;
+    s = make_mode(s.name, p);
+  }
+  EstimatorSettings st = settings_for(c, {1.0, 1.0, 1.0}, 0);
+  st.closed_loop = false;
+  RecursiveEstimator est(start, st);
+  run(est, sim.record);
+  for (int i = 0; i < 3; ++i)
+    EXPECT_NEAR(est.mode(i).value.wn / modal_parameters(c.model.submodels[i]).wn, 1.0, 1e-4) << "mode " << i + 1;
+}
+
+// ------------------------------------------------------------------ acceptance 4
+
+TEST(RecursiveEstimator, WithLambdaOneConvergesToTheOfflineAdditiveSrivcEstimate) {
+  const Config c = paper_config();
+  for (bool closed : {true, false}) {
+    ExperimentSpec e = *c.experiment;
+    e.closed_loop = closed;
+    e.excitation = prbs(closed ? 2.0 : 1.0);
+    e.seed = 11;
+    const auto sim = simulate(time_invariant(*c.plant, 0.01), e);
+    SrivcOptions o;
+    o.closed_loop = closed;
+    o.controller = c.controller;
+    const FitResult offline = fit_srivc(sim.record, c.model, o);
+    ASSERT_TRUE(offline.converged);
+    EstimatorSettings st = settings_for(c, {1.0, 1.0, 1.0}, 1000);
+    st.closed_loop = closed;
+    RecursiveEstimator est(c.model, st);
+    run(est, sim.record);
+    for (int i = 0; i < 3; ++i) {
+      const auto off = modal_parameters(offline.model.submodels[i]);
+      EXPECT_NEAR(est.mode(i).value.wn / off.wn, 1.0, 0.01) << (closed ? "closed" : "open") << " mode " << i + 1;
+      EXPECT_NEAR(est.mode(i).value.zeta / off.zeta, 1.0, 0.01) << (closed ? "closed" : "open") << " mode " << i + 1;
+    }
+  }
+}
+
+// ------------------------------------------------------------------ acceptance 1 and 2
+
+TEST(RecursiveEstimator, TracksTheSeedExample) {
+  // The paper's record: 1000 s at 20 Hz, closed loop, four-sine setpoint, wn1 and
+  // zeta2 drifting in [100, 300] s, wn3 and zeta3 in [500, 800] s.
+  const Config c = paper_config();
+  const auto sim = simulate(*c.plant, *c.experiment);
+  RecursiveEstimator paper(c.model, settings_for(c, {0.999, 0.999, 0.999}, 1000));
+  const Tracking tp = track(paper, sim, 50.0);
+  print_table("lambda = 0.999 (the paper's):", tp);
+  std::vector<double> shipped;
+  for (const auto& s : c.submodel_settings) shipped.push_back(s.forgetting);
+  RecursiveEstimator best(c.model, settings_for(c, shipped, c.estimator.warmup_samples));
+  const Tracking tb = track(best, sim, 50.0);
+  print_table("shipped defaults (config/paper-sim.yaml):", tb);
+  EXPECT_EQ(paper.status().resets, 0u);
+  EXPECT_EQ(best.status().resets, 0u);
+  // The issue's thresholds, exactly, on the criteria this record can support:
+  // mode 2 (a setpoint sine on its resonance) meets all of frequency median < 0.5 %
+  // and p95 < 3 %; modes 1 and 2 keep the damping p95 < 20 %.
+  EXPECT_LT(tb.percentile(tb.wn[1], 0.5), 0.5);
+  EXPECT_LT(tb.percentile(tb.wn[1], 0.95), 3.0);
+  EXPECT_LT(tb.percentile(tb.zeta[0], 0.95), 20.0);
+  EXPECT_LT(tb.percentile(tb.zeta[1], 0.95), 20.0);
+  // Not met, and reported with numbers in the issue note rather than asserted with
+  // wider tolerances: mode 1's frequency p95 (lag of a 25-50 s memory on its 0.1 %/s
+  // ramp) and mode 3 (one setpoint sine near it: wn, zeta and gain are not separable,
+  // see RecursiveEstimator.WithLambdaOne... and AdditiveSrivc tests).
+}
+
+TEST(RecursiveEstimator, AdditiveModelIsAtLeastAsAccurateAsTheUnfactoredSixthOrderOne) {
+  // Acceptance 2: the recursive SRIVC with K = 1 and an unfactored 6th-order model
+  // (CONTSID's approach, which the paper argues against) on the same record, same
+  // forgetting: the additive estimate is at least as accurate on every mode.
+  const Config c = paper_config();
+  const auto sim = simulate(*c.plant, *c.experiment);
+  auto mul = [](const Eigen::VectorXd& x, const Eigen::VectorXd& y) {
+    Eigen::VectorXd z = Eigen::VectorXd::Zero(x.size() + y.size() - 1);
+    for (Eigen::Index i = 0; i < x.size(); ++i) z.segment(i, y.size()) += x(i) * y;
+    return z;
+  };
+  Eigen::VectorXd A = Eigen::VectorXd::Ones(1), B = Eigen::VectorXd::Zero(5);
+  for (const auto& s : c.model.submodels) A = mul(A, s.a_polynomial());
+  for (std::size_t i = 0; i < 3; ++i) {
+    Eigen::VectorXd t = c.model.submodels[i].b;
+    for (std::size_t j = 0; j < 3; ++j)
+      if (j != i) t = mul(t, c.model.submodels[j].a_polynomial());
+    B.head(t.size()) += t;
+  }
+  Submodel k1;
+  k1.name = "unfactored";
+  k1.n = 6;
+  k1.m = 4;
+  k1.a = A.tail(6);
+  k1.b = B;
+  AdditiveModel unfactored;
+  unfactored.submodels = {k1};
+  {
+    // The baseline is implemented right: on noise-free data it holds the truth.
+    ExperimentSpec e = *c.experiment;
+    e.duration = 200.0;
+    const auto clean = simulate(time_invariant(*c.plant, 0.0), e);
+    RecursiveEstimator exact(unfactored, settings_for(c, {0.999}, 0));
+    run(exact, clean.record);
+    const auto modes = resonances(exact.submodel(0));
+    ASSERT_EQ(modes.size(), 3u);
+    EXPECT_NEAR(modes[0].wn, 2.0, 1e-8);
+    EXPECT_NEAR(modes[2].wn, 20.0, 1e-7);
+    EXPECT_LT(exact.residual_rms(), 1e-10);
+  }
+  RecursiveEstimator additive(c.model, settings_for(c, {0.999, 0.999, 0.999}, 1000));
+  RecursiveEstimator single(unfactored, settings_for(c, {0.999}, 1000));
+  std::vector<double> err_add[3], err_k1[3];
+  const Record& r = sim.record;
+  for (Eigen::Index k = 0; k < r.size(); ++k) {
+    additive.step({r.t(k), r.u(k), r.y(k), r.r(k)});
+    single.step({r.t(k), r.u(k), r.y(k), r.r(k)});
+    if (r.t(k) < 50.0 || k % 10 != 0 || single.status().warming_up) continue;
+    const auto modes = resonances(single.submodel(0));
+    for (int i = 0; i < 3; ++i) {
+      err_add[i].push_back(std::abs(additive.mode(i).value.wn / sim.truth(k, 3 * i) - 1.0));
+      // A mode the unfactored model lost (real poles) counts as a 100 % error.
+      err_k1[i].push_back(modes.size() == 3 ? std::abs(modes[i].wn / sim.truth(k, 3 * i) - 1.0) : 1.0);
+    }
+  }
+  Tracking t;
+  std::printf("  mode   additive wn median/p95 [%%]   unfactored K=1 wn median/p95 [%%]\n");
+  for (int i = 0; i < 3; ++i) {
+    std::printf("  mode%d  %8.3f %8.3f               %8.3f %8.3f\n", i + 1, t.percentile(err_add[i], 0.5),
+                t.percentile(err_add[i], 0.95), t.percentile(err_k1[i], 0.5), t.percentile(err_k1[i], 0.95));
+    EXPECT_LE(t.percentile(err_add[i], 0.5), t.percentile(err_k1[i], 0.5)) << "mode " << i + 1;
+    EXPECT_LE(t.percentile(err_add[i], 0.95), t.percentile(err_k1[i], 0.95)) << "mode " << i + 1;
+  }
+}
+
+// ------------------------------------------------------------------ acceptance 5
+
+TEST(RecursiveEstimator, BadSamplesAreCountedAndNeverBecomeNaN) {
+  const Config c = paper_config();
+  ExperimentSpec e = *c.experiment;
+  e.duration = 400.0;
+  e.excitation = prbs(2.0);
+  const auto sim = simulate(time_invariant(*c.plant, 0.01), e);
+  const Record& r = sim.record;
+  RecursiveEstimator est(c.model, settings_for(c, {0.999, 0.999, 0.999}, 1000));
+  const double T = c.sample_time;
+  double t_shift = 0.0;
+  for (Eigen::Index k = 0; k < r.size(); ++k) {
+    Sample s{r.t(k) + t_shift, r.u(k), r.y(k), r.r(k)};
+    const double t = r.t(k);
+    if (k == 2500) s.y = std::numeric_limits<double>::quiet_NaN();  // a NaN sample
+    if (k == 2600) s.u = std::numeric_limits<double>::infinity();
+    if (k == 3000) t_shift = 10.0, s.t += 10.0;                       // a 10 s gap
+    if (k == 3500) s.y = 1e12;                                        // a wild sample
+    if (t > 250.0 && t <= 310.0) s.u = 0.0, s.r = 0.0;                // 60 s without input
+    if (k == 4000) est.step(s);                                       // a duplicate
+    est.step(s);
+    for (int i = 0; i < 3; ++i) {
+      const ModeEstimate m = est.mode(i);
+      ASSERT_TRUE(std::isfinite(m.value.wn) && std::isfinite(m.value.zeta) && std::isfinite(m.value.gain) &&
+                  std::isfinite(m.std.wn) && std::isfinite(m.std.zeta) && std::isfinite(m.std.gain))
+          << "k=" << k;
+    }
+    ASSERT_TRUE(std::isfinite(est.residual_rms())) << "k=" << k;
+  }
+  const EstimatorStatus& st = est.status();
+  EXPECT_EQ(st.rejected_nonfinite, 2u);
+  EXPECT_EQ(st.gaps, 1u);
+  EXPECT_GE(st.outliers, 1u);
+  EXPECT_EQ(st.rejected_out_of_order, 1u);
+  EXPECT_GT(st.low_excitation_samples, 0.8 * 60.0 / T);
+  // And it still tracks: the plant did not change.
+  for (int i = 0; i < 3; ++i)
+    EXPECT_NEAR(est.mode(i).value.wn / modal_parameters(c.model.submodels[i]).wn, 1.0, 0.03) << "mode " << i + 1;
+  (void)T;
+}
+
+TEST(RecursiveEstimator, RejectsInconsistentSettings) {
+  const Config c = paper_config();
+  EXPECT_THROW(RecursiveEstimator(c.model, settings_for(c, {0.999, 1.5, 0.999}, 0)), std::invalid_argument);
+  EXPECT_THROW(RecursiveEstimator(c.model, settings_for(c, {0.999, 0.999}, 0)), std::invalid_argument);
+  EstimatorSettings s = settings_for(c, {0.999, 0.999, 0.999}, 0);
+  s.sample_time = 0.0;
+  EXPECT_THROW(RecursiveEstimator(c.model, s), std::invalid_argument);
+  s = settings_for(c, {0.999, 0.999, 0.999}, 0);
+  s.controller = DiscreteTransferFunction();
+  EXPECT_THROW(RecursiveEstimator(c.model, s), std::invalid_argument);
+}
+
+// ------------------------------------------------------------------ acceptance 3
+
+// A random 3-mode plant with frequencies over a decade, in closed loop with a
+// low-gain integral controller that is stable by construction (checked), and a
+// multisine setpoint covering every mode.
+struct RandomCase {
+  PlantSpec plant;
+  ExperimentSpec experiment;
+  AdditiveModel truth;
+  double loop_radius = 0.0;
+};
+
+RandomCase random_case(std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> U(0.0, 1.0);
+  RandomCase rc;
+  const double w0 = 2.0 * kPi * (1.0 + 9.0 * U(rng));  // lowest mode 1..10 Hz
+  std::vector<double> ws = {w0, w0 * std::pow(10.0, U(rng)), w0 * std::pow(10.0, U(rng))};
+  std::sort(ws.begin(), ws.end());
+  ws[2] = w0 * 10.0 * (0.9 + 0.1 * U(rng));  // spread over about a decade
+  // At least 1.6x apart: a start 20 % off must still be nearer its own mode than a
+  // neighbour (log 1.2 < log(1.6)/2), or the labels are ambiguous.
+  ws[1] = std::clamp(ws[1], 1.6 * ws[0], ws[2] / 1.6);
+  for (int i = 0; i < 3; ++i) {
+    ModalParameters m{ws[i], 0.01 * std::pow(30.0, U(rng)), std::pow(10.0, U(rng) - 0.5)};
+    PlantMode pm;
+    pm.modal = m;
+    pm.submodel = make_mode("m" + std::to_string(i + 1), m);
+    rc.plant.modes.push_back(pm);
+    rc.truth.submodels.push_back(pm.submodel);
+  }
+  rc.plant.snr_db = 30.0;
+  ExperimentSpec& e = rc.experiment;
+  e.sample_time = 1.0 / (ws[2] / (2 * kPi) * 20.0);  // 20 samples per period of the fastest mode
+  e.duration = 600.0 * 2 * kPi / ws[0];               // 600 periods of the slowest
+  e.seed = seed;
+  e.closed_loop = true;
+  // Proportional control: each positive-gain mode has its phase in (-180, 0) deg,
+  // so their sum never reaches the negative real axis and any k > 0 is stable in
+  // continuous time; sampling adds lag, so k backs off until the sampled loop is
+  // provably stable (spectral radius of the ZOH loop) with margin.
+  const double T = e.sample_time;
+  Eigen::MatrixXd phi = Eigen::MatrixXd::Zero(6, 6), gamma = Eigen::MatrixXd::Zero(6, 1), cmat = Eigen::MatrixXd::Zero(1, 6);
+  for (int i = 0; i < 3; ++i) {
+    const Discretization d = discretize(rc.truth.submodels[i].denominator(), T, Hold::zoh);
+    phi.block(2 * i, 2 * i, 2, 2) = d.phi;
+    gamma.block(2 * i, 0, 2, 1) = d.gamma0;
+    cmat(0, 2 * i) = rc.truth.submodels[i].b(0);
+  }
+  double k = 2.0 / rc.truth.response(0.0).real();
+  for (int attempt = 0; attempt < 40; ++attempt, k *= 0.7) {
+    e.controller = DiscreteTransferFunction({k}, {1.0});
+    double margin = 1e9;  // min |1 + L| up to Nyquist: distance to the critical point
+    for (double w = ws[0] / 10; w < kPi / T; w *= 1.002)
+      margin = std::min(margin, std::abs(1.0 + rc.truth.response(w) * e.controller.response(w, T)));
+    if (closed_loop_spectral_radius(e.controller, phi, gamma, cmat, 0.0) < 1.0 && margin > 0.5) break;
+  }
+  rc.loop_radius = closed_loop_spectral_radius(e.controller, phi, gamma, cmat, 0.0);
+  e.excitation.kind = SignalSpec::Kind::multisine;
+  e.excitation.f_min_hz = 0.3 * ws[0] / (2 * kPi);
+  e.excitation.f_max_hz = std::min(1.5 * ws[2] / (2 * kPi), 0.4 / e.sample_time);
+  e.excitation.period_s = 20.0 * 2 * kPi / ws[0];
+  e.excitation.rms = 1.0;
+  e.excitation.seed = seed;
+  return rc;
+}
+
+TEST(RecursiveEstimator, TwentyRandomPlantsConvergeAndTrackWithoutDivergence) {
+  int failures = 0;
+  for (std::uint64_t seed = 1; seed <= 20; ++seed) {
+    const RandomCase rc = random_case(seed);
+    const auto sim = simulate(rc.plant, rc.experiment);
+    ASSERT_LT(rc.loop_radius, 1.0) << "plant " << seed << ": no stabilising gain found";
+    ASSERT_TRUE(sim.record.y.allFinite()) << "plant " << seed;
+    // Start from a model 20 % wrong in every frequency.
+    AdditiveModel start = rc.truth;
+    for (auto& s : start.submodels) {
+      auto p = modal_parameters(s);
+      p.wn *= (seed % 2 ? 1.2 : 0.8);
+      s = make_mode(s.name, p);
+    }
+    EstimatorSettings st;
+    st.sample_time = rc.experiment.sample_time;
+    st.closed_loop = true;
+    st.controller = rc.experiment.controller;
+    st.forgetting = {0.9995, 0.9995, 0.9995};
+    st.warmup_samples = static_cast<int>(sim.record.size() / 10);
+    RecursiveEstimator est(start, st);
+    const Tracking tr = track(est, sim, sim.record.t(sim.record.size() / 5));
+    double worst = 0.0;
+    for (int i = 0; i < 3; ++i) worst = std::max(worst, tr.percentile(tr.wn[i], 0.95));
+    std::printf("plant %2llu: warm-up fit %d, reason '%s', clamps %llu, outliers %llu, low %llu\n", static_cast<unsigned long long>(seed),
+                est.status().warmup_fit_used, est.status().last_reset_reason,
+                static_cast<unsigned long long>(est.status().covariance_clamps), static_cast<unsigned long long>(est.status().outliers),
+                static_cast<unsigned long long>(est.status().low_excitation_samples));
+    std::printf("plant %2llu: f = %.2f %.2f %.2f Hz  zeta = %.3f %.3f %.3f  wn p95 %.3f %%  resets %llu\n",
+                static_cast<unsigned long long>(seed), rc.truth.submodels[0].response(0).real() * 0 + modal_parameters(rc.truth.submodels[0]).hz(),
+                modal_parameters(rc.truth.submodels[1]).hz(), modal_parameters(rc.truth.submodels[2]).hz(),
+                modal_parameters(rc.truth.submodels[0]).zeta, modal_parameters(rc.truth.submodels[1]).zeta,
+                modal_parameters(rc.truth.submodels[2]).zeta, worst,
+                static_cast<unsigned long long>(est.status().resets));
+    EXPECT_LT(worst, 5.0) << "plant " << seed;
+    if (worst >= 5.0) ++failures;
+  }
+  EXPECT_EQ(failures, 0);
+}
+
+}  // namespace
+}  // namespace modalwatch
