@@ -77,6 +77,8 @@ class Prefilter {
   double previous_input() const { return w_prev_; }
 
  private:
+  void propagate(double w_next);
+
   int order_ = 0;
   double T_ = 0.0;
   Hold hold_ = Hold::zoh;

@@ -134,16 +134,22 @@ struct RecursiveEstimator::Impl {
   void save_good();
   void restore_good(const char* reason);
   unsigned advance(const Sample& s, bool allow_update);
-  bool update_block(Block& b, double y_f, double& theta_change);
+  bool update_block(Block& b, double y_f);
   void finish_warmup();
 };
 
 void RecursiveEstimator::Impl::rediscretise(Block& b) {
-  const FilterVector a = b.a_poly(), den = b.denominator();
+  const FilterVector a = b.a_poly();
   const double Ts = b.ws * cfg.sample_time;
   const Discretization da = discretize(a, Ts, cfg.output_hold);
   b.fy.set_denominator(a, da);
   b.fx.set_denominator(a, da);
+  if (b.l == 0 && cfg.output_hold == Hold::zoh) {  // p^l A = A: one discretisation serves all four
+    b.fu.set_denominator(a, da);
+    b.fz.set_denominator(a, da);
+    return;
+  }
+  const FilterVector den = b.denominator();
   const Discretization dd = discretize(den, Ts, Hold::zoh);
   b.fu.set_denominator(den, dd);
   b.fz.set_denominator(den, dd);
@@ -236,22 +242,39 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
 
 // eqs. (23)-(25) for one block from theta-bar(t_{k-1}), P-bar(t_{k-1}); the
 // filtered regressor phi and instrument psi are already in b.
-bool RecursiveEstimator::Impl::update_block(Block& b, double y_f, double& change) {
-  b.Ppsi.noalias() = b.P * b.psi;
-  const double denom = b.lambda + b.phi.dot(b.Ppsi);
+bool RecursiveEstimator::Impl::update_block(Block& b, double y_f) {
+  // Plain loops: n_theta is 3 for a mode, where Eigen's dynamic kernels cost more
+  // than the arithmetic.
+  const int nt = b.nt;
+  double Ppsi[kMaxTheta], phiP[kMaxTheta];
+  double denom = b.lambda, eps = y_f;
+  for (int i = 0; i < nt; ++i) {
+    double v = 0.0, w = 0.0;
+    for (int j = 0; j < nt; ++j) {
+      v += b.P(i, j) * b.psi(j);
+      w += b.P(j, i) * b.phi(j);
+    }
+    Ppsi[i] = v;
+    phiP[i] = w;
+    denom += b.phi(i) * v;
+    eps -= b.phi(i) * b.theta(i);
+  }
   if (!std::isfinite(denom) || std::abs(denom) < 1e-300) return false;
-  const double eps = y_f - b.phi.dot(b.theta);
-  ThetaVec theta = b.theta + b.Ppsi * (eps / denom);  // eq. (24), K = P psi / denom (eq. 23)
-  // eq. (25): P = (P - K phi^T P) / lambda
-  ThetaVec phiP = b.P.transpose() * b.phi;
-  b.P.noalias() -= (b.Ppsi / denom) * phiP.transpose();
-  b.P /= b.lambda;
+  // eq. (23) K = P psi / denom; eq. (24) theta = theta + K eps;
+  // eq. (25) P = (P - K phi^T P) / lambda, kept symmetric.
+  ThetaVec theta = b.theta;
+  const double inv_lambda = 1.0 / b.lambda;
+  for (int i = 0; i < nt; ++i) {
+    const double k = Ppsi[i] / denom;
+    theta(i) += k * eps;
+    for (int j = 0; j < nt; ++j) b.P(i, j) = (b.P(i, j) - k * phiP[j]) * inv_lambda;
+  }
   if (b.n > 0 && project(theta.head(b.n), b.n)) ++status.projections;
   if (b.n > 0 && theta(b.n - 1) == 0.0) return false;
-  change = (theta - b.theta).squaredNorm() / std::max(b.theta.squaredNorm(), 1e-300);
   b.theta = theta;
   // Guards: symmetry, random walk (CONTSID's Kalman-filter adaptation), bounded trace.
-  b.P = 0.5 * (b.P + b.P.transpose());
+  for (int i = 0; i < nt; ++i)
+    for (int j = i + 1; j < nt; ++j) b.P(i, j) = b.P(j, i) = 0.5 * (b.P(i, j) + b.P(j, i));
   // Q is a parameter covariance; P carries theta^2 per output^2 (cov = sigma^2 P).
   if (cfg.random_walk > 0.0 && e_var > 0.0)
     for (int j = 0; j < b.nt; ++j) b.P(j, j) += std::pow(cfg.random_walk * b.theta(j), 2) / e_var;
@@ -267,7 +290,9 @@ bool RecursiveEstimator::Impl::update_block(Block& b, double y_f, double& change
     }
   }
   if (clamped) ++status.covariance_clamps;
-  return std::isfinite(b.P.trace()) && b.theta.allFinite();
+  double trace = 0.0;
+  for (int j = 0; j < nt; ++j) trace += b.P(j, j) + b.theta(j);
+  return std::isfinite(trace);
 }
 
 unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
@@ -374,6 +399,30 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   for (int l = 0; l < cfg.block_iterations && healthy; ++l) {
     for (std::size_t i = 0; i < blocks.size() && healthy; ++i) {
       Block& b = blocks[i];
+      if (!refine) {
+        // M_l = 1, M_s = 0 (the paper's setting): one update from theta-bar, P-bar in place.
+        double y_tilde = y;
+        for (std::size_t j = 0; j < blocks.size(); ++j)
+          if (j != i) y_tilde -= blocks[j].xu;
+        const auto& dy = b.fy.step(y_tilde);
+        const auto& dx = b.fx.step(b.xz);
+        const auto& du = b.fu.derivatives();
+        const auto& dz = cfg.closed_loop ? b.fz.derivatives() : du;
+        for (int j = 1; j <= b.n; ++j) {
+          b.phi(j - 1) = -dy(j);
+          b.psi(j - 1) = -dx(j);
+        }
+        for (int j = 0; j <= b.m; ++j) {
+          b.phi(b.n + j) = du(j);
+          b.psi(b.n + j) = dz(j);
+        }
+        if (!update_block(b, dy(0))) {
+          healthy = false;
+          break;
+        }
+        b.xu = b.output(b.fu);
+        continue;
+      }
       const ThetaVec theta_bar = b.theta;
       const ThetaMat P_bar = b.P;
       ThetaVec theta_iter = theta_bar;
@@ -409,8 +458,7 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
         }
         b.theta = theta_bar;
         b.P = P_bar;
-        double change = 0.0;
-        if (!update_block(b, dy(0), change)) {
+        if (!update_block(b, dy(0))) {
           healthy = false;
           break;
         }

@@ -34,39 +34,51 @@ Discretization first_order(const Eigen::Ref<const Eigen::VectorXd>& d, double T)
   return z;
 }
 
+// 2x2 matrices as four scalars: the per-sample re-discretisation of a mode runs
+// in the recursive estimator's inner loop, where dynamic-size Eigen costs more
+// than the arithmetic.
+struct M2 {
+  double a, b, c, d;  // [[a, b], [c, d]]
+  M2 operator*(const M2& o) const {
+    return {a * o.a + b * o.c, a * o.b + b * o.d, c * o.a + d * o.c, c * o.b + d * o.d};
+  }
+  M2 operator+(const M2& o) const { return {a + o.a, b + o.b, c + o.c, d + o.d}; }
+  M2 operator*(double k) const { return {a * k, b * k, c * k, d * k}; }
+};
+
 // N = 2, d_0 != 0. exp(A T) = c0 I + c1 A T by Cayley-Hamilton, with c0, c1
 // from the eigenvalues of A T (complex, real or repeated); the input integrals
 // follow from A^{-1}, or from the Taylor series when |A T| is small (where the
-// A^{-1} forms cancel).
+// A^{-1} forms cancel). B = [0, 1/d2].
 Discretization second_order(const Eigen::Ref<const Eigen::VectorXd>& d, double T) {
-  FilterMatrix A;
-  FilterVector B;
-  companion(d, A, B);
-  const FilterMatrix AT = A * T;
-  const double norm = AT.cwiseAbs().rowwise().sum().maxCoeff();
+  const double d0 = d(0), d1 = d(1), d2 = d(2), bB = 1.0 / d2;
+  const M2 AT{0.0, T, -d0 / d2 * T, -d1 / d2 * T};
+  const double norm = std::max(std::abs(AT.b), std::abs(AT.c) + std::abs(AT.d));
   Discretization z;
-  z.gamma1.setZero(2);
+  z.phi.resize(2, 2);
+  z.gamma0.resize(2);
+  z.gamma1.resize(2);
   if (norm < 0.5) {
     // Taylor: phi = sum (AT)^k/k!, Psi0 = sum (AT)^k/(k+1)!, Psi1 = sum (AT)^k/(k+2)!.
-    FilterMatrix term = FilterMatrix::Identity(2, 2), phi = FilterMatrix::Zero(2, 2),
-                 psi0 = FilterMatrix::Zero(2, 2), psi1 = FilterMatrix::Zero(2, 2);
-    double f0 = 1.0, f1 = 1.0, f2 = 0.5;  // 1/k!, 1/(k+1)!, 1/(k+2)!
+    M2 term{1, 0, 0, 1}, phi{0, 0, 0, 0}, psi0{0, 0, 0, 0}, psi1{0, 0, 0, 0};
+    double f0 = 1.0, f1 = 1.0, f2 = 0.5, power = 1.0;  // 1/k!, 1/(k+1)!, 1/(k+2)!, norm^k
     for (int k = 0; k < 30; ++k) {
-      phi += f0 * term;
-      psi0 += f1 * term;
-      psi1 += f2 * term;
+      phi = phi + term * f0;
+      psi0 = psi0 + term * f1;
+      psi1 = psi1 + term * f2;
       term = term * AT;
       f0 /= (k + 1);
       f1 /= (k + 2);
       f2 /= (k + 3);
-      if (f0 * std::pow(norm, k + 1) < 1e-18) break;
+      power *= norm;
+      if (f0 * power < 1e-18) break;
     }
-    z.phi = phi;
-    z.gamma0 = T * (psi0 * B);
-    z.gamma1 = T * (psi1 * B);
+    z.phi << phi.a, phi.b, phi.c, phi.d;
+    z.gamma0 << T * psi0.b * bB, T * psi0.d * bB;
+    z.gamma1 << T * psi1.b * bB, T * psi1.d * bB;
     return z;
   }
-  const double tr = AT.trace(), det = AT.determinant();
+  const double tr = AT.a + AT.d, det = AT.a * AT.d - AT.b * AT.c;
   const double sigma = 0.5 * tr, disc = sigma * sigma - det;  // eigenvalues sigma +- sqrt(disc)
   const double es = std::exp(sigma);
   double c1;  // sin(w)/w, sinh(w)/w or 1
@@ -84,13 +96,16 @@ Discretization second_order(const Eigen::Ref<const Eigen::VectorXd>& d, double T
     ch = 1.0;
   }
   const double k1 = es * c1, k0 = es * (ch - sigma * c1);
-  z.phi = k0 * FilterMatrix::Identity(2, 2) + k1 * AT;
-  // A^{-1} of the companion matrix [[0, 1], [-d0/d2, -d1/d2]].
-  FilterMatrix Ainv(2, 2);
-  Ainv << -d(1) / d(0), -d(2) / d(0), 1.0, 0.0;
-  const FilterMatrix I = FilterMatrix::Identity(2, 2);
-  z.gamma0 = Ainv * ((z.phi - I) * B);
-  z.gamma1 = (Ainv * (z.gamma0 - T * B)) / T;
+  const M2 phi{k0 + k1 * AT.a, k1 * AT.b, k1 * AT.c, k0 + k1 * AT.d};
+  // A^{-1} of the companion matrix [[0, 1], [-d0/d2, -d1/d2]] is [[-d1/d0, -d2/d0], [1, 0]].
+  const M2 Ainv{-d1 / d0, -d2 / d0, 1.0, 0.0};
+  // gamma0 = A^{-1} (phi - I) B, gamma1 = A^{-1} (gamma0 - T B) / T.
+  const double v0 = phi.b * bB, v1 = (phi.d - 1.0) * bB;
+  const double g0 = Ainv.a * v0 + Ainv.b * v1, g1 = Ainv.c * v0 + Ainv.d * v1;
+  const double w0 = g0, w1 = g1 - T * bB;
+  z.phi << phi.a, phi.b, phi.c, phi.d;
+  z.gamma0 << g0, g1;
+  z.gamma1 << (Ainv.a * w0 + Ainv.b * w1) / T, (Ainv.c * w0 + Ainv.d * w1) / T;
   return z;
 }
 
@@ -163,22 +178,29 @@ void Prefilter::reset() {
   w_prev_ = 0.0;
 }
 
-const FilterVector& Prefilter::step(double w) {
-  if (order_ > 0) {
-    // x(t_k) from x(t_{k-1}) with the input held (ZOH) or ramped (FOH) over the interval.
-    FilterVector next = disc_.phi * x_ + disc_.gamma0 * w_prev_;
-    if (hold_ == Hold::foh) next += disc_.gamma1 * (w - w_prev_);
-    x_ = next;
+// The state update x <- phi x + gamma0 w_prev (+ gamma1 (w - w_prev)) as plain
+// loops: for the orders used here (1..8, mostly 2) Eigen's dynamic-size
+// matrix-vector kernel costs more than the arithmetic.
+void Prefilter::propagate(double w_next) {
+  const int N = order_;
+  double next[kMaxFilterOrder];
+  const double ramp = hold_ == Hold::foh ? w_next - w_prev_ : 0.0;
+  for (int i = 0; i < N; ++i) {
+    double v = disc_.gamma0(i) * w_prev_ + disc_.gamma1(i) * ramp;
+    for (int j = 0; j < N; ++j) v += disc_.phi(i, j) * x_(j);
+    next[i] = v;
   }
+  for (int i = 0; i < N; ++i) x_(i) = next[i];
+}
+
+const FilterVector& Prefilter::step(double w) {
+  propagate(w);
   return complete(w);
 }
 
 void Prefilter::advance() {
   if (hold_ != Hold::zoh) throw std::logic_error("Prefilter::advance needs a held input (ZOH)");
-  if (order_ > 0) {
-    FilterVector next = disc_.phi * x_ + disc_.gamma0 * w_prev_;
-    x_ = next;
-  }
+  propagate(w_prev_);
 }
 
 const FilterVector& Prefilter::complete(double w) {
