@@ -1,0 +1,562 @@
+// The fault detector on synthetic estimate streams (no estimator): a drift is
+// flagged after the hold time and nothing else is, noise consistent with the
+// reported standard deviations never is, both thresholds are needed, flags fall
+// with hysteresis, baselines are learned or configured, invalid updates freeze
+// everything, bad settings throw, and update() never grows the caller's vector.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <optional>
+#include <random>
+#include <stdexcept>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "modalwatch/fault_detector.hpp"
+
+namespace modalwatch {
+namespace {
+
+constexpr double kPeriod = 0.1;  // s between updates (the publish period)
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// Three modes; relative standard deviations 0.1 % of the value.
+const std::vector<ModalParameters> kBaseline = {{60.0, 0.05, 2.0}, {150.0, 0.03, 0.5}, {400.0, 0.02, 0.1}};
+
+double& at(ModalParameters& p, Quantity q) {
+  switch (q) {
+    case Quantity::wn: return p.wn;
+    case Quantity::zeta: return p.zeta;
+    default: return p.gain;
+  }
+}
+
+double get(const ModalParameters& p, Quantity q) {
+  switch (q) {
+    case Quantity::wn: return p.wn;
+    case Quantity::zeta: return p.zeta;
+    default: return p.gain;
+  }
+}
+
+ModalParameters scaled(const ModalParameters& p, double f) { return {p.wn * f, p.zeta * f, p.gain * f}; }
+
+FaultDetectorSettings configured(const std::vector<ModalParameters>& baseline = kBaseline) {
+  FaultDetectorSettings s;
+  for (std::size_t i = 0; i < baseline.size(); ++i) {
+    s.mode_names.push_back("mode" + std::to_string(i + 1));
+    s.baselines.emplace_back(baseline[i]);
+  }
+  return s;
+}
+
+FaultDetectorSettings learned(std::size_t modes, double window) {
+  FaultDetectorSettings s;
+  for (std::size_t i = 0; i < modes; ++i) {
+    s.mode_names.push_back("mode" + std::to_string(i + 1));
+    s.baselines.emplace_back(std::nullopt);
+  }
+  s.learn_window = window;
+  return s;
+}
+
+// A synthetic estimate stream at kPeriod: set `value` / `std_dev`, then step.
+struct Stream {
+  explicit Stream(FaultDetectorSettings s, double relative_std = 1e-3)
+      : detector(std::move(s)), value(kBaseline), std_dev(kBaseline.size()) {
+    value.resize(detector.status().size(), kBaseline[0]);
+    std_dev.resize(value.size());
+    for (std::size_t i = 0; i < value.size(); ++i) std_dev[i] = scaled(value[i], relative_std);
+    changes.reserve(kQuantities * value.size());
+  }
+
+  double t() const { return static_cast<double>(k) * kPeriod; }
+
+  // One update; returns the changes it made.
+  const std::vector<FlagChange>& step(bool valid = true) {
+    changes.clear();
+    detector.update(t(), value, std_dev, valid, changes);
+    log.insert(log.end(), changes.begin(), changes.end());
+    ++k;
+    return changes;
+  }
+  void run(double seconds, bool valid = true) {
+    const long n = std::lround(seconds / kPeriod);
+    for (long j = 0; j < n; ++j) step(valid);
+  }
+  // Steps until `pred` holds (at most `seconds`); returns the time of that update, or NaN.
+  template <class Pred>
+  double run_until(double seconds, Pred pred) {
+    const long n = std::lround(seconds / kPeriod);
+    for (long j = 0; j < n; ++j) {
+      const double now = t();
+      step();
+      if (pred()) return now;
+    }
+    return kNaN;
+  }
+
+  const QuantityStatus& q(int mode, Quantity quantity) const {
+    return detector.status()[mode].quantity[static_cast<int>(quantity)];
+  }
+
+  FaultDetector detector;
+  std::vector<ModalParameters> value, std_dev;
+  std::vector<FlagChange> changes, log;
+  long k = 0;
+};
+
+// ------------------------------------------------------------------ a drift is flagged
+
+TEST(FaultDetector, FifteenPercentFrequencyDropIsFlaggedAfterExactlyTheHoldTime) {
+  Stream s(configured());
+  const double hold = FaultThresholds{}.hold_time;
+  s.run(10.0);
+  EXPECT_FALSE(s.detector.any_flag());
+  EXPECT_TRUE(s.log.empty());
+
+  const double t_drop = s.t();
+  s.value[1].wn = 0.85 * kBaseline[1].wn;
+  s.step();
+  const QuantityStatus& wn = s.q(1, Quantity::wn);
+  EXPECT_TRUE(wn.pending);
+  EXPECT_FALSE(wn.flagged);
+  EXPECT_DOUBLE_EQ(wn.since, t_drop) << "pending: since = the time the condition began";
+  EXPECT_NEAR(wn.deviation_relative, -0.15, 1e-12);
+  EXPECT_NEAR(wn.deviation_sigma, -0.15 / 1e-3, 1e-6);
+
+  // Still pending one update before the hold time has elapsed, flagged at it.
+  s.run(hold - kPeriod);
+  EXPECT_TRUE(wn.pending);
+  EXPECT_FALSE(wn.flagged);
+  EXPECT_TRUE(s.log.empty());
+  const double t_raise = s.t();
+  ASSERT_EQ(s.step().size(), 1u);
+  EXPECT_NEAR(t_raise - t_drop, hold, 1e-9);
+  EXPECT_TRUE(wn.flagged);
+  EXPECT_FALSE(wn.pending);
+  EXPECT_DOUBLE_EQ(wn.since, t_raise) << "flagged: since = the time the flag rose";
+
+  const FlagChange& c = s.log.front();
+  EXPECT_EQ(c.mode, 1);
+  EXPECT_EQ(c.quantity, Quantity::wn);
+  EXPECT_TRUE(c.raised);
+  EXPECT_DOUBLE_EQ(c.time, t_raise);
+  EXPECT_DOUBLE_EQ(c.value, 0.85 * kBaseline[1].wn);
+  EXPECT_DOUBLE_EQ(c.baseline, kBaseline[1].wn);
+  EXPECT_NEAR(c.deviation_relative, -0.15, 1e-12);
+  EXPECT_NEAR(c.deviation_sigma, -150.0, 1e-6);
+
+  // Nothing else, ever: one bit, one event.
+  s.run(60.0);
+  EXPECT_EQ(s.log.size(), 1u);
+  EXPECT_TRUE(s.detector.any_flag());
+  EXPECT_EQ(s.detector.flag_bits(), std::uint64_t{1} << (1 * 3 + 0));
+  for (int i = 0; i < 3; ++i)
+    for (int q = 0; q < kQuantities; ++q)
+      if (!(i == 1 && q == 0)) {
+        EXPECT_FALSE(s.detector.status()[i].quantity[q].flagged) << i << " " << q;
+        EXPECT_FALSE(s.detector.status()[i].quantity[q].pending) << i << " " << q;
+      }
+}
+
+TEST(FaultDetector, FlagBitsAreModeTimesThreePlusQuantity) {
+  FaultDetectorSettings st = configured();
+  for (auto& th : st.thresholds) th.hold_time = 0.0;
+  Stream s(st);
+  s.value[2].gain *= 1.5;
+  s.value[0].zeta *= 0.5;
+  s.step();
+  EXPECT_EQ(s.detector.flag_bits(), (std::uint64_t{1} << 8) | (std::uint64_t{1} << 1));
+  EXPECT_TRUE(s.detector.any_flag());
+  EXPECT_EQ(s.log.size(), 2u) << "hold_time 0 raises at the first update past the thresholds";
+}
+
+// ------------------------------------------------------------------ noise is not
+
+TEST(FaultDetector, NoiseConsistentWithTheReportedStdNeverFlagsOverTenThousandUpdates) {
+  // Relative std 2 % (the sigma threshold binds: 5 % is only 2.5 sigma), 0.5 %
+  // (the relative threshold binds: 5 % is 10 sigma) and 1.25 % (both at once).
+  const std::vector<double> rel_std = {0.02, 0.005, 0.0125};
+  Stream s(configured());
+  std::mt19937_64 rng(20240611);
+  std::normal_distribution<double> z(0.0, 1.0);
+  double max_sigma = 0.0;
+  int pending_updates = 0;
+  for (int k = 0; k < 10000; ++k) {
+    for (int i = 0; i < 3; ++i)
+      for (Quantity q : {Quantity::wn, Quantity::zeta, Quantity::gain}) {
+        const double x0 = get(kBaseline[i], q);
+        at(s.std_dev[i], q) = rel_std[i] * x0;
+        at(s.value[i], q) = x0 + rel_std[i] * x0 * z(rng);
+      }
+    s.step();
+    for (const ModeStatus& m : s.detector.status())
+      for (const QuantityStatus& qs : m.quantity) {
+        max_sigma = std::max(max_sigma, std::abs(qs.deviation_sigma));
+        pending_updates += qs.pending ? 1 : 0;
+      }
+    ASSERT_FALSE(s.detector.any_flag()) << "update " << k;
+  }
+  std::printf("  30000 quantity updates: max |deviation| %.2f sigma, %d pending updates\n", max_sigma, pending_updates);
+  EXPECT_TRUE(s.log.empty());
+  EXPECT_GT(max_sigma, 3.5) << "the noise did reach the tails";
+  EXPECT_LT(pending_updates, 30) << "rare short excursions only (about 4 expected past 4 sigma)";
+}
+
+TEST(FaultDetector, LargeChangeWithHugeUncertaintyDoesNotFlag) {
+  Stream s(configured());
+  s.value[0].wn = 0.7 * kBaseline[0].wn;      // -30 %
+  s.std_dev[0].wn = 0.2 * kBaseline[0].wn;    // but 1.5 sigma
+  s.run(30.0);
+  EXPECT_FALSE(s.detector.any_flag());
+  EXPECT_FALSE(s.q(0, Quantity::wn).pending);
+  EXPECT_NEAR(s.q(0, Quantity::wn).deviation_sigma, -1.5, 1e-9);
+  EXPECT_NEAR(s.q(0, Quantity::wn).deviation_relative, -0.3, 1e-12);
+}
+
+TEST(FaultDetector, SmallChangeWithTinyStdDoesNotFlag) {
+  Stream s(configured(), 1e-4);
+  s.value[0].wn = 0.99 * kBaseline[0].wn;  // -1 %, 100 sigma
+  s.run(30.0);
+  EXPECT_FALSE(s.detector.any_flag());
+  EXPECT_NEAR(s.q(0, Quantity::wn).deviation_sigma, -100.0, 1e-6);
+  EXPECT_NEAR(s.q(0, Quantity::wn).deviation_relative, -0.01, 1e-12);
+}
+
+TEST(FaultDetector, StdThatIsZeroOrNotFiniteCannotFlag) {
+  Stream s(configured());
+  s.value[0].wn = 0.5 * kBaseline[0].wn;
+  s.std_dev[0].wn = 0.0;
+  s.value[1].wn = 0.5 * kBaseline[1].wn;
+  s.std_dev[1].wn = kNaN;
+  s.value[2].wn = 0.5 * kBaseline[2].wn;
+  s.std_dev[2].wn = -1.0;
+  s.run(30.0);
+  EXPECT_FALSE(s.detector.any_flag());
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(s.q(i, Quantity::wn).deviation_sigma, 0.0) << "reported as 0 when undefined";
+    EXPECT_NEAR(s.q(i, Quantity::wn).deviation_relative, -0.5, 1e-12);
+  }
+}
+
+TEST(FaultDetector, EachQuantityHasItsOwnThresholds) {
+  FaultDetectorSettings st = configured();
+  st.thresholds[static_cast<int>(Quantity::zeta)].relative_threshold = 0.3;  // damping is noisier
+  Stream s(st);
+  s.value[0].zeta = 0.8 * kBaseline[0].zeta;  // -20 %: inside the zeta limit
+  s.value[0].gain = 0.8 * kBaseline[0].gain;  // -20 %: past the default gain limit
+  s.run(10.0);
+  EXPECT_FALSE(s.q(0, Quantity::zeta).flagged);
+  EXPECT_TRUE(s.q(0, Quantity::gain).flagged);
+}
+
+// ------------------------------------------------------------------ hysteresis
+
+TEST(FaultDetector, FlagStaysInsideTheHysteresisBandAndFallsAfterTheClearTime) {
+  const FaultThresholds th;  // 4 sigma, 5 %, clear at half of both
+  Stream s(configured());
+  s.value[0].wn = 0.85 * kBaseline[0].wn;
+  s.run(5.0);
+  ASSERT_TRUE(s.q(0, Quantity::wn).flagged);
+  const double t_raise = s.q(0, Quantity::wn).since;
+
+  // 3 % (30 sigma) is below the rise threshold but above 2.5 % / 2 sigma: stays.
+  s.value[0].wn = 0.97 * kBaseline[0].wn;
+  s.run(10 * th.clear_time);
+  EXPECT_TRUE(s.q(0, Quantity::wn).flagged);
+  EXPECT_DOUBLE_EQ(s.q(0, Quantity::wn).since, t_raise);
+  EXPECT_EQ(s.log.size(), 1u);
+
+  // 1 %: back in the relative sense; falls after exactly clear_time.
+  s.value[0].wn = 0.99 * kBaseline[0].wn;
+  const double t_back = s.t();
+  s.run(th.clear_time);  // 20 updates: 1.9 s of the 2 s
+  EXPECT_TRUE(s.q(0, Quantity::wn).flagged);
+  const double t_fall = s.t();
+  ASSERT_EQ(s.step().size(), 1u);
+  EXPECT_NEAR(t_fall - t_back, th.clear_time, 1e-9);
+  EXPECT_FALSE(s.q(0, Quantity::wn).flagged);
+  EXPECT_FALSE(s.q(0, Quantity::wn).pending);
+  EXPECT_EQ(s.q(0, Quantity::wn).since, 0.0);
+  const FlagChange& c = s.log.back();
+  EXPECT_EQ(c.mode, 0);
+  EXPECT_EQ(c.quantity, Quantity::wn);
+  EXPECT_FALSE(c.raised);
+  EXPECT_DOUBLE_EQ(c.time, t_fall);
+  EXPECT_DOUBLE_EQ(c.value, 0.99 * kBaseline[0].wn);
+  EXPECT_DOUBLE_EQ(c.baseline, kBaseline[0].wn);
+  EXPECT_NEAR(c.deviation_relative, -0.01, 1e-12);
+  EXPECT_EQ(s.detector.flag_bits(), 0u);
+}
+
+TEST(FaultDetector, FlagFallsWhenBackInTheSigmaSenseAlone) {
+  Stream s(configured());
+  s.value[0].wn = 0.85 * kBaseline[0].wn;
+  s.run(5.0);
+  ASSERT_TRUE(s.q(0, Quantity::wn).flagged);
+  s.std_dev[0].wn = 0.2 * kBaseline[0].wn;  // still -15 %, but only 0.75 sigma now
+  s.run(FaultThresholds{}.clear_time + kPeriod);
+  EXPECT_FALSE(s.q(0, Quantity::wn).flagged);
+}
+
+TEST(FaultDetector, ReturningPastTheBandRestartsTheClearTimer) {
+  const FaultThresholds th;
+  Stream s(configured());
+  s.value[0].wn = 0.85 * kBaseline[0].wn;
+  s.run(5.0);
+  s.value[0].wn = 0.99 * kBaseline[0].wn;
+  s.run(th.clear_time - kPeriod);  // one update short
+  s.value[0].wn = 0.97 * kBaseline[0].wn;
+  s.step();  // inside the band again
+  s.value[0].wn = 0.99 * kBaseline[0].wn;
+  const double t_back = s.t();
+  const double t_fall = s.run_until(10.0, [&] { return !s.q(0, Quantity::wn).flagged; });
+  EXPECT_NEAR(t_fall - t_back, th.clear_time, 1e-9);
+  EXPECT_EQ(s.log.size(), 2u);
+}
+
+TEST(FaultDetector, ABlipShorterThanTheHoldTimeNeverFlags) {
+  const FaultThresholds th;
+  Stream s(configured());
+  s.run(5.0);
+  s.value[0].wn = 0.5 * kBaseline[0].wn;
+  s.step();
+  EXPECT_TRUE(s.q(0, Quantity::wn).pending);
+  s.value[0].wn = kBaseline[0].wn;
+  s.step();
+  EXPECT_FALSE(s.q(0, Quantity::wn).pending);
+  EXPECT_EQ(s.q(0, Quantity::wn).since, 0.0);
+  // Repeated excursions of 20 updates (1.9 s of the 2 s hold): the timer restarts each time.
+  for (int r = 0; r < 20; ++r) {
+    s.value[0].wn = 0.5 * kBaseline[0].wn;
+    s.run(th.hold_time);
+    s.value[0].wn = kBaseline[0].wn;
+    s.step();
+  }
+  s.run(30.0);
+  EXPECT_FALSE(s.detector.any_flag());
+  EXPECT_TRUE(s.log.empty());
+}
+
+// ------------------------------------------------------------------ baselines
+
+TEST(FaultDetector, LearnsTheMeanOverTheWindowAndRaisesNothingWhileLearning) {
+  constexpr double window = 10.0;
+  Stream s(learned(3, window));
+  // Warm-up first: invalid updates do not start the window.
+  s.run(5.0, false);
+  EXPECT_FALSE(s.detector.status()[0].baseline_ready);
+  // During learning the estimates swing +-20 % about kBaseline with a tiny std:
+  // far past the thresholds of the baseline they end up defining.
+  const double t_start = s.t();
+  double sum_wn = 0.0;
+  int count = 0;
+  const double t_ready = s.run_until(2 * window, [&] {
+    sum_wn += s.value[0].wn;
+    ++count;
+    const bool ready = s.detector.status()[0].baseline_ready;
+    const double f = (count % 2 == 0) ? 1.2 : 0.8;
+    for (int i = 0; i < 3; ++i) s.value[i] = scaled(kBaseline[i], f);
+    return ready;
+  });
+  ASSERT_FALSE(std::isnan(t_ready));
+  EXPECT_NEAR(t_ready - t_start, window, 1e-9) << "ready at the first update a window after the first valid one";
+  EXPECT_EQ(count, static_cast<int>(std::lround(window / kPeriod)) + 1) << "both ends included";
+  const ModeStatus& m = s.detector.status()[0];
+  EXPECT_TRUE(m.baseline.learned);
+  EXPECT_NEAR(m.baseline.value.wn, sum_wn / count, 1e-9);
+  EXPECT_NEAR(m.baseline.value.wn, kBaseline[0].wn, 0.01 * kBaseline[0].wn);
+  for (int i = 0; i < 3; ++i) EXPECT_TRUE(s.detector.status()[i].baseline_ready);
+  EXPECT_TRUE(s.log.empty()) << "no flag while learning";
+
+  // Against the learned baseline: steady values stay quiet, a drop is flagged.
+  for (int i = 0; i < 3; ++i) s.value[i] = s.detector.status()[i].baseline.value;
+  s.run(10.0);
+  EXPECT_FALSE(s.detector.any_flag());
+  s.value[2].wn *= 0.85;
+  s.run(5.0);
+  EXPECT_EQ(s.detector.flag_bits(), std::uint64_t{1} << 6);
+}
+
+TEST(FaultDetector, ConfiguredBaselineIsUsedFromTheFirstUpdate) {
+  Stream s(configured());
+  for (int i = 0; i < 3; ++i) {
+    const ModeStatus& m = s.detector.status()[i];
+    EXPECT_TRUE(m.baseline_ready);
+    EXPECT_FALSE(m.baseline.learned);
+    EXPECT_EQ(m.baseline.value.wn, kBaseline[i].wn);
+    EXPECT_EQ(m.baseline.value.zeta, kBaseline[i].zeta);
+    EXPECT_EQ(m.baseline.value.gain, kBaseline[i].gain);
+  }
+  // The estimate sits 15 % off the configuration from the start: flagged after the hold.
+  s.value[0].gain = 1.15 * kBaseline[0].gain;
+  s.step();
+  EXPECT_NEAR(s.q(0, Quantity::gain).deviation_relative, 0.15, 1e-12);
+  EXPECT_TRUE(s.q(0, Quantity::gain).pending);
+  s.run(FaultThresholds{}.hold_time);
+  EXPECT_TRUE(s.q(0, Quantity::gain).flagged);
+  EXPECT_EQ(s.detector.status()[0].baseline.value.gain, kBaseline[0].gain) << "never re-learned";
+}
+
+TEST(FaultDetector, ConfiguredAndLearnedBaselinesMix) {
+  FaultDetectorSettings st = configured();
+  st.baselines[1] = std::nullopt;
+  st.learn_window = 5.0;
+  Stream s(st);
+  EXPECT_TRUE(s.detector.status()[0].baseline_ready);
+  EXPECT_FALSE(s.detector.status()[1].baseline_ready);
+  s.value[1] = scaled(kBaseline[1], 1.1);
+  s.run(6.0);
+  EXPECT_TRUE(s.detector.status()[1].baseline.learned);
+  EXPECT_NEAR(s.detector.status()[1].baseline.value.wn, 1.1 * kBaseline[1].wn, 1e-9);
+  EXPECT_FALSE(s.detector.status()[0].baseline.learned);
+}
+
+// ------------------------------------------------------------------ invalid updates
+
+TEST(FaultDetector, InvalidUpdatesPauseLearningAndAreLeftOutOfTheMean) {
+  constexpr double window = 10.0;
+  Stream s(learned(1, window));
+  s.run(6.0);  // 60 valid updates at the baseline: 5.9 s of the window
+  s.value[0] = scaled(kBaseline[0], 3.0);  // garbage while the excitation is low
+  s.run(100.0, false);
+  EXPECT_FALSE(s.detector.status()[0].baseline_ready);
+  s.value[0] = kBaseline[0];
+  // 41 updates: the first adds nothing (the interval across the invalid stretch
+  // does not count), the other 40 make 9.9 s.
+  s.run(4.1);
+  EXPECT_FALSE(s.detector.status()[0].baseline_ready);
+  s.step();
+  ASSERT_TRUE(s.detector.status()[0].baseline_ready);
+  EXPECT_NEAR(s.detector.status()[0].baseline.value.wn, kBaseline[0].wn, 1e-12 * kBaseline[0].wn);
+}
+
+TEST(FaultDetector, APendingConditionDoesNotMatureWhileInvalid) {
+  const FaultThresholds th;
+  Stream s(configured());
+  s.value[0].wn = 0.85 * kBaseline[0].wn;
+  const double t_drop = s.t();
+  s.run(1.0);  // 10 updates: 0.9 s of the 2 s hold
+  s.run(50.0, false);
+  EXPECT_TRUE(s.q(0, Quantity::wn).pending);
+  EXPECT_FALSE(s.q(0, Quantity::wn).flagged);
+  EXPECT_DOUBLE_EQ(s.q(0, Quantity::wn).since, t_drop) << "still the time the condition began";
+  // The remaining 1.1 s of valid time after the first valid update.
+  const double t_resume = s.t();
+  const double t_raise = s.run_until(10.0, [&] { return s.q(0, Quantity::wn).flagged; });
+  EXPECT_NEAR(t_raise - t_resume, th.hold_time - 0.9, 1e-9);
+}
+
+TEST(FaultDetector, InvalidUpdatesNeverChangeFlagsOrStatus) {
+  Stream s(configured());
+  s.value[0].wn = 0.85 * kBaseline[0].wn;
+  s.run(5.0);
+  ASSERT_TRUE(s.q(0, Quantity::wn).flagged);
+  const QuantityStatus before = s.q(0, Quantity::wn);
+
+  // Back to the baseline, but invalid for much longer than clear_time: stays.
+  s.value[0] = kBaseline[0];
+  s.run(60.0, false);
+  const QuantityStatus& wn = s.q(0, Quantity::wn);
+  EXPECT_TRUE(wn.flagged);
+  EXPECT_EQ(wn.deviation_sigma, before.deviation_sigma);
+  EXPECT_EQ(wn.deviation_relative, before.deviation_relative);
+  EXPECT_EQ(wn.since, before.since);
+
+  // Far off on every mode while invalid: nothing rises either.
+  for (int i = 0; i < 3; ++i) s.value[i] = scaled(kBaseline[i], 0.5);
+  s.run(60.0, false);
+  EXPECT_EQ(s.detector.flag_bits(), 1u);
+  EXPECT_EQ(s.log.size(), 1u);
+  for (int i = 1; i < 3; ++i) EXPECT_FALSE(s.q(i, Quantity::wn).pending);
+}
+
+TEST(FaultDetector, NonFiniteEstimatesMakeOnlyThatModeInvalid) {
+  Stream s(configured());
+  for (int i = 0; i < 2; ++i) s.value[i].wn = 0.85 * kBaseline[i].wn;
+  s.value[0].gain = kNaN;  // mode 0 invalid: its wn drop cannot be flagged
+  s.run(10.0);
+  EXPECT_FALSE(s.q(0, Quantity::wn).pending);
+  EXPECT_FALSE(s.q(0, Quantity::wn).flagged);
+  EXPECT_TRUE(s.q(1, Quantity::wn).flagged);
+  s.value[0].gain = std::numeric_limits<double>::infinity();
+  s.run(10.0);
+  EXPECT_FALSE(s.q(0, Quantity::wn).flagged);
+  s.value[0].gain = kBaseline[0].gain;
+  s.run(5.0);
+  EXPECT_TRUE(s.q(0, Quantity::wn).flagged);
+  // A non-finite time makes the whole update invalid.
+  s.changes.clear();
+  s.detector.update(kNaN, s.value, s.std_dev, true, s.changes);
+  EXPECT_TRUE(s.changes.empty());
+  EXPECT_EQ(s.detector.flag_bits(), (1u << 0) | (1u << 3));
+}
+
+// ------------------------------------------------------------------ settings
+
+TEST(FaultDetector, BadSettingsThrow) {
+  auto throws = [](auto edit) {
+    FaultDetectorSettings st = configured();
+    edit(st);
+    EXPECT_THROW(FaultDetector{st}, std::invalid_argument);
+  };
+  throws([](auto& s) { s.baselines.pop_back(); });
+  throws([](auto& s) { s.mode_names.push_back("extra"); });
+  throws([](auto& s) { s.learn_window = 0.0; });
+  throws([](auto& s) { s.learn_window = kNaN; });
+  throws([](auto& s) { s.thresholds[0].sigma_threshold = 0.0; });
+  throws([](auto& s) { s.thresholds[1].sigma_threshold = -1.0; });
+  throws([](auto& s) { s.thresholds[2].relative_threshold = 0.0; });
+  throws([](auto& s) { s.thresholds[0].relative_threshold = kNaN; });
+  throws([](auto& s) { s.thresholds[1].clear_fraction = 0.0; });
+  throws([](auto& s) { s.thresholds[2].clear_fraction = 1.0; });
+  throws([](auto& s) { s.thresholds[0].hold_time = -0.1; });
+  throws([](auto& s) { s.thresholds[1].clear_time = -0.1; });
+  throws([](auto& s) { s.thresholds[2].hold_time = std::numeric_limits<double>::infinity(); });
+  throws([](auto& s) { s.baselines[0]->wn = kNaN; });
+  throws([](auto& s) {
+    s.mode_names.assign(22, "m");
+    s.baselines.assign(22, ModalParameters{1.0, 0.1, 1.0});
+  });
+
+  // Zero hold and clear times, 21 modes and no modes are fine.
+  FaultDetectorSettings ok = configured();
+  ok.thresholds[0].hold_time = ok.thresholds[0].clear_time = 0.0;
+  EXPECT_NO_THROW(FaultDetector{ok});
+  ok.mode_names.assign(21, "m");
+  ok.baselines.assign(21, ModalParameters{1.0, 0.1, 1.0});
+  EXPECT_NO_THROW(FaultDetector{ok});
+  EXPECT_NO_THROW(FaultDetector{FaultDetectorSettings{}});
+}
+
+TEST(FaultDetector, EstimatesForTheWrongNumberOfModesThrow) {
+  FaultDetector fd(configured());
+  std::vector<FlagChange> changes;
+  const std::vector<ModalParameters> two(2);
+  EXPECT_THROW(fd.update(0.0, two, kBaseline, true, changes), std::invalid_argument);
+  EXPECT_THROW(fd.update(0.0, kBaseline, two, true, changes), std::invalid_argument);
+}
+
+// ------------------------------------------------------------------ allocation
+
+TEST(FaultDetector, UpdateStaysWithinTheReservedCapacityEvenWhenEveryFlagChangesAtOnce) {
+  FaultDetectorSettings st = configured();
+  for (auto& th : st.thresholds) th.hold_time = th.clear_time = 0.0;
+  Stream s(st);
+  const std::size_t capacity = s.changes.capacity();
+  const FlagChange* data = s.changes.data();
+  ASSERT_EQ(capacity, 9u);
+  for (int r = 0; r < 100; ++r) {
+    for (int i = 0; i < 3; ++i) s.value[i] = scaled(kBaseline[i], r % 2 == 0 ? 0.5 : 1.0);
+    EXPECT_EQ(s.step().size(), 9u) << "every quantity of every mode rises or falls";
+    EXPECT_EQ(s.changes.capacity(), capacity);
+    EXPECT_EQ(s.changes.data(), data);
+  }
+  EXPECT_EQ(s.log.size(), 900u);
+}
+
+}  // namespace
+}  // namespace modalwatch
