@@ -22,7 +22,15 @@ struct FitArgs {
   int max_iterations = 200;
 };
 
+struct TrackArgs {
+  std::string config;
+  std::string data;
+  std::string out;       // est.csv
+  bool progress = true;  // progress bar on stderr
+};
+
 int simulate(const SimulateArgs& args);
+int track(const TrackArgs& args);
 int fit(const FitArgs& args);
 
 }  // namespace modalwatch::cli

@@ -28,6 +28,14 @@ int main(int argc, char** argv) {
   fit_cmd->add_option("--to", fit_args.to, "use samples up to this time [s]");
   fit_cmd->add_option("--max-iterations", fit_args.max_iterations, "block-coordinate cycles")->check(CLI::PositiveNumber);
 
+  TrackArgs track_args;
+  bool no_progress = false;
+  auto* track_cmd = app.add_subcommand("track", "Recursive additive RSRIVC over a record: writes the estimates per sample");
+  track_cmd->add_option("--config,-c", track_args.config, "YAML with the model: (and estimator:) sections")->required();
+  track_cmd->add_option("--data,-d", track_args.data, "record CSV with columns t,u,y[,r]")->required();
+  track_cmd->add_option("--out,-o", track_args.out, "estimates CSV to write (one row per sample)")->required();
+  track_cmd->add_flag("--no-progress", no_progress, "no progress bar on stderr");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -40,5 +48,9 @@ int main(int argc, char** argv) {
   }
   if (simulate_cmd->parsed()) return simulate(sim);
   if (fit_cmd->parsed()) return fit(fit_args);
+  if (track_cmd->parsed()) {
+    track_args.progress = !no_progress;
+    return track(track_args);
+  }
   return 2;
 }

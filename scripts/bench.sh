@@ -1,0 +1,76 @@
+#!/usr/bin/env bash
+# Speed of the recursive estimator and of `modalwatch track` (issue 3,
+# acceptance 6). Measures and prints; asserts nothing.
+#
+#   scripts/bench.sh
+#
+# 1. Builds Release in build-release (benchmarks on) and runs bench_estimator
+#    (Google Benchmark: step() for K=2/3, open/closed loop, M_s=0/2; the CSV
+#    reader on 1M rows; track in process).
+# 2. Instructions per sample of step() for K=3 closed loop, M_s=0: callgrind on
+#    step_driver for two step counts N1 < N2, (Ir(N2) - Ir(N1)) / (N2 - N1),
+#    so warm-up, simulation and start-up cancel.
+# 3. `modalwatch track` end to end (CSV in and out) on a simulated 2M-sample
+#    K=3 closed-loop record: samples/s of the wall-clock time.
+#
+# Environment: BUILD (build-release), JOBS (2), MIN_TIME (0.5, seconds per
+# benchmark), N1/N2 (20000/120000), TRACK_SAMPLES (2000000), BENCH_FILTER
+# (a --benchmark_filter regex).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+BUILD=${BUILD:-build-release}
+JOBS=${JOBS:-2}
+MIN_TIME=${MIN_TIME:-0.5}
+N1=${N1:-20000}
+N2=${N2:-120000}
+TRACK_SAMPLES=${TRACK_SAMPLES:-2000000}
+CONFIG=config/paper-sim.yaml
+
+WORK=$(mktemp -d "${TMPDIR:-/tmp}/modalwatch_bench.XXXXXX")
+trap 'rm -rf "$WORK"' EXIT
+
+echo "== build ($BUILD, Release)"
+if ! { cmake -S . -B "$BUILD" -DCMAKE_BUILD_TYPE=Release -DMODALWATCH_BENCHMARKS=ON &&
+       cmake --build "$BUILD" -j"$JOBS" --target modalwatch bench_estimator step_driver; } >"$WORK/build.log" 2>&1; then
+  cat "$WORK/build.log"
+  exit 1
+fi
+CLI="$BUILD/modalwatch"
+BENCH="$BUILD/tests/bench/bench_estimator"
+DRIVER="$BUILD/tests/bench/step_driver"
+
+echo
+echo "== Google Benchmark (items_per_second = samples/s)"
+"$BENCH" --benchmark_min_time="$MIN_TIME" ${BENCH_FILTER:+--benchmark_filter="$BENCH_FILTER"}
+
+echo
+echo "== callgrind: instructions per sample of step(), K=3 closed loop, M_s=0"
+if command -v valgrind >/dev/null; then
+  ir() { awk '/^summary:/ {print $2; found=1; exit} END {if (!found) exit 1}' "$1"; }
+  for n in "$N1" "$N2"; do
+    valgrind --tool=callgrind --callgrind-out-file="$WORK/callgrind.$n" "$DRIVER" "$n" >"$WORK/driver.$n" 2>"$WORK/valgrind.$n"
+    echo "  N=$n: Ir $(ir "$WORK/callgrind.$n")   ($(cat "$WORK/driver.$n"))"
+  done
+  I1=$(ir "$WORK/callgrind.$N1")
+  I2=$(ir "$WORK/callgrind.$N2")
+  echo "  instructions per sample: $(( (I2 - I1) / (N2 - N1) ))   (target <= 2000)"
+else
+  echo "  valgrind not installed: skipped"
+fi
+
+echo
+echo "== modalwatch track end to end: $TRACK_SAMPLES samples, K=3 closed loop (CSV in and out)"
+duration=$(awk -v n="$TRACK_SAMPLES" 'BEGIN {printf "%.6f", n / 20}')  # paper-sim.yaml samples at 20 Hz
+"$CLI" simulate --config "$CONFIG" --out "$WORK/record.csv" --duration "$duration" 2>/dev/null
+start=$(date +%s.%N)
+"$CLI" track --config "$CONFIG" --data "$WORK/record.csv" --out "$WORK/est.csv" --no-progress \
+  >"$WORK/track.out" 2>"$WORK/track.err"
+end=$(date +%s.%N)
+rows=$(($(wc -l <"$WORK/est.csv") - 1))
+sed 's/^/  /' "$WORK/track.err"
+awk -v s="$start" -v e="$end" -v n="$rows" -v in_mb="$(stat -c %s "$WORK/record.csv")" \
+  -v out_mb="$(stat -c %s "$WORK/est.csv")" 'BEGIN {
+    printf "  wall clock: %.3f s for %d rows (record %.0f MB, est.csv %.0f MB)\n", e - s, n, in_mb / 1e6, out_mb / 1e6
+    printf "  track end to end: %.0f samples/s   (target >= 500000)\n", n / (e - s)
+  }'

@@ -1,0 +1,224 @@
+// `modalwatch track` as a user meets it: the real binary on real files, exit
+// codes, est.csv's layout, and the summary on stderr. Accuracy is asserted in
+// test_estimator, not here.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "modalwatch/csv.hpp"
+
+namespace fs = std::filesystem;
+
+namespace modalwatch {
+namespace {
+
+struct Outcome {
+  int code;
+  std::string output;  // stdout and stderr
+};
+
+Outcome run(const std::string& args) {
+  const std::string cmd = std::string(MODALWATCH_CLI) + " " + args + " 2>&1";
+  FILE* pipe = popen(cmd.c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buf{};
+  while (pipe && std::fgets(buf.data(), buf.size(), pipe)) out += buf.data();
+  const int status = pipe ? pclose(pipe) : -1;
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+bool contains(const std::string& text, const std::string& what) { return text.find(what) != std::string::npos; }
+
+// The number after `key: ` in the summary, -1 when absent.
+long long summary_count(const std::string& output, const std::string& key) {
+  const std::string label = "\n  " + key + ": ";
+  const auto at = output.find(label);
+  if (at == std::string::npos) return -1;
+  const std::size_t begin = at + label.size();
+  std::size_t end = begin;
+  while (end < output.size() && output[end] >= '0' && output[end] <= '9') ++end;
+  return end > begin ? std::stoll(output.substr(begin, end - begin)) : -1;
+}
+
+std::string paper_config() { return std::string(MODALWATCH_SOURCE_DIR) + "/config/paper-sim.yaml"; }
+
+std::string expected_header() {
+  std::string h = "t";
+  for (const char* mode : {"mode1", "mode2", "mode3"})
+    for (const char* q : {"_wn", "_zeta", "_gain", "_wn_std", "_zeta_std", "_gain_std"}) h += std::string(",") + mode + q;
+  return h + ",residual_rms,flags,resets";
+}
+
+class Track : public ::testing::Test {
+ public:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("modalwatch_track_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  std::string write(const std::string& name, const std::string& text) const {
+    std::ofstream(path(name)) << text;
+    return path(name);
+  }
+  Outcome track(const std::string& data, const std::string& out = "est.csv") const {
+    return run("track --config " + paper_config() + " --data " + data + " --out " + path(out));
+  }
+  // Only the files a test wrote itself: no est.csv, no temporary left behind.
+  std::vector<std::string> files() const {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(dir_)) names.push_back(e.path().filename().string());
+    return names;
+  }
+
+ protected:
+  fs::path dir_;
+};
+
+std::string first_line(const std::string& file) {
+  std::ifstream in(file);
+  std::string line;
+  std::getline(in, line);
+  return line;
+}
+
+void expect_all_finite(const Table& est) {
+  for (Eigen::Index i = 0; i < est.data.rows(); ++i)
+    for (Eigen::Index j = 0; j < est.data.cols(); ++j)
+      ASSERT_TRUE(std::isfinite(est.data(i, j))) << "row " << i + 2 << ", column " << est.columns[j];
+}
+
+TEST_F(Track, SimulatedRecordGivesOneFiniteRowPerSample) {
+  const Outcome sim = run("simulate --config " + paper_config() + " --out " + path("d.csv") + " --duration 120");
+  ASSERT_EQ(sim.code, 0) << sim.output;
+  const Outcome r = track(path("d.csv"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(first_line(path("est.csv")), expected_header());
+  const Table est = read_table(path("est.csv"));  // read_table rejects NaN and Inf
+  EXPECT_EQ(est.data.rows(), 2400);
+  expect_all_finite(est);
+  const Table d = read_table(path("d.csv"));
+  EXPECT_TRUE(est.data.col(0) == d.data.col(d.column("t")));
+  // Summary on stderr, the modal table on stdout; no progress bar when stderr is not a terminal.
+  for (const char* s : {"samples/s", "updates: ", "resets: ", "warm-up fit", "mode1", "mode3", "f [Hz]", "zeta"})
+    EXPECT_TRUE(contains(r.output, s)) << s << "\n" << r.output;
+  EXPECT_FALSE(contains(r.output, "\r")) << r.output;
+  EXPECT_EQ(summary_count(r.output, "rejected non-finite"), 0) << r.output;
+  EXPECT_EQ(summary_count(r.output, "gaps"), 0) << r.output;
+  EXPECT_EQ(files().size(), 2u);  // d.csv and est.csv, no temporary left behind
+}
+
+// The record of acceptance point 5: a NaN sample, a 10 s gap, a sample of 1e12
+// and 60 s of zero input (and setpoint) in the simulated closed-loop record.
+std::string damaged_record(const std::string& clean_csv) {
+  const Table d = read_table(clean_csv);
+  const int ct = d.column("t"), cr = d.column("r"), cu = d.column("u"), cy = d.column("y");
+  std::ostringstream out;
+  out.precision(17);
+  out << "t,r,u,y\n";
+  for (Eigen::Index k = 0; k < d.data.rows(); ++k) {
+    const double t = d.data(k, ct);
+    double r = d.data(k, cr), u = d.data(k, cu), y = d.data(k, cy);
+    if (t > 80.0 && t <= 90.0) continue;  // 10 s gap
+    if (t > 150.0 && t <= 210.0) {
+      // No input, no setpoint: the output is the noise alone (std 0.1, deterministic here).
+      r = 0.0;
+      u = 0.0;
+      y = 0.1 * std::sin(12.9898 * static_cast<double>(k));
+    }
+    if (k == 1200) {  // t = 60
+      out << t << "," << r << "," << u << ",nan\n";
+      continue;
+    }
+    if (k == 2000) y = 1e12;  // t = 100
+    out << t << "," << r << "," << u << "," << y << "\n";
+  }
+  return out.str();
+}
+
+TEST_F(Track, NaNGapOutlierAndSilenceAreCountedNeverNaN) {
+  const Outcome sim = run("simulate --config " + paper_config() + " --out " + path("clean.csv") + " --duration 260");
+  ASSERT_EQ(sim.code, 0) << sim.output;
+  const std::string data = write("damaged.csv", damaged_record(path("clean.csv")));
+  const Outcome r = track(data);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(first_line(path("est.csv")), expected_header());
+  const Table est = read_table(path("est.csv"));
+  EXPECT_EQ(est.data.rows(), 5200 - 200);  // one row per input row, the NaN row included
+  expect_all_finite(est);
+
+  EXPECT_EQ(summary_count(r.output, "rejected non-finite"), 1) << r.output;
+  EXPECT_EQ(summary_count(r.output, "gaps"), 1) << r.output;
+  EXPECT_GE(summary_count(r.output, "outliers"), 1) << r.output;
+  EXPECT_GT(summary_count(r.output, "low-excitation samples"), 0) << r.output;
+  // Visible per sample too: the flags column.
+  const int flags = est.column("flags");
+  unsigned all = 0;
+  for (Eigen::Index k = 0; k < est.data.rows(); ++k) all |= static_cast<unsigned>(est.data(k, flags));
+  EXPECT_TRUE(all & (1u << 1)) << "no sample flagged non-finite";
+  EXPECT_TRUE(all & (1u << 3)) << "no sample flagged as a gap";
+  EXPECT_TRUE(all & (1u << 4)) << "no sample flagged as an outlier";
+}
+
+TEST_F(Track, MissingDataFileIsBadInputAndWritesNothing) {
+  const Outcome r = track(path("nonexistent.csv"));
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_TRUE(contains(r.output, "nonexistent.csv")) << r.output;
+  EXPECT_TRUE(files().empty());
+}
+
+TEST_F(Track, WrongColumnsAreBadInputAndWriteNothing) {
+  const std::string data = write("bad.csv", "t,a,b\n0,0,0\n0.05,0,0\n0.1,0,0\n");
+  const Outcome r = track(data);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_TRUE(contains(r.output, "'u'")) << r.output;
+  EXPECT_EQ(files(), std::vector<std::string>{"bad.csv"});
+}
+
+TEST_F(Track, ClosedLoopWithoutReferenceIsBadInput) {
+  const std::string data = write("noref.csv", "t,u,y\n0,0,0\n0.05,0,0\n0.1,0,0\n");
+  const Outcome r = track(data);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_TRUE(contains(r.output, "'r'")) << r.output;
+  EXPECT_EQ(files(), std::vector<std::string>{"noref.csv"});
+}
+
+TEST_F(Track, WrongSampleRateIsBadInput) {
+  std::ostringstream s;
+  s << "t,r,u,y\n";
+  for (int k = 0; k < 50; ++k) s << k * 0.1 << ",0,0,0\n";  // 10 Hz, the config says 20
+  const Outcome r = track(write("slow.csv", s.str()));
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_TRUE(contains(r.output, "sample_rate_hz")) << r.output;
+  EXPECT_EQ(files(), std::vector<std::string>{"slow.csv"});
+}
+
+TEST_F(Track, UnwritableOutputIsAnErrorAndLeavesNothing) {
+  const Outcome sim = run("simulate --config " + paper_config() + " --out " + path("d.csv") + " --duration 10");
+  ASSERT_EQ(sim.code, 0) << sim.output;
+  const Outcome r = track(path("d.csv"), "no/such/dir/est.csv");
+  EXPECT_NE(r.code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "cannot write")) << r.output;
+  EXPECT_EQ(files(), std::vector<std::string>{"d.csv"});
+}
+
+TEST_F(Track, MissingRequiredOptionIsBadInput) {
+  const Outcome r = run("track --config " + paper_config() + " --data x.csv");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_TRUE(contains(r.output, "--out")) << r.output;
+}
+
+}  // namespace
+}  // namespace modalwatch
