@@ -124,7 +124,7 @@ struct RecursiveEstimator::Impl {
   double e_var_good = 0.0;   // e_var when the last good state was saved
   std::uint64_t rearm = 0;   // samples until the divergence detector is armed again
   int outlier_run = 0;       // consecutive samples replaced as outliers
-  double pow_short = 0.0, pow_ref = 0.0, pow_alpha = 0.0;
+  double pow_short = 0.0, pow_ref = 0.0, pow_alpha = 0.0, pow_ref_alpha = 0.0;
   std::uint64_t pow_count = 0;
 
   void build(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>* fit_covariance, double fit_sigma2,
@@ -378,6 +378,9 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   pow_short = pow_count == 0 ? z * z : pow_alpha * pow_short + (1.0 - pow_alpha) * z * z;
   ++pow_count;
   const bool low = pow_ref > 0.0 && pow_short < cfg.low_excitation_ratio * pow_ref;
+  // The reference is the input power over a long window, learned while the
+  // excitation is normal (seeded by the warm-up when there is one).
+  if (!low) pow_ref = pow_ref > 0.0 ? pow_ref_alpha * pow_ref + (1.0 - pow_ref_alpha) * z * z : pow_short;
   status.low_excitation = low;
   if (low) {
     ++status.low_excitation_samples;
@@ -588,6 +591,7 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
                         ? settings.low_excitation_window / T
                         : (std::isfinite(w_min) ? 2.0 * std::numbers::pi / w_min / T : 1000.0);
   m.pow_alpha = 1.0 - 1.0 / std::max(pw, 2.0);
+  m.pow_ref_alpha = 1.0 - 1.0 / std::max(20.0 * pw, 2.0);
 
   if (settings.warmup_samples > 0) {
     m.wt.resize(settings.warmup_samples);
