@@ -9,6 +9,7 @@ cd "$(dirname "$0")/.."
 config="${1:-config/motion-stage.yaml}"
 [ -x build/modalwatch ] || scripts/setup.sh
 out="${DEMO_DIR:-$(mktemp -d)}"
+mkdir -p "$out"
 echo "== simulate: $config -> $out/record.csv"
 build/modalwatch simulate --config "$config" --out "$out/record.csv" --truth "$out/truth.csv"
 echo "== truth (from $config, plant section):"
