@@ -257,17 +257,6 @@ std::string first_allocation_trace() {
   return out.str();
 }
 
-EstimatorSettings settings_from(const Config& config) {
-  // Completed from the config as `modalwatch track` does.
-  EstimatorSettings s = config.estimator;
-  s.sample_time = config.sample_time;
-  s.closed_loop = config.closed_loop;
-  s.controller = config.controller;
-  s.output_hold = config.output_hold;
-  s.forgetting.clear();
-  for (const auto& sub : config.submodel_settings) s.forgetting.push_back(sub.forgetting);
-  return s;
-}
 
 struct Data {
   Config config;
@@ -309,7 +298,7 @@ class NoAllocation : public ::testing::TestWithParam<Case> {};
 TEST_P(NoAllocation, InStepAndReadOutsAfterWarmup) {
   const Case c = GetParam();
   const Data& d = data();
-  EstimatorSettings s = settings_from(d.config);
+  EstimatorSettings s = d.config.estimator;
   s.closed_loop = c.closed_loop;
   s.warmup_samples = c.warmup_samples;
   s.refinements = c.refinements;

@@ -26,11 +26,7 @@ constexpr double kPi = std::numbers::pi;
 Config paper_config() { return load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/paper-sim.yaml"); }
 
 EstimatorSettings settings_for(const Config& c, std::vector<double> forgetting, int warmup) {
-  EstimatorSettings s = c.estimator;
-  s.sample_time = c.sample_time;
-  s.closed_loop = c.closed_loop;
-  s.controller = c.controller;
-  s.output_hold = c.output_hold;
+  EstimatorSettings s = c.estimator;  // completed from the rest of the file by load_config
   s.forgetting = std::move(forgetting);
   s.warmup_samples = warmup;
   return s;

@@ -1,4 +1,5 @@
 #include "commands.hpp"
+#include "guarded.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -16,22 +17,6 @@
 namespace modalwatch::cli {
 namespace {
 
-// Runs a command body and maps errors to exit codes: bad input is 2.
-template <class F>
-int guarded(const char* command, F&& body) {
-  try {
-    return body();
-  } catch (const InputError& e) {
-    std::fprintf(stderr, "modalwatch %s: %s\n", command, e.what());
-    return 2;
-  } catch (const std::invalid_argument& e) {
-    std::fprintf(stderr, "modalwatch %s: %s\n", command, e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "modalwatch %s: error: %s\n", command, e.what());
-    return 1;
-  }
-}
 
 void write_text_atomically(const std::string& path, const std::string& text) {
   const std::string tmp = path + ".tmp";

@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "guarded.hpp"
 #include "modalwatch/config.hpp"
 #include "modalwatch/csv.hpp"
 #include "modalwatch/error.hpp"
@@ -39,35 +40,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-// Runs a command body and maps errors to exit codes: bad input is 2 (as in commands.cpp).
-template <class F>
-int guarded(const char* command, F&& body) {
-  try {
-    return body();
-  } catch (const InputError& e) {
-    std::fprintf(stderr, "modalwatch %s: %s\n", command, e.what());
-    return 2;
-  } catch (const std::invalid_argument& e) {
-    std::fprintf(stderr, "modalwatch %s: %s\n", command, e.what());
-    return 2;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "modalwatch %s: error: %s\n", command, e.what());
-    return 1;
-  }
-}
 
-// The estimator settings of a config, completed from the rest of the file
-// whatever the `estimator:` section already filled in.
-EstimatorSettings estimator_settings(const Config& config) {
-  EstimatorSettings s = config.estimator;
-  s.sample_time = config.sample_time;
-  s.closed_loop = config.closed_loop;
-  s.controller = config.controller;
-  s.output_hold = config.output_hold;
-  s.forgetting.clear();
-  for (const auto& sub : config.submodel_settings) s.forgetting.push_back(sub.forgetting);
-  return s;
-}
 
 // The record's step must be the configured one (gaps aside): at least half of
 // the steps within 1 % of the sample time.
@@ -374,7 +347,7 @@ int track(const TrackArgs& args) {
   return guarded("track", [&] {
     const auto t_start = Clock::now();
     const Config config = load_config(args.config);
-    const EstimatorSettings settings = estimator_settings(config);
+    const EstimatorSettings& settings = config.estimator;  // completed by load_config
 
     RecordReadOptions read_options;
     read_options.allow_nonfinite = true;

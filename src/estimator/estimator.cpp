@@ -91,6 +91,18 @@ struct Block {
     for (int j = 0; j <= m; ++j) s += theta(n + j) * d(j);
     return s;
   }
+  // Regressor (eqs. 19, 33) and instrument (eqs. 20, 29, 32) from the filtered
+  // residual output dy, auxiliary output dx, input du and instrument input dz.
+  void fill(const FilterVector& dy, const FilterVector& dx, const FilterVector& du, const FilterVector& dz) {
+    for (int j = 1; j <= n; ++j) {
+      phi(j - 1) = -dy(j);
+      psi(j - 1) = -dx(j);
+    }
+    for (int j = 0; j <= m; ++j) {
+      phi(n + j) = du(j);
+      psi(n + j) = dz(j);
+    }
+  }
   double feedthrough() const {
     return m == n + l ? theta(n + m) / (n > 0 ? theta(n - 1) : 1.0) : 0.0;
   }
@@ -411,14 +423,7 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
         const auto& dx = b.fx.step(b.xz);
         const auto& du = b.fu.derivatives();
         const auto& dz = cfg.closed_loop ? b.fz.derivatives() : du;
-        for (int j = 1; j <= b.n; ++j) {
-          b.phi(j - 1) = -dy(j);
-          b.psi(j - 1) = -dx(j);
-        }
-        for (int j = 0; j <= b.m; ++j) {
-          b.phi(b.n + j) = du(j);
-          b.psi(b.n + j) = dz(j);
-        }
+        b.fill(dy, dx, du, dz);
         if (!update_block(b, dy(0))) {
           healthy = false;
           break;
@@ -451,14 +456,7 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
         const auto& dx = b.fx.step(b.xz);
         const auto& du = b.fu.derivatives();
         const auto& dz = cfg.closed_loop ? b.fz.derivatives() : du;
-        for (int j = 1; j <= b.n; ++j) {
-          b.phi(j - 1) = -dy(j);
-          b.psi(j - 1) = -dx(j);
-        }
-        for (int j = 0; j <= b.m; ++j) {
-          b.phi(b.n + j) = du(j);
-          b.psi(b.n + j) = dz(j);
-        }
+        b.fill(dy, dx, du, dz);
         b.theta = theta_bar;
         b.P = P_bar;
         if (!update_block(b, dy(0))) {

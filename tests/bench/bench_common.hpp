@@ -33,17 +33,6 @@ inline Record simulate_paper(int K, bool closed_loop, double duration) {
   return simulate(*c.plant, e).record;
 }
 
-// Completed from the config as `modalwatch track` does.
-inline EstimatorSettings track_settings(const Config& config) {
-  EstimatorSettings s = config.estimator;
-  s.sample_time = config.sample_time;
-  s.closed_loop = config.closed_loop;
-  s.controller = config.controller;
-  s.output_hold = config.output_hold;
-  s.forgetting.clear();
-  for (const auto& sub : config.submodel_settings) s.forgetting.push_back(sub.forgetting);
-  return s;
-}
 
 // Feeds a record to an estimator forever: after the last sample it continues
 // with sample `restart`, time shifted so that it keeps increasing by T.

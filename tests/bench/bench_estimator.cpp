@@ -38,7 +38,7 @@ void BM_Step(benchmark::State& state) {
   const int K = static_cast<int>(state.range(0));
   const bool closed = state.range(1) != 0;
   const Config config = paper_subset(K);
-  EstimatorSettings s = track_settings(config);
+  EstimatorSettings s = config.estimator;
   s.closed_loop = closed;
   s.refinements = static_cast<int>(state.range(2));
   s.block_iterations = 1;

@@ -22,7 +22,7 @@ int main(int argc, char** argv) {
   }
   constexpr int kWarmup = 1000;
   const Config& config = paper_config();
-  EstimatorSettings s = track_settings(config);
+  EstimatorSettings s = config.estimator;
   s.closed_loop = true;
   s.refinements = 0;
   s.block_iterations = 1;
