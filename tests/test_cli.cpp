@@ -9,6 +9,8 @@
 
 #include <gtest/gtest.h>
 
+#include "support.hpp"
+
 #include "modalwatch/config.hpp"
 #include "modalwatch/csv.hpp"
 
@@ -17,20 +19,8 @@ namespace fs = std::filesystem;
 namespace modalwatch {
 namespace {
 
-struct Outcome {
-  int code;
-  std::string output;  // stdout and stderr
-};
-
-Outcome run(const std::string& args) {
-  const std::string cmd = std::string(MODALWATCH_CLI) + " " + args + " 2>&1";
-  FILE* pipe = popen(cmd.c_str(), "r");
-  std::string out;
-  std::array<char, 4096> buf{};
-  while (pipe && std::fgets(buf.data(), buf.size(), pipe)) out += buf.data();
-  const int status = pipe ? pclose(pipe) : -1;
-  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
-}
+using test_support::Outcome;
+Outcome run(const std::string& args) { return test_support::run_cli(args); }
 
 class Cli : public ::testing::Test {
  public:

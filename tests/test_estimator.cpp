@@ -11,6 +11,8 @@
 
 #include <gtest/gtest.h>
 
+#include "support.hpp"
+
 #include "modalwatch/config.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/prefilter.hpp"
@@ -190,19 +192,8 @@ TEST(RecursiveEstimator, AdditiveModelIsAtLeastAsAccurateAsTheUnfactoredSixthOrd
   // forgetting: the additive estimate is at least as accurate on every mode.
   const Config c = paper_config();
   const auto sim = simulate(*c.plant, *c.experiment);
-  auto mul = [](const Eigen::VectorXd& x, const Eigen::VectorXd& y) {
-    Eigen::VectorXd z = Eigen::VectorXd::Zero(x.size() + y.size() - 1);
-    for (Eigen::Index i = 0; i < x.size(); ++i) z.segment(i, y.size()) += x(i) * y;
-    return z;
-  };
-  Eigen::VectorXd A = Eigen::VectorXd::Ones(1), B = Eigen::VectorXd::Zero(5);
-  for (const auto& s : c.model.submodels) A = mul(A, s.a_polynomial());
-  for (std::size_t i = 0; i < 3; ++i) {
-    Eigen::VectorXd t = c.model.submodels[i].b;
-    for (std::size_t j = 0; j < 3; ++j)
-      if (j != i) t = mul(t, c.model.submodels[j].a_polynomial());
-    B.head(t.size()) += t;
-  }
+  Eigen::VectorXd A, B;
+  test_support::expand(c.model, A, B);
   Submodel k1;
   k1.name = "unfactored";
   k1.n = 6;

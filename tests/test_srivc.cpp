@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include "support.hpp"
+
 #include "modalwatch/polynomial.hpp"
 #include "modalwatch/simulator.hpp"
 #include "modalwatch/srivc.hpp"
@@ -122,23 +124,7 @@ TEST(AdditiveSrivc, RecoversSeedSystemFromNoiseFreeClosedLoopData) {
   EXPECT_LT(max_relative_error(fit.model.beta(), truth.beta()), 1e-6);
 }
 
-// A^{-1} expanded: the unfactored B/A of a sum of modes.
-void expand(const AdditiveModel& m, Eigen::VectorXd& A, Eigen::VectorXd& B) {
-  auto mul = [](const Eigen::VectorXd& x, const Eigen::VectorXd& y) {
-    Eigen::VectorXd z = Eigen::VectorXd::Zero(x.size() + y.size() - 1);
-    for (Eigen::Index i = 0; i < x.size(); ++i) z.segment(i, y.size()) += x(i) * y;
-    return z;
-  };
-  A = Eigen::VectorXd::Ones(1);
-  for (const auto& s : m.submodels) A = mul(A, s.a_polynomial());
-  B = Eigen::VectorXd::Zero(A.size() - 2);
-  for (std::size_t i = 0; i < m.submodels.size(); ++i) {
-    Eigen::VectorXd term = m.submodels[i].b;
-    for (std::size_t j = 0; j < m.submodels.size(); ++j)
-      if (j != i) term = mul(term, m.submodels[j].a_polynomial());
-    B.head(term.size()) += term;
-  }
-}
+using test_support::expand;
 
 TEST(Srivc, UnfactoredSixthOrderRecoversSeedSystemFromNoiseFreeOpenLoopData) {
   const PlantSpec plant = paper_plant(0.0);
