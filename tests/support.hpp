@@ -3,11 +3,18 @@
 // expanding an additive model into its unfactored B/A.
 #include <array>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
 #include <string>
 #include <sys/wait.h>
+#include <unistd.h>
+
+#include <gtest/gtest.h>
 
 #include <Eigen/Core>
 
+#include "modalwatch/error.hpp"
 #include "modalwatch/model.hpp"
 
 namespace modalwatch::test_support {
@@ -46,6 +53,38 @@ inline void expand(const AdditiveModel& m, Eigen::VectorXd& A, Eigen::VectorXd& 
       if (j != i) term = multiply(term, m.submodels[j].a_polynomial());
     B.head(term.size()) += term;
   }
+}
+
+// A fixture with a fresh directory per test, removed afterwards.
+class ScratchDir : public ::testing::Test {
+ public:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("modalwatch_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->test_suite_name() + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  std::string write(const std::string& name, const std::string& text) const {
+    std::ofstream(path(name)) << text;
+    return path(name);
+  }
+
+ protected:
+  std::filesystem::path dir_;
+};
+
+// The message of the InputError thrown by f (fails the test when none is thrown).
+inline std::string error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  ADD_FAILURE() << "expected an InputError";
+  return "";
 }
 
 }  // namespace modalwatch::test_support

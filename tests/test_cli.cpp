@@ -22,26 +22,11 @@ namespace {
 using test_support::Outcome;
 Outcome run(const std::string& args) { return test_support::run_cli(args); }
 
-class Cli : public ::testing::Test {
+class Cli : public test_support::ScratchDir {
  public:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("modalwatch_cli_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-  std::string write(const std::string& name, const std::string& text) const {
-    std::ofstream(path(name)) << text;
-    return path(name);
-  }
   static std::string config(const std::string& name) {
     return std::string(MODALWATCH_SOURCE_DIR) + "/config/" + name;
   }
-
- protected:
-  fs::path dir_;
 };
 
 bool contains(const std::string& text, const std::string& what) { return text.find(what) != std::string::npos; }

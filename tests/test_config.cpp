@@ -12,6 +12,8 @@
 
 #include <gtest/gtest.h>
 
+#include "support.hpp"
+
 #include "modalwatch/config.hpp"
 #include "modalwatch/error.hpp"
 
@@ -83,16 +85,7 @@ std::string edit(std::string text, const std::string& from, const std::string& t
   return text;
 }
 
-// The message of the InputError thrown by f (fails the test when none is thrown).
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "expected an InputError";
-  return "";
-}
+using modalwatch::test_support::error_of;
 
 std::string parse_error(const std::string& yaml) {
   return error_of([&] { parse_config(yaml, "test.yaml"); });

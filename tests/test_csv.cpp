@@ -12,6 +12,8 @@
 
 #include <gtest/gtest.h>
 
+#include "support.hpp"
+
 #include "modalwatch/csv.hpp"
 #include "modalwatch/error.hpp"
 
@@ -25,16 +27,7 @@ namespace {
 #define EXPECT_CONTAINS(text, part) \
   EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
 
-// The message of the InputError thrown by f (fails the test when none is thrown).
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "expected an InputError";
-  return "";
-}
+using modalwatch::test_support::error_of;
 
 class CsvTest : public ::testing::Test {
  protected:

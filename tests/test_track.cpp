@@ -49,20 +49,8 @@ std::string expected_header() {
   return h + ",residual_rms,flags,resets";
 }
 
-class Track : public ::testing::Test {
+class Track : public test_support::ScratchDir {
  public:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("modalwatch_track_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-  std::string write(const std::string& name, const std::string& text) const {
-    std::ofstream(path(name)) << text;
-    return path(name);
-  }
   Outcome track(const std::string& data, const std::string& out = "est.csv") const {
     return run("track --config " + paper_config() + " --data " + data + " --out " + path(out));
   }
@@ -73,8 +61,6 @@ class Track : public ::testing::Test {
     return names;
   }
 
- protected:
-  fs::path dir_;
 };
 
 std::string first_line(const std::string& file) {

@@ -41,7 +41,7 @@ Record window(const Record& r, const FitArgs& args) {
   return r.segment(begin, end - begin);
 }
 
-void print_modal_table(const Config& config, const FitResult& fit) {
+void print_modal_table(const FitResult& fit) {
   std::printf("\n%-10s %11s %10s %12s %10s %9s %9s %12s %10s\n", "submodel", "f [Hz]", "+-", "wn [rad/s]", "+-",
               "zeta", "+-", "gain", "+-");
   for (std::size_t i = 0; i < fit.model.submodels.size(); ++i) {
@@ -66,7 +66,6 @@ void print_modal_table(const Config& config, const FitResult& fit) {
     for (const auto& r : resonances(s))
       std::printf("%-10s %11.5f %10s %12.5f %10s %9.5f\n", "", r.hz(), "", r.wn, "", r.zeta);
   }
-  (void)config;
 }
 
 }  // namespace
@@ -126,7 +125,7 @@ int fit(const FitArgs& args) {
     std::printf("%s after %d block-coordinate cycles (last change %.2e), %d stability projections\n",
                 result.converged ? "converged" : "NOT converged", result.iterations,
                 result.change_history.empty() ? 0.0 : result.change_history.back(), result.projections);
-    print_modal_table(config, result);
+    print_modal_table(result);
     std::printf("\nfit on the data: %.2f %%   output-error std: %.4g\n", result.fit_percent,
                 std::sqrt(result.noise_variance));
     if (!args.out.empty()) write_text_atomically(args.out, config_to_yaml(config, result.model));

@@ -72,7 +72,7 @@ struct Block {
   double xu = 0.0, xz = 0.0;  // B/(p^l A) driven by u and by z, at t_k
   ThetaVec good_theta;
   ThetaMat good_P;
-  ThetaVec phi, psi, Ppsi;
+  ThetaVec phi, psi;
 
   FilterVector a_poly() const {
     FilterVector c(n + 1);
@@ -207,7 +207,6 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.fz = Prefilter(den, b.ws * T, Hold::zoh);
     b.phi.resize(b.nt);
     b.psi.resize(b.nt);
-    b.Ppsi.resize(b.nt);
     blocks.push_back(std::move(b));
   }
   snapshot.resize(4 * blocks.size());
