@@ -1,5 +1,6 @@
 #include "commands.hpp"
 #include "guarded.hpp"
+#include "table.hpp"
 
 #include <cmath>
 #include <cstdio>
@@ -41,32 +42,6 @@ Record window(const Record& r, const FitArgs& args) {
   return r.segment(begin, end - begin);
 }
 
-void print_modal_table(const FitResult& fit) {
-  std::printf("\n%-10s %11s %10s %12s %10s %9s %9s %12s %10s\n", "submodel", "f [Hz]", "+-", "wn [rad/s]", "+-",
-              "zeta", "+-", "gain", "+-");
-  for (std::size_t i = 0; i < fit.model.submodels.size(); ++i) {
-    const Submodel& s = fit.model.submodels[i];
-    const ModalParameters p = modal_parameters(s);
-    const ModalParameters sd = modal_std(s, fit.theta_covariance(static_cast<int>(i)));
-    if (s.is_mode()) {
-      std::printf("%-10s %11.5f %10.2e %12.5f %10.2e %9.5f %9.2e %12.5g %10.2e\n", s.name.c_str(), p.hz(),
-                  sd.wn / (2 * std::numbers::pi), p.wn, sd.wn, p.zeta, sd.zeta, p.gain, sd.gain);
-      continue;
-    }
-    // Rigid bodies and general transfer functions: their coefficients, and the
-    // resonances of A when it has any.
-    std::printf("%-10s n=%d m=%d l=%d", s.name.c_str(), s.n, s.m, s.rigid_poles);
-    const Eigen::VectorXd th = s.theta();
-    const Eigen::MatrixXd c = fit.theta_covariance(static_cast<int>(i));
-    for (int j = 0; j < s.n_theta(); ++j) {
-      const bool is_a = j < s.n;
-      std::printf("  %s%d=%.6g(+-%.2g)", is_a ? "a" : "b", is_a ? j + 1 : j - s.n, th(j), std::sqrt(std::max(0.0, c(j, j))));
-    }
-    std::printf("\n");
-    for (const auto& r : resonances(s))
-      std::printf("%-10s %11.5f %10s %12.5f %10s %9.5f\n", "", r.hz(), "", r.wn, "", r.zeta);
-  }
-}
 
 }  // namespace
 
@@ -125,7 +100,10 @@ int fit(const FitArgs& args) {
     std::printf("%s after %d block-coordinate cycles (last change %.2e), %d stability projections\n",
                 result.converged ? "converged" : "NOT converged", result.iterations,
                 result.change_history.empty() ? 0.0 : result.change_history.back(), result.projections);
-    print_modal_table(result);
+    std::vector<Eigen::MatrixXd> covariances;
+    for (int i = 0; i < static_cast<int>(result.model.submodels.size()); ++i)
+      covariances.push_back(result.theta_covariance(i));
+    print_modal_table(result.model, covariances);
     std::printf("\nfit on the data: %.2f %%   output-error std: %.4g\n", result.fit_percent,
                 std::sqrt(result.noise_variance));
     if (!args.out.empty()) write_text_atomically(args.out, config_to_yaml(config, result.model));

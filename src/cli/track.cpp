@@ -30,6 +30,7 @@
 
 #include "commands.hpp"
 #include "guarded.hpp"
+#include "table.hpp"
 #include "modalwatch/config.hpp"
 #include "modalwatch/csv.hpp"
 #include "modalwatch/error.hpp"
@@ -309,35 +310,6 @@ std::vector<std::string> est_columns(const AdditiveModel& model) {
   return columns;
 }
 
-void print_modal_table(const RecursiveEstimator& est) {
-  std::printf("\n%-10s %11s %10s %12s %10s %9s %9s %12s %10s\n", "submodel", "f [Hz]", "+-", "wn [rad/s]", "+-",
-              "zeta", "+-", "gain", "+-");
-  const bool have_covariance = !est.status().warming_up;
-  for (int i = 0; i < est.submodels(); ++i) {
-    const Submodel s = est.submodel(i);
-    if (s.is_mode()) {
-      const ModeEstimate m = est.mode(i);
-      const ModalParameters& p = m.value;
-      const ModalParameters& sd = m.std;
-      std::printf("%-10s %11.5f %10.2e %12.5f %10.2e %9.5f %9.2e %12.5g %10.2e\n", s.name.c_str(), p.hz(),
-                  sd.wn / (2 * std::numbers::pi), p.wn, sd.wn, p.zeta, sd.zeta, p.gain, sd.gain);
-      continue;
-    }
-    // Rigid bodies and general transfer functions: their coefficients, and the
-    // resonances of A when it has any.
-    std::printf("%-10s n=%d m=%d l=%d", s.name.c_str(), s.n, s.m, s.rigid_poles);
-    const Eigen::VectorXd th = s.theta();
-    const Eigen::MatrixXd c = have_covariance ? est.covariance(i) : Eigen::MatrixXd::Zero(s.n_theta(), s.n_theta());
-    for (int j = 0; j < s.n_theta(); ++j) {
-      const bool is_a = j < s.n;
-      std::printf("  %s%d=%.6g(+-%.2g)", is_a ? "a" : "b", is_a ? j + 1 : j - s.n, th(j),
-                  std::sqrt(std::max(0.0, c(j, j))));
-    }
-    std::printf("\n");
-    for (const auto& r : resonances(s))
-      std::printf("%-10s %11.5f %10s %12.5f %10s %9.5f\n", "", r.hz(), "", r.wn, "", r.zeta);
-  }
-}
 
 double seconds_between(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
@@ -440,7 +412,14 @@ int track(const TrackArgs& args) {
 
     std::printf("modalwatch track: %lld samples, final estimate at t = %.6g s\n", static_cast<long long>(n),
                 n > 0 ? data.t(n - 1) : 0.0);
-    print_modal_table(estimator);
+    {
+      std::vector<Eigen::MatrixXd> covariances;
+      for (int i = 0; i < estimator.submodels(); ++i) {
+        const int nt = estimator.submodel(i).n_theta();
+        covariances.push_back(estimator.status().warming_up ? Eigen::MatrixXd::Zero(nt, nt) : estimator.covariance(i));
+      }
+      print_modal_table(estimator.model(), covariances);
+    }
     std::printf("\nresidual RMS: %.4g\n", estimator.residual_rms());
     return 0;
   });

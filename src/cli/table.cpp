@@ -1,0 +1,38 @@
+#include "table.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <numbers>
+
+namespace modalwatch::cli {
+
+void print_modal_table(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>& covariances) {
+  std::printf("\n%-10s %11s %10s %12s %10s %9s %9s %12s %10s\n", "submodel", "f [Hz]", "+-", "wn [rad/s]", "+-",
+              "zeta", "+-", "gain", "+-");
+  for (std::size_t i = 0; i < model.submodels.size(); ++i) {
+    const Submodel& s = model.submodels[i];
+    const Eigen::MatrixXd& c = covariances[i];
+    if (s.is_mode()) {
+      const ModalParameters p = modal_parameters(s);
+      const ModalParameters sd = modal_std(s, c);
+      std::printf("%-10s %11.5f %10.2e %12.5f %10.2e %9.5f %9.2e %12.5g %10.2e\n", s.name.c_str(), p.hz(),
+                  sd.wn / (2 * std::numbers::pi), p.wn, sd.wn, p.zeta, sd.zeta, p.gain, sd.gain);
+      continue;
+    }
+    // Rigid bodies and general transfer functions: their coefficients, and the
+    // resonances of A when it has any.
+    std::printf("%-10s n=%d m=%d l=%d", s.name.c_str(), s.n, s.m, s.rigid_poles);
+    const Eigen::VectorXd th = s.theta();
+    for (int j = 0; j < s.n_theta(); ++j) {
+      const bool is_a = j < s.n;
+      std::printf("  %s%d=%.6g(+-%.2g)", is_a ? "a" : "b", is_a ? j + 1 : j - s.n, th(j),
+                  std::sqrt(std::max(0.0, c(j, j))));
+    }
+    std::printf("\n");
+    for (const auto& r : resonances(s))
+      std::printf("%-10s %11.5f %10s %12.5f %10s %9.5f\n", "", r.hz(), "", r.wn, "", r.zeta);
+  }
+}
+
+}  // namespace modalwatch::cli
