@@ -1061,3 +1061,41 @@ TEST_F(ConfigFiles, CsvSignalRoundTrip) {
 }
 
 }  // namespace
+
+TEST(Config, LcmDefaultsStayOnTheHost) {
+  const Config c = parse_config(kBase, "test.yaml");
+  EXPECT_EQ(c.lcm.url, "udpm://239.255.76.67:7667?ttl=0");
+  EXPECT_EQ(c.lcm.samples_channel, "MODALWATCH_SAMPLES");
+  EXPECT_EQ(c.lcm.heartbeat_channel, "MODALWATCH_HEARTBEAT");
+}
+
+TEST(Config, LcmSectionAndRoundTrip) {
+  const std::string lcm =
+      "lcm:\n"                                   // 15
+      "  url: memq://\n"                         // 16
+      "  channels:\n"                            // 17
+      "    samples: X_SAMPLES\n"                 // 18
+      "    fault_status: \"X'S STATUS\"\n";    // 19
+  const Config c = parse_config(kBase + lcm, "test.yaml");
+  EXPECT_EQ(c.lcm.url, "memq://");
+  EXPECT_EQ(c.lcm.samples_channel, "X_SAMPLES");
+  EXPECT_EQ(c.lcm.batches_channel, "MODALWATCH_BATCHES");
+  EXPECT_EQ(c.lcm.fault_status_channel, "X'S STATUS");
+  const Config back = parse_config(config_to_yaml(c, c.model), "back.yaml");
+  EXPECT_EQ(back.lcm.url, c.lcm.url);
+  EXPECT_EQ(back.lcm.samples_channel, c.lcm.samples_channel);
+  EXPECT_EQ(back.lcm.fault_status_channel, c.lcm.fault_status_channel);
+}
+
+TEST(ConfigErrors, Lcm) {
+  EXPECT_EQ(parse_error(kBase + "lcm:\n  url: localhost\n"),
+            "test.yaml:16: key 'lcm.url': expected an LCM URL such as udpm://239.255.76.67:7667?ttl=0 or "
+            "memq:// (got localhost)");
+  EXPECT_EQ(parse_error(kBase + "lcm:\n  channel: X\n"),
+            "test.yaml:16: key 'lcm.channel': unknown key for lcm (allowed: url, channels)");
+  EXPECT_EQ(parse_error(kBase + "lcm:\n  channels:\n    estimates: MODALWATCH_SAMPLES\n"),
+            "test.yaml:17: key 'lcm.channels.estimates': channel 'MODALWATCH_SAMPLES' is also "
+            "lcm.channels.samples (got MODALWATCH_SAMPLES)");
+  EXPECT_EQ(parse_error(kBase + "lcm:\n  channels:\n    samples: \"\"\n"),
+            "test.yaml:17: key 'lcm.channels.samples': expected a non-empty string (got \"\")");
+}

@@ -19,6 +19,17 @@ struct SubmodelSettings {
   double forgetting = 1.0;  // lambda in (0, 1], eq. (13)
 };
 
+// The `lcm:` section: where the daemon listens and publishes, and where `replay`
+// publishes. Defaults stay on the host (ttl=0).
+struct LcmSettings {
+  std::string url = "udpm://239.255.76.67:7667?ttl=0";
+  std::string samples_channel = "MODALWATCH_SAMPLES";   // sample_t in
+  std::string batches_channel = "MODALWATCH_BATCHES";   // sample_batch_t in
+  std::string estimates_channel = "MODALWATCH_ESTIMATES";        // estimates_t out
+  std::string fault_status_channel = "MODALWATCH_FAULT_STATUS";  // fault_status_t out
+  std::string heartbeat_channel = "MODALWATCH_HEARTBEAT";        // heartbeat_t out
+};
+
 struct Config {
   std::string source;          // file name, for messages
   double sample_time = 0.0;    // s (from sample_rate_hz)
@@ -33,6 +44,7 @@ struct Config {
   // sample_time, closed_loop, controller, output_hold, forgetting and the
   // per-submodel initial_covariance come from the sections above.
   EstimatorSettings estimator;
+  LcmSettings lcm;  // `lcm:` section (daemon, replay)
 };
 
 Config load_config(const std::string& path);

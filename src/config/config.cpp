@@ -661,10 +661,35 @@ void parse_estimator(const Map& est, double sample_time, EstimatorSettings& e) {
   if (const auto v = est.get("low_excitation_window")) e.low_excitation_window = v->at_least(0.0);
 }
 
+void parse_lcm(const Map& m, LcmSettings& lcm) {
+  m.allow({"url", "channels"}, "lcm");
+  if (const auto v = m.get("url")) {
+    lcm.url = v->text();
+    if (lcm.url.find("://") == std::string::npos)
+      v->fail("expected an LCM URL such as udpm://239.255.76.67:7667?ttl=0 or memq://");
+  }
+  if (const auto c = m.get("channels")) {
+    const Map ch(*c);
+    ch.allow({"samples", "batches", "estimates", "fault_status", "heartbeat"}, "lcm.channels");
+    const std::pair<const char*, std::string*> names[] = {
+        {"samples", &lcm.samples_channel},     {"batches", &lcm.batches_channel},
+        {"estimates", &lcm.estimates_channel}, {"fault_status", &lcm.fault_status_channel},
+        {"heartbeat", &lcm.heartbeat_channel}};
+    for (const auto& [key, out] : names)
+      if (const auto v = ch.get(key)) *out = v->text();
+    // One channel for two purposes would feed the daemon its own output.
+    for (std::size_t i = 0; i < std::size(names); ++i)
+      for (std::size_t j = i + 1; j < std::size(names); ++j)
+        if (*names[i].second == *names[j].second)
+          (ch.get(names[j].first) ? *ch.get(names[j].first) : ch.self())
+              .fail("channel '" + *names[j].second + "' is also lcm.channels." + names[i].first);
+  }
+}
+
 // ---------------------------------------------------------------- document
 
 void parse_document(const Map& top, Config& config, const std::filesystem::path& dir) {
-  top.allow({"sample_rate_hz", "model", "controller", "plant", "simulation", "estimator"}, "");
+  top.allow({"sample_rate_hz", "model", "controller", "plant", "simulation", "estimator", "lcm"}, "");
   config.sample_time = 1.0 / top.require("sample_rate_hz").positive();
   parse_model(Map(top.require("model")), config);
   if (const auto c = top.get("controller")) config.controller = parse_controller(Map(*c));
@@ -673,6 +698,7 @@ void parse_document(const Map& top, Config& config, const std::filesystem::path&
   if (const auto p = top.get("plant")) config.plant = parse_plant(Map(*p));
   if (const auto s = top.get("simulation")) config.experiment = parse_simulation(Map(*s), config, dir);
   if (const auto e = top.get("estimator")) parse_estimator(Map(*e), config.sample_time, config.estimator);
+  if (const auto l = top.get("lcm")) parse_lcm(Map(*l), config.lcm);
 }
 
 // The estimator settings that the other sections determine (the `estimator:`
@@ -903,6 +929,17 @@ void write_estimator(YamlWriter& w, const EstimatorSettings& e, double sample_ti
   w.number(1, "low_excitation_window", e.low_excitation_window);
 }
 
+void write_lcm(YamlWriter& w, const LcmSettings& l) {
+  w.line(0, "lcm:");
+  w.key(1, "url", quoted(l.url));
+  w.line(1, "channels:");
+  w.key(2, "samples", quoted(l.samples_channel));
+  w.key(2, "batches", quoted(l.batches_channel));
+  w.key(2, "estimates", quoted(l.estimates_channel));
+  w.key(2, "fault_status", quoted(l.fault_status_channel));
+  w.key(2, "heartbeat", quoted(l.heartbeat_channel));
+}
+
 void write_simulation(YamlWriter& w, const ExperimentSpec& e) {
   w.line(0, "simulation:");
   w.number(1, "duration", e.duration);
@@ -924,6 +961,7 @@ std::string config_to_yaml(const Config& config, const AdditiveModel& model) {
   if (config.plant) write_plant(w, *config.plant);
   if (config.experiment) write_simulation(w, *config.experiment);
   write_estimator(w, config.estimator, config.sample_time);
+  write_lcm(w, config.lcm);
   return w.str();
 }
 
