@@ -20,6 +20,8 @@
 namespace fs = std::filesystem;
 using modalwatch::InputError;
 using modalwatch::read_record;
+using modalwatch::parse_record;
+using modalwatch::parse_table;
 using modalwatch::read_table;
 
 namespace {
@@ -317,3 +319,21 @@ TEST(CsvShared, EmpsTrainHasReference) {
 }
 
 }  // namespace
+
+// The in-memory entry points (used by the fuzz harnesses) are the file readers
+// without the file: same values, same messages under the given source name.
+TEST_F(CsvTest, TextEntryPointsMatchTheFileReaders) {
+  const std::string text = "t,u,y,r\n0,1,2,3\n0.5,nan,5,6\n1,7,8,9\n2,1,1,1\n";
+  modalwatch::RecordReadOptions tolerant;
+  tolerant.allow_nonfinite = true;
+  tolerant.allow_gaps = true;
+  const modalwatch::Record from_file = read_record(file("r.csv", text), {}, tolerant);
+  const modalwatch::Record from_text = parse_record(text, "r.csv", {}, tolerant);
+  ASSERT_EQ(from_text.size(), 4);
+  EXPECT_EQ(from_text.t, from_file.t);
+  EXPECT_TRUE(std::isnan(from_text.u(1)));
+  EXPECT_EQ(from_text.y, from_file.y);
+  EXPECT_EQ(from_text.r, from_file.r);
+  EXPECT_EQ(parse_table("t,u\n0,1\n", "mem").data(0, 1), 1.0);
+  EXPECT_EQ(error_of([&] { parse_record(text, "mem.csv"); }), "mem.csv: row 3, column 'u': not a finite number (got 'nan')");
+}

@@ -2,6 +2,7 @@
 // CSV records: a header line, then numeric rows. Errors name the row (1-based
 // line number in the file) and the column.
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -19,6 +20,8 @@ struct Table {
 // Reads a numeric table. Throws InputError naming the row and column for a
 // non-numeric field, NaN or Inf, a short or long row, or an empty file.
 Table read_table(const std::string& path);
+// The same on text already in memory; `source` names it in messages.
+Table parse_table(std::string_view text, const std::string& source);
 
 struct RecordColumns {
   std::string t = "t", u = "u", y = "y", r = "r";
@@ -38,6 +41,8 @@ struct RecordReadOptions {
 // evenly (within 1 % of the mean step). Throws InputError.
 Record read_record(const std::string& path, const RecordColumns& columns = {},
                    const RecordReadOptions& options = {});
+Record parse_record(std::string_view text, const std::string& source, const RecordColumns& columns = {},
+                    const RecordReadOptions& options = {});
 
 // Writes atomically (temporary file, then rename), so a failure leaves nothing behind.
 void write_table(const std::string& path, const std::vector<std::string>& columns,

@@ -198,13 +198,13 @@ int Table::column(const std::string& name) const {
 
 namespace {
 
-// read_table, with nan/inf accepted in every column except `finite_column`
-// when allow_nonfinite is set.
-Table parse_table(const std::string& path, bool allow_nonfinite, const std::string& finite_column) {
-  const std::string text = read_file(path);
+// parse_table, with nan/inf accepted in every column except `finite_column`
+// when allow_nonfinite is set. `path` names the source in messages.
+Table parse_text(std::string_view text, const std::string& path, bool allow_nonfinite,
+                 const std::string& finite_column) {
   LineReader lines(strip_bom(text));
   std::string_view line;
-  if (text.find_first_not_of(" \t\r\n\xEF\xBB\xBF") == std::string::npos || !lines.next(line))
+  if (text.find_first_not_of(" \t\r\n\xEF\xBB\xBF") == std::string_view::npos || !lines.next(line))
     throw InputError(path, "empty file (expected a header line of column names)");
   Table table;
   table.columns = parse_header(path, line);
@@ -228,7 +228,11 @@ Table parse_table(const std::string& path, bool allow_nonfinite, const std::stri
 
 }  // namespace
 
-Table read_table(const std::string& path) { return parse_table(path, false, ""); }
+Table parse_table(std::string_view text, const std::string& source) {
+  return parse_text(text, source, false, "");
+}
+
+Table read_table(const std::string& path) { return parse_table(read_file(path), path); }
 
 namespace {
 
@@ -293,7 +297,12 @@ void check_gaps(const std::string& path, const std::string& name, const Eigen::V
 }  // namespace
 
 Record read_record(const std::string& path, const RecordColumns& columns, const RecordReadOptions& options) {
-  const Table table = parse_table(path, options.allow_nonfinite, columns.t);
+  return parse_record(read_file(path), path, columns, options);
+}
+
+Record parse_record(std::string_view text, const std::string& path, const RecordColumns& columns,
+                    const RecordReadOptions& options) {
+  const Table table = parse_text(text, path, options.allow_nonfinite, columns.t);
   const int t = require_column(path, table, columns.t);
   const int u = require_column(path, table, columns.u);
   const int y = require_column(path, table, columns.y);

@@ -1,0 +1,66 @@
+#!/usr/bin/env bash
+# Runs every libFuzzer harness in tests/fuzz for a given time and reports the
+# executions and findings of each (issue 6).
+#
+#   scripts/fuzz.sh                 # 60 s per harness
+#   scripts/fuzz.sh 600             # 10 min per harness
+#   FUZZERS="fuzz_config" scripts/fuzz.sh 30
+#
+# Builds build-fuzz with clang++ and -DMODALWATCH_FUZZ=ON (libraries instrumented
+# for coverage, ASan and UBSan). Seeds: the shipped configs, a small CSV, and
+# whatever earlier runs left in build-fuzz/corpus/<harness>. A crash leaves its
+# input in build-fuzz/findings/<harness>/; turn each into a regression test
+# (tests/fuzz/regressions/<harness>/, replayed by the normal test suite).
+set -uo pipefail
+cd "$(dirname "$0")/.." || exit 1
+
+SECONDS_EACH=${1:-60}
+DIR=${FUZZ_DIR:-build-fuzz}
+JOBS=${JOBS:-2}
+ALL="fuzz_messages fuzz_config fuzz_csv fuzz_lcm_log fuzz_checkpoint"
+FUZZERS=${FUZZERS:-$ALL}
+
+command -v clang++ >/dev/null || { echo "fuzz.sh: clang++ not found (apt-get install clang libclang-rt-14-dev)"; exit 1; }
+
+targets=()
+for f in $FUZZERS; do [ -f "tests/fuzz/$f.cpp" ] && targets+=("$f"); done
+[ ${#targets[@]} -gt 0 ] || { echo "fuzz.sh: no harness among: $FUZZERS"; exit 1; }
+
+CXX=clang++ cmake -S . -B "$DIR" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMODALWATCH_FUZZ=ON \
+  -DMODALWATCH_BENCHMARKS=OFF >"$DIR.configure.log" 2>&1 || { tail -30 "$DIR.configure.log"; exit 1; }
+build_args=()
+for t in "${targets[@]}"; do build_args+=(--target "$t"); done
+cmake --build "$DIR" -j"$JOBS" "${build_args[@]}" >"$DIR/build.log" 2>&1 || { tail -40 "$DIR/build.log"; exit 1; }
+
+# Seeds.
+mkdir -p "$DIR/corpus/fuzz_config" "$DIR/corpus/fuzz_csv"
+cp config/*.yaml "$DIR/corpus/fuzz_config/" 2>/dev/null
+printf 't,u,y,r\n0,1,2,3\n0.05,1.5,nan,0\n0.1,-1,2e-3,inf\n' >"$DIR/corpus/fuzz_csv/seed.csv"
+
+export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:halt_on_error=1}
+export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
+
+summary=()
+total_findings=0
+for t in "${targets[@]}"; do
+  corpus="$DIR/corpus/$t"
+  findings="$DIR/findings/$t"
+  mkdir -p "$corpus" "$findings"
+  log="$DIR/$t.log"
+  echo "==> $t for ${SECONDS_EACH}s"
+  # -fork keeps fuzzing past a finding, so one run reports all of them.
+  "$DIR/tests/fuzz/$t" "$corpus" -max_total_time="$SECONDS_EACH" -print_final_stats=1 \
+    -artifact_prefix="$findings/" -fork=1 -ignore_crashes=1 -ignore_ooms=1 -ignore_timeouts=1 \
+    -rss_limit_mb=2048 -timeout=10 >"$log" 2>&1
+  # -fork prints "#<executions>: cov: ..." progress lines; the last one is the total.
+  execs=$(grep -oE '^#[0-9]+' "$log" | tail -n 1 | tr -d '#')
+  found=$(find "$findings" -type f | wc -l)
+  total_findings=$((total_findings + found))
+  cov=$(grep -oE 'cov: [0-9]+' "$log" | tail -n 1)
+  summary+=("$(printf '%-16s %14s execs  %3d findings  %s' "$t" "${execs:-?}" "$found" "$cov")")
+done
+
+echo
+echo "==== fuzz.sh summary (${SECONDS_EACH}s each) ===="
+printf '%s\n' "${summary[@]}"
+[ $total_findings -eq 0 ] && echo "RESULT: no findings" || { echo "RESULT: $total_findings findings (see $DIR/findings)"; exit 1; }
