@@ -383,7 +383,12 @@ struct Collector {
   int packets = 0;
   int ok = 0;
   int wrong_fingerprint = 0;
-  void handle(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+  // Subscribed through the C API, as the daemon does: liblcm 1.3.1's C++
+  // subscribe() wrapper hands its callback a user_data that UBSan rejects.
+  static void handle(const lcm_recv_buf_t* rbuf, const char* channel, void* self) {
+    static_cast<Collector*>(self)->handle(rbuf, channel);
+  }
+  void handle(const lcm_recv_buf_t* rbuf, const std::string& channel) {
     EXPECT_EQ(channel, "MODALWATCH_SAMPLES");
     ++packets;
     int n_out = 0;
@@ -403,7 +408,7 @@ TEST(MessagesLcm, MemqPublishSubscribeThreeBatches) {
   lcm::LCM lc("memq://");
   ASSERT_TRUE(lc.good());
   Collector c;
-  ASSERT_NE(lc.subscribe("MODALWATCH_SAMPLES", &Collector::handle, &c), nullptr);
+  ASSERT_NE(lcm_subscribe(lc.getUnderlyingLCM(), "MODALWATCH_SAMPLES", &Collector::handle, &c), nullptr);
 
   const double period = 1.0 / 1024.0;
   const auto all = make_samples(3 * 32, 1'000'000, 1, period);
