@@ -459,7 +459,7 @@ TEST(RecursiveEstimator, StateAndRestoreResumeWithoutWarmupAsAfterAGap) {
   }
   EXPECT_GT(resumed.status().updates, updates_at_restore + 50) << "updates within 100 samples of the restart";
 
-  double max_gap_effect[3] = {0, 0, 0}, end_gap_effect[3] = {0, 0, 0};
+  double max_gap_effect[3] = {0, 0, 0}, end_gap_effect[3] = {0, 0, 0}, max_gap_relative[3] = {0, 0, 0};
   for (Eigen::Index k = half + 100; k < r.size(); ++k) {
     smooth.step(sample(k, false));
     gapped.step(sample(k, true));
@@ -467,12 +467,13 @@ TEST(RecursiveEstimator, StateAndRestoreResumeWithoutWarmupAsAfterAGap) {
     for (int i = 0; i < 3; ++i) {
       const ModeEstimate a = smooth.mode(i), g = gapped.mode(i);
       max_gap_effect[i] = std::max(max_gap_effect[i], std::abs(g.value.wn - a.value.wn) / a.std.wn);
+      max_gap_relative[i] = std::max(max_gap_relative[i], std::abs(g.value.wn / a.value.wn - 1.0));
       if (k == r.size() - 1) end_gap_effect[i] = std::abs(g.value.wn - a.value.wn) / a.std.wn;
     }
   }
   for (int i = 0; i < 3; ++i)
-    std::printf("mode %d: a %.0f s gap at %.0f s moves wn by up to %.3g sigma (%.3g sigma at the end)\n", i + 1,
-                restart_time, r.t(half), max_gap_effect[i], end_gap_effect[i]);
+    std::printf("mode %d: a %.0f s gap at %.0f s moves wn by up to %.3g sigma, %.2g %% (%.3g sigma at the end)\n",
+                i + 1, restart_time, r.t(half), max_gap_effect[i], 100.0 * max_gap_relative[i], end_gap_effect[i]);
   const EstimatorStatus &a = gapped.status(), &b = resumed.status();
   EXPECT_EQ(b.samples, a.samples);
   EXPECT_EQ(b.updates, a.updates);
