@@ -161,7 +161,10 @@ class RecursiveEstimator {
   // A copy of the state (allocates: never inside the real-time loop's step()).
   EstimatorState state() const;
   // Continues from `state` as if it had run the samples itself, except that the
-  // prefilter and controller states restart from rest (as after a gap). Throws
+  // prefilter and controller states restart from rest: the first sample after
+  // restore() counts as a gap (kGap), also when its time is not after the saved
+  // last sample (a restarted controller clock); later samples are checked as
+  // usual. Throws
   // std::invalid_argument when the state does not fit this estimator's structure
   // (submodel count, n, m, rigid poles, matrix sizes) or holds non-finite or
   // invalid numbers; the estimator is unchanged then.

@@ -138,6 +138,7 @@ struct RecursiveEstimator::Impl {
 
   double t_prev = 0.0;
   bool have_prev = false;
+  bool just_restored = false;  // restore() ran and no sample has come since
   double last_u = 0.0, last_r = 0.0;  // held in place of a non-finite sample
   std::uint64_t since_update = 0;
   std::uint64_t updates_since_good = 0;
@@ -642,11 +643,14 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
   const double T = m.cfg.sample_time;
   if (m.have_prev) {
     const double dt = s.t - m.t_prev;
-    if (dt < 0.5 * T) {  // duplicate or out of order
+    // The first sample after restore() may come on another time base (a
+    // restarted controller clock): earlier than the checkpoint is then a gap too.
+    const bool restarted = m.just_restored;
+    if (dt < 0.5 * T && !restarted) {  // duplicate or out of order
       ++m.status.rejected_out_of_order;
       return kRejectedOutOfOrder;
     }
-    if (dt > m.cfg.gap_factor * T) {
+    if (dt > m.cfg.gap_factor * T || restarted) {
       // The prefilter states no longer describe the signals: restart them, keep theta and P.
       ++m.status.gaps;
       flags |= kGap;
@@ -656,6 +660,7 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
   }
   m.t_prev = s.t;
   m.have_prev = true;
+  m.just_restored = false;
   if (bad_values && (m.status.warming_up || m.blocks.empty())) return flags;
   m.last_u = sample.u;
   m.last_r = sample.r;
@@ -783,6 +788,7 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
       fail(where + "name or orders (n, m, rigid poles) differ");
     if (got.a.size() != got.n || got.b.size() != got.m + 1) fail(where + "coefficient count differs from n, m");
     if (!got.a.allFinite() || !got.b.allFinite()) fail(where + "non-finite coefficient");
+    if (got.n > 0 && got.a(got.n - 1) == 0.0) fail(where + "a_n = 0 (order drop)");
   }
   if (st.warmed_up) {
     if (st.P.size() != K || st.time_scale.size() != K || st.P_bound.size() != K || st.good_theta.size() != K ||
@@ -823,6 +829,8 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
       for (int j = 1; j <= b.n; ++j) b.scale(j - 1) = std::pow(b.ws, j);
       for (int k = 0; k <= b.m; ++k) b.scale(b.n + k) = std::pow(b.ws, k - b.l);
       b.theta = st.model.submodels[i].theta().cwiseProduct(Eigen::VectorXd(b.scale));
+      if (!b.scale.allFinite() || !b.theta.allFinite() || (b.scale.array() == 0.0).any())
+        fail("submodel " + std::to_string(i + 1) + ": time_scale out of range for its coefficients");
       b.P = st.P[i];
       b.p_bound = st.P_bound[i];
       b.good_theta = st.good_theta[i].cwiseProduct(Eigen::VectorXd(b.scale));
@@ -851,6 +859,7 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
   next.since_update = st.since_update;
   next.updates_since_good = st.updates_since_good;
   next.have_prev = st.have_last_sample;
+  next.just_restored = true;
   next.t_prev = st.last_t;
   next.last_u = st.last_u;
   next.last_r = st.last_r;
