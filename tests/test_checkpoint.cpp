@@ -196,6 +196,16 @@ TEST(Checkpoint, FingerprintCoversStructureLoopAndForgettingButNotTheRest) {
   EXPECT_NE(checkpoint_fingerprint(d), f);
 }
 
+TEST(Checkpoint, EncodeRefusesWhatDecodeWouldReject) {
+  Checkpoint cp;
+  cp.estimator.model.submodels = {make_mode(std::string(257, 'm'), {1.0, 0.1, 1.0})};
+  EXPECT_THROW(encode_checkpoint(cp), std::invalid_argument);
+  cp.estimator.model.submodels = {make_mode(std::string(256, 'm'), {1.0, 0.1, 1.0})};
+  EXPECT_EQ(decode_checkpoint(encode_checkpoint(cp), "m").estimator.model.submodels[0].name.size(), 256u);
+  cp.baselines.resize(65);
+  EXPECT_THROW(encode_checkpoint(cp), std::invalid_argument);
+}
+
 class CheckpointFile : public ScratchDir {};
 
 TEST_F(CheckpointFile, WriteReadReplacesAtomically) {

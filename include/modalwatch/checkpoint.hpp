@@ -39,6 +39,8 @@ struct Checkpoint {
 // FNV-1a (64 bit) over a canonical little-endian serialisation of those.
 std::uint64_t checkpoint_fingerprint(const Config& config);
 
+// Throws std::invalid_argument for what the decoder would reject (more than 64
+// submodels or baselines, a name longer than 256 bytes).
 std::vector<std::uint8_t> encode_checkpoint(const Checkpoint& c);
 // Never crashes on any bytes: checks magic, version, lengths (against the bytes
 // that remain, before allocating), CRC, finiteness and structure; throws
