@@ -819,7 +819,8 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
     if (!reason) fail("unknown last_reset_reason");
   }
 
-  // Validated: from here nothing throws except allocation.
+  // Built in a copy and moved in at the end: a throw below (derived numbers out
+  // of range, allocation) leaves this estimator as it was.
   Impl next = m;
   if (st.warmed_up) {
     next.build(st.model, nullptr, 0.0, 1.0);  // structure, prefilters at rest; theta, P below
