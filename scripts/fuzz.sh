@@ -6,9 +6,13 @@
 #   scripts/fuzz.sh 600             # 10 min per harness
 #   FUZZERS="fuzz_config" scripts/fuzz.sh 30
 #
-# Builds build-fuzz with clang++ and -DMODALWATCH_FUZZ=ON (libraries instrumented
-# for coverage, ASan and UBSan). Seeds: the shipped configs, a small CSV, and
-# whatever earlier runs left in build-fuzz/corpus/<harness>. A crash leaves its
+# Harnesses: fuzz_messages (LCM sample/batch decode), fuzz_config (YAML loader),
+# fuzz_csv (CSV reader), fuzz_lcm_log (lcm-logger files), fuzz_checkpoint
+# (checkpoint loader). Builds build-fuzz with clang++ and -DMODALWATCH_FUZZ=ON
+# (libraries instrumented for coverage, ASan and UBSan; the checkpoint CRC check
+# is compiled out so mutations reach the decoder). Seeds: a checkpoint and an
+# LCM log from make_seeds, the shipped configs, a small CSV, and whatever
+# earlier runs left in build-fuzz/corpus/<harness>. A crash leaves its
 # input in build-fuzz/findings/<harness>/; turn each into a regression test
 # (tests/fuzz/regressions/<harness>/, replayed by the normal test suite).
 set -uo pipefail
@@ -28,12 +32,16 @@ for f in $FUZZERS; do [ -f "tests/fuzz/$f.cpp" ] && targets+=("$f"); done
 
 CXX=clang++ cmake -S . -B "$DIR" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMODALWATCH_FUZZ=ON \
   -DMODALWATCH_BENCHMARKS=OFF >"$DIR.configure.log" 2>&1 || { tail -30 "$DIR.configure.log"; exit 1; }
-build_args=()
+build_args=(--target make_seeds)
 for t in "${targets[@]}"; do build_args+=(--target "$t"); done
 cmake --build "$DIR" -j"$JOBS" "${build_args[@]}" >"$DIR/build.log" 2>&1 || { tail -40 "$DIR/build.log"; exit 1; }
 
-# Seeds.
-mkdir -p "$DIR/corpus/fuzz_config" "$DIR/corpus/fuzz_csv"
+# Seeds: a real checkpoint and an LCM log written by liblcm (make_seeds), the
+# shipped configs, a small CSV.
+mkdir -p "$DIR/corpus/fuzz_config" "$DIR/corpus/fuzz_csv" "$DIR/corpus/fuzz_checkpoint" "$DIR/corpus/fuzz_lcm_log"
+"$DIR/tests/fuzz/make_seeds" "$DIR/seeds" >/dev/null || { echo "fuzz.sh: make_seeds failed"; exit 1; }
+cp "$DIR"/seeds/checkpoint/* "$DIR/corpus/fuzz_checkpoint/" 2>/dev/null
+cp "$DIR"/seeds/lcm_log/* "$DIR/corpus/fuzz_lcm_log/" 2>/dev/null
 cp config/*.yaml "$DIR/corpus/fuzz_config/" 2>/dev/null
 printf 't,u,y,r\n0,1,2,3\n0.05,1.5,nan,0\n0.1,-1,2e-3,inf\n' >"$DIR/corpus/fuzz_csv/seed.csv"
 

@@ -3,6 +3,7 @@
 # build/. Idempotent; run as root on a fresh Debian bookworm machine.
 #   scripts/setup.sh            # packages + Release-with-debug-info build
 #   BUILD_DIR=build-asan CMAKE_ARGS=-DMODALWATCH_SANITIZE=ON scripts/setup.sh
+#   NO_JAVA=1 scripts/setup.sh  # without the Java packages (only lcm-spy needs them)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -13,6 +14,10 @@ packages=(
   liblcm-dev liblcm-bin libglib2.0-dev libsystemd-dev
   python3 python3-numpy python3-matplotlib
 )
+# Only for scripts/lcm-spy.sh (the types jar and lcm-spy itself): optional.
+if [ "${NO_JAVA:-0}" != 1 ]; then
+  packages+=(default-jdk-headless liblcm-java libjchart2d-java)
+fi
 
 missing=()
 for p in "${packages[@]}"; do
@@ -23,6 +28,17 @@ if ((${#missing[@]})); then
   SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
   $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+
+# LCM's udpm:// (tests, demo, replay) on a machine without a multicast route,
+# e.g. a container: let the loopback carry multicast (the LCM docs' recipe).
+# Only as root, only when no route covers 224.0.0.0/4 yet; idempotent.
+if [ "$(id -u)" -eq 0 ] && command -v ip >/dev/null; then
+  if ! ip route get 239.255.76.67 >/dev/null 2>&1; then
+    ip link set lo multicast on
+    ip route add 224.0.0.0/4 dev lo
+    echo "setup: multicast routed over lo (224.0.0.0/4)"
+  fi
 fi
 
 build_dir="${BUILD_DIR:-build}"

@@ -401,5 +401,169 @@ TEST(RecursiveEstimator, TwentyRandomPlantsConvergeAndTrackWithoutDivergence) {
   EXPECT_EQ(failures, 0);
 }
 
+
+// ------------------------------------------------------------------ checkpoint (issue 4)
+
+// The seed's record, interrupted half way: state(), a fresh estimator with the
+// same settings, restore(), the rest, as a daemon restart does it (the restarted
+// daemon's next sample comes after a time gap). Everything the estimator carries
+// is in the state, so the resumed run must equal an uninterrupted run that sees
+// the same time gap, to rounding (theta goes through physical units and back:
+// 1e-15 relative; 1e-9 allows what that grows to over 10000 updates). The gap's
+// own effect (prefilters and controller restart from rest, a transient that the
+// updates partly absorb) is measured against the run without a gap and printed.
+TEST(RecursiveEstimator, StateAndRestoreResumeWithoutWarmupAsAfterAGap) {
+  const Config c = paper_config();
+  const auto sim = simulate(*c.plant, *c.experiment);
+  const Record& r = sim.record;
+  std::vector<double> shipped;
+  for (const auto& s : c.submodel_settings) shipped.push_back(s.forgetting);
+  const EstimatorSettings st = settings_for(c, shipped, c.estimator.warmup_samples);
+  const Eigen::Index half = r.size() / 2;
+  const double restart_time = 2.0;  // s, how long the daemon was down
+  auto sample = [&](Eigen::Index k, bool gap) {
+    return Sample{r.t(k) + (gap && k >= half ? restart_time : 0.0), r.u(k), r.y(k), r.r(k)};
+  };
+
+  RecursiveEstimator smooth(c.model, st);  // no interruption at all
+  RecursiveEstimator gapped(c.model, st);  // the same time gap, no restart
+  RecursiveEstimator first(c.model, st);
+  for (Eigen::Index k = 0; k < half; ++k) {
+    smooth.step(sample(k, false));
+    gapped.step(sample(k, true));
+    first.step(sample(k, true));
+  }
+  const EstimatorState saved = first.state();
+  ASSERT_TRUE(saved.warmed_up);
+  EXPECT_EQ(saved.last_t, r.t(half - 1));
+
+  RecursiveEstimator resumed(c.model, st);
+  ASSERT_TRUE(resumed.status().warming_up);
+  resumed.restore(saved);
+  // No warm-up: the saved estimate is there at once and updates go on.
+  EXPECT_FALSE(resumed.status().warming_up);
+  EXPECT_EQ(resumed.status().samples, first.status().samples);
+  EXPECT_EQ(resumed.status().updates, first.status().updates);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(resumed.mode(i).value.wn / first.mode(i).value.wn, 1.0, 1e-14);
+    EXPECT_NEAR(resumed.mode(i).std.wn / first.mode(i).std.wn, 1.0, 1e-12);
+  }
+  const std::uint64_t updates_at_restore = resumed.status().updates;
+  EXPECT_TRUE(resumed.step(sample(half, true)) & kGap);
+  gapped.step(sample(half, true));
+  smooth.step(sample(half, false));
+  for (Eigen::Index k = half + 1; k < half + 100; ++k) {
+    EXPECT_FALSE(resumed.step(sample(k, true)) & kWarmingUp);
+    gapped.step(sample(k, true));
+    smooth.step(sample(k, false));
+  }
+  EXPECT_GT(resumed.status().updates, updates_at_restore + 50) << "updates within 100 samples of the restart";
+
+  double max_gap_effect[3] = {0, 0, 0}, end_gap_effect[3] = {0, 0, 0}, max_gap_relative[3] = {0, 0, 0};
+  for (Eigen::Index k = half + 100; k < r.size(); ++k) {
+    smooth.step(sample(k, false));
+    gapped.step(sample(k, true));
+    resumed.step(sample(k, true));
+    for (int i = 0; i < 3; ++i) {
+      const ModeEstimate a = smooth.mode(i), g = gapped.mode(i);
+      max_gap_effect[i] = std::max(max_gap_effect[i], std::abs(g.value.wn - a.value.wn) / a.std.wn);
+      max_gap_relative[i] = std::max(max_gap_relative[i], std::abs(g.value.wn / a.value.wn - 1.0));
+      if (k == r.size() - 1) end_gap_effect[i] = std::abs(g.value.wn - a.value.wn) / a.std.wn;
+    }
+  }
+  for (int i = 0; i < 3; ++i)
+    std::printf("mode %d: a %.0f s gap at %.0f s moves wn by up to %.3g sigma, %.2g %% (%.3g sigma at the end)\n",
+                i + 1, restart_time, r.t(half), max_gap_effect[i], 100.0 * max_gap_relative[i], end_gap_effect[i]);
+  const EstimatorStatus &a = gapped.status(), &b = resumed.status();
+  EXPECT_EQ(b.samples, a.samples);
+  EXPECT_EQ(b.updates, a.updates);
+  EXPECT_EQ(b.gaps, a.gaps);
+  EXPECT_EQ(b.outliers, a.outliers);
+  EXPECT_EQ(b.resets, a.resets);
+  EXPECT_EQ(b.low_excitation_samples, a.low_excitation_samples);
+  for (int i = 0; i < 3; ++i) {
+    const ModeEstimate g = gapped.mode(i), e = resumed.mode(i);
+    EXPECT_NEAR(e.value.wn / g.value.wn, 1.0, 1e-9) << "mode " << i + 1;
+    EXPECT_NEAR(e.value.zeta / g.value.zeta, 1.0, 1e-9) << "mode " << i + 1;
+    EXPECT_NEAR(e.value.gain / g.value.gain, 1.0, 1e-9) << "mode " << i + 1;
+    EXPECT_NEAR(e.std.wn / g.std.wn, 1.0, 1e-9) << "mode " << i + 1;
+  }
+  EXPECT_NEAR(resumed.residual_rms() / gapped.residual_rms(), 1.0, 1e-9);
+}
+
+TEST(RecursiveEstimator, RestoreRejectsAStateOfAnotherStructureOrWithNonFiniteNumbers) {
+  const Config c = paper_config();
+  ExperimentSpec e = *c.experiment;
+  e.duration = 100.0;
+  const auto sim = simulate(*c.plant, e);
+  const EstimatorSettings st = settings_for(c, {0.999, 0.999, 0.999}, 1000);
+  RecursiveEstimator est(c.model, st);
+  run(est, sim.record);
+  const EstimatorState good = est.state();
+  RecursiveEstimator other(c.model, st);
+  EXPECT_NO_THROW(other.restore(good));
+
+  EstimatorState s = good;
+  s.model.submodels.pop_back();
+  EXPECT_THROW(other.restore(s), std::invalid_argument);
+  s = good;
+  s.model.submodels[1] = make_rigid_body("mode2", 1.0);
+  EXPECT_THROW(other.restore(s), std::invalid_argument);
+  s = good;
+  s.P[2] = Eigen::MatrixXd::Identity(4, 4);
+  EXPECT_THROW(other.restore(s), std::invalid_argument);
+  s = good;
+  s.P[0](1, 1) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(other.restore(s), std::invalid_argument);
+  s = good;
+  s.model.submodels[0].a(0) = std::numeric_limits<double>::infinity();
+  EXPECT_THROW(other.restore(s), std::invalid_argument);
+  s = good;
+  s.noise_variance = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(other.restore(s), std::invalid_argument);
+  s = good;
+  s.status.last_reset_reason = "made up";
+  EXPECT_THROW(other.restore(s), std::invalid_argument);
+  // A failed restore leaves the estimator as it was.
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(other.mode(i).value.wn, est.mode(i).value.wn);
+  // A state written during warm-up carries no estimate: the warm-up starts again.
+  RecursiveEstimator young(c.model, st);
+  for (int k = 0; k < 10; ++k) young.step({sim.record.t(k), sim.record.u(k), sim.record.y(k), sim.record.r(k)});
+  const EstimatorState early = young.state();
+  EXPECT_FALSE(early.warmed_up);
+  RecursiveEstimator again(c.model, st);
+  again.restore(early);
+  EXPECT_TRUE(again.status().warming_up);
+  EXPECT_EQ(again.status().samples, 10u);
+}
+
+
+TEST(RecursiveEstimator, AfterRestoreTheFirstSampleIsAGapEvenOnARestartedClock) {
+  const Config c = paper_config();
+  ExperimentSpec e = *c.experiment;
+  e.duration = 200.0;
+  e.excitation = prbs(2.0);
+  const auto sim = simulate(time_invariant(*c.plant, 0.01), e);
+  const Record& r = sim.record;
+  const EstimatorSettings st = settings_for(c, {0.999, 0.999, 0.999}, 1000);
+  RecursiveEstimator est(c.model, st);
+  const Eigen::Index half = r.size() / 2;
+  for (Eigen::Index k = 0; k < half; ++k) est.step({r.t(k), r.u(k), r.y(k), r.r(k)});
+  const EstimatorState saved = est.state();
+  RecursiveEstimator resumed(c.model, st);
+  resumed.restore(saved);
+  // The controller's clock restarted: the second half arrives with t from 0.
+  const double shift = r.t(half);
+  EXPECT_TRUE(resumed.step({r.t(half) - shift, r.u(half), r.y(half), r.r(half)}) & kGap);
+  EXPECT_EQ(resumed.status().gaps, saved.status.gaps + 1);
+  // From then on the usual checks: a duplicate is rejected, the rest updates.
+  EXPECT_TRUE(resumed.step({r.t(half) - shift, r.u(half), r.y(half), r.r(half)}) & kRejectedOutOfOrder);
+  for (Eigen::Index k = half + 1; k < r.size(); ++k) resumed.step({r.t(k) - shift, r.u(k), r.y(k), r.r(k)});
+  EXPECT_EQ(resumed.status().rejected_out_of_order, saved.status.rejected_out_of_order + 1);
+  EXPECT_GT(resumed.status().updates, saved.status.updates + static_cast<std::uint64_t>(r.size() - half) / 2);
+  for (int i = 0; i < 3; ++i)
+    EXPECT_NEAR(resumed.mode(i).value.wn / modal_parameters(c.model.submodels[i]).wn, 1.0, 0.03) << "mode " << i + 1;
+}
+
 }  // namespace
 }  // namespace modalwatch

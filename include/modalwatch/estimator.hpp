@@ -96,6 +96,44 @@ struct ModeEstimate {
   ModalParameters std;
 };
 
+// The reasons status().last_reset_reason can hold (besides ""): static strings,
+// so that a checkpoint can carry them as an index.
+const std::vector<const char*>& reset_reasons();
+
+// Everything needed to resume estimation without a new warm-up (a checkpoint):
+// the estimate, P as the estimator keeps it (normalised time, see time_scale),
+// the last good state it returns to on a reset, the noise, residual and
+// excitation statistics, the counters and the time of the last sample. Not the
+// prefilter or controller states: after restore() they restart from rest, as
+// after a gap.
+struct EstimatorState {
+  // False while the estimator was still warming up: then only the counters and
+  // the time are carried and the warm-up starts again after restore().
+  bool warmed_up = false;
+  AdditiveModel model;                       // current theta, physical units
+  std::vector<Eigen::MatrixXd> P;            // per submodel, P-bar_i (normalised)
+  std::vector<double> time_scale;            // per submodel: theta' = diag(ws^j) theta
+  std::vector<Eigen::VectorXd> P_bound;      // per submodel: bound on diag(P-bar_i)
+  std::vector<Eigen::VectorXd> good_theta;   // last good theta_i, physical units
+  std::vector<Eigen::MatrixXd> good_P;       // last good P-bar_i
+
+  // Output-error statistics (variance over the residual window, short window
+  // for divergence, its value at the last good state) and excitation power.
+  double noise_variance = 0.0, residual_short = 0.0, noise_variance_good = 0.0;
+  std::uint64_t residual_count = 0;
+  std::uint64_t rearm = 0;
+  double input_power = 0.0, input_power_reference = 0.0;
+  std::uint64_t input_power_count = 0;
+  std::uint64_t since_update = 0, updates_since_good = 0;
+
+  bool have_last_sample = false;
+  double last_t = 0.0;                       // s, time of the newest sample
+  double last_u = 0.0, last_r = 0.0;         // held in place of a non-finite sample
+
+  EstimatorStatus status;                    // counters (last_reset_reason: one of the
+                                             // estimator's own reasons, or "")
+};
+
 class RecursiveEstimator {
  public:
   // Throws std::invalid_argument on an inconsistent configuration.
@@ -119,6 +157,18 @@ class RecursiveEstimator {
   double residual_rms() const noexcept;  // output error over the residual window
   double noise_variance() const noexcept;
   const EstimatorStatus& status() const noexcept;
+
+  // A copy of the state (allocates: never inside the real-time loop's step()).
+  EstimatorState state() const;
+  // Continues from `state` as if it had run the samples itself, except that the
+  // prefilter and controller states restart from rest: the first sample after
+  // restore() counts as a gap (kGap), also when its time is not after the saved
+  // last sample (a restarted controller clock); later samples are checked as
+  // usual. Throws
+  // std::invalid_argument when the state does not fit this estimator's structure
+  // (submodel count, n, m, rigid poles, matrix sizes) or holds non-finite or
+  // invalid numbers; the estimator is unchanged then.
+  void restore(const EstimatorState& state);
 
  private:
   struct Impl;

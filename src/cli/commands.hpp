@@ -1,6 +1,7 @@
 #pragma once
 // The modalwatch subcommands. Each returns the process exit code: 0 on success,
 // 2 on bad input (the message names the file and the key or row), 1 otherwise.
+#include <cstdint>
 #include <optional>
 #include <string>
 
@@ -16,7 +17,8 @@ struct SimulateArgs {
 
 struct FitArgs {
   std::string config;
-  std::string data;
+  std::string data;     // CSV or LCM log
+  std::string channel;  // LCM log: the channel to read
   std::string out;  // fitted model YAML (optional)
   std::optional<double> from, to;  // time window of the record to use, s
   int max_iterations = 200;
@@ -24,12 +26,26 @@ struct FitArgs {
 
 struct TrackArgs {
   std::string config;
-  std::string data;
+  std::string data;     // CSV or LCM log
+  std::string channel;  // LCM log: the channel to read
   std::string out;       // est.csv
   bool progress = true;  // progress bar on stderr
 };
 
+// Publishes a record on LCM (config lcm:) as sample_t (batch 1) or
+// sample_batch_t (batch N), paced at speed x real time (0: as fast as possible).
+struct ReplayArgs {
+  std::string config;
+  std::string data;     // CSV or LCM log
+  std::string channel;  // LCM log: the channel to read
+  double speed = 1.0;   // 0: as fast as possible
+  int batch = 1;        // samples per packet
+  std::string url;      // overrides lcm.url
+  std::optional<std::int64_t> start_utime;  // utime of the first sample, us (default: now)
+};
+
 int simulate(const SimulateArgs& args);
+int replay(const ReplayArgs& args);
 int track(const TrackArgs& args);
 int fit(const FitArgs& args);
 

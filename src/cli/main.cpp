@@ -1,6 +1,9 @@
 // modalwatch: one command line, several subcommands, all driving the same core
 // library as the daemon and the tests.
+#include <cmath>
 #include <cstdio>
+#include <stdexcept>
+#include <string>
 
 #include <CLI/CLI.hpp>
 
@@ -22,7 +25,8 @@ int main(int argc, char** argv) {
   FitArgs fit_args;
   auto* fit_cmd = app.add_subcommand("fit", "Offline additive SRIVC on a record: prints the modal table");
   fit_cmd->add_option("--config,-c", fit_args.config, "YAML with the model: section (initial guesses)")->required();
-  fit_cmd->add_option("--data,-d", fit_args.data, "record CSV with columns t,u,y[,r]")->required();
+  fit_cmd->add_option("--data,-d", fit_args.data, "record: CSV with columns t,u,y[,r], or an LCM log")->required();
+  fit_cmd->add_option("--channel", fit_args.channel, "LCM log: channel with the samples (default: the only one)");
   fit_cmd->add_option("--out,-o", fit_args.out, "write the fitted model as a config YAML");
   fit_cmd->add_option("--from", fit_args.from, "use samples from this time on [s]");
   fit_cmd->add_option("--to", fit_args.to, "use samples up to this time [s]");
@@ -32,9 +36,22 @@ int main(int argc, char** argv) {
   bool no_progress = false;
   auto* track_cmd = app.add_subcommand("track", "Recursive additive RSRIVC over a record: writes the estimates per sample");
   track_cmd->add_option("--config,-c", track_args.config, "YAML with the model: (and estimator:) sections")->required();
-  track_cmd->add_option("--data,-d", track_args.data, "record CSV with columns t,u,y[,r]")->required();
+  track_cmd->add_option("--data,-d", track_args.data, "record: CSV with columns t,u,y[,r], or an LCM log")->required();
+  track_cmd->add_option("--channel", track_args.channel, "LCM log: channel with the samples (default: the only one)");
   track_cmd->add_option("--out,-o", track_args.out, "estimates CSV to write (one row per sample)")->required();
   track_cmd->add_flag("--no-progress", no_progress, "no progress bar on stderr");
+
+  ReplayArgs replay_args;
+  std::string speed = "1";
+  auto* replay_cmd = app.add_subcommand("replay", "Publish a record on LCM (lcm: section) at real time or faster");
+  replay_cmd->add_option("--config,-c", replay_args.config, "YAML with the lcm: section (and model.loop)")->required();
+  replay_cmd->add_option("--data,-d", replay_args.data, "record: CSV with columns t,u,y[,r], or an LCM log")->required();
+  replay_cmd->add_option("--channel", replay_args.channel, "LCM log input: channel with the samples");
+  replay_cmd->add_option("--speed", speed, "times real time; 0 or 'max': as fast as possible")->capture_default_str();
+  replay_cmd->add_option("--batch", replay_args.batch, "samples per packet: 1 = sample_t, N > 1 = sample_batch_t")
+      ->check(CLI::Range(1, 100000))->capture_default_str();
+  replay_cmd->add_option("--url", replay_args.url, "LCM URL (overrides lcm.url)");
+  replay_cmd->add_option("--start-utime", replay_args.start_utime, "utime of the first sample [us] (default: now)");
 
   try {
     app.parse(argc, argv);
@@ -48,6 +65,22 @@ int main(int argc, char** argv) {
   }
   if (simulate_cmd->parsed()) return simulate(sim);
   if (fit_cmd->parsed()) return fit(fit_args);
+  if (replay_cmd->parsed()) {
+    if (speed == "max") {
+      replay_args.speed = 0.0;
+    } else {
+      try {
+        std::size_t used = 0;
+        replay_args.speed = std::stod(speed, &used);
+        if (used != speed.size() || !(replay_args.speed >= 0.0) || !std::isfinite(replay_args.speed))
+          throw std::invalid_argument(speed);
+      } catch (const std::exception&) {
+        std::fprintf(stderr, "modalwatch replay: --speed: '%s' is not a number >= 0 or 'max'\n", speed.c_str());
+        return 2;
+      }
+    }
+    return replay(replay_args);
+  }
   if (track_cmd->parsed()) {
     track_args.progress = !no_progress;
     return track(track_args);

@@ -8,6 +8,8 @@
 #include <limits>
 #include <numbers>
 #include <stdexcept>
+#include <string>
+#include <string_view>
 
 #include "modalwatch/polynomial.hpp"
 #include "modalwatch/record.hpp"
@@ -60,6 +62,12 @@ bool project(Eigen::Ref<ThetaVec> a_part, int n) {
   return true;
 }
 
+constexpr const char* kResetNonFiniteModel = "non-finite auxiliary model or instrument output";
+constexpr const char* kResetUnstableLoop = "the instrument's closed loop with the current model is unstable";
+constexpr const char* kResetDiverged =
+    "output error diverged (residual RMS above divergence_ratio x its last good value)";
+constexpr const char* kResetDegenerate = "non-finite or degenerate update (NaN/Inf in theta, P or the gain)";
+
 struct Block {
   int n = 0, m = 0, l = 0, nt = 0;
   double ws = 1.0, lambda = 1.0;
@@ -110,6 +118,12 @@ struct Block {
 
 }  // namespace
 
+const std::vector<const char*>& reset_reasons() {
+  static const std::vector<const char*> reasons = {kResetNonFiniteModel, kResetUnstableLoop, kResetDiverged,
+                                                   kResetDegenerate};
+  return reasons;
+}
+
 struct RecursiveEstimator::Impl {
   EstimatorSettings cfg;
   AdditiveModel initial;
@@ -124,6 +138,7 @@ struct RecursiveEstimator::Impl {
 
   double t_prev = 0.0;
   bool have_prev = false;
+  bool just_restored = false;  // restore() ran and no sample has come since
   double last_u = 0.0, last_r = 0.0;  // held in place of a non-finite sample
   std::uint64_t since_update = 0;
   std::uint64_t updates_since_good = 0;
@@ -345,13 +360,13 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
     y_hat += b.xu;
   }
   if (!std::isfinite(y_hat) || !std::isfinite(z)) {
-    restore_good("non-finite auxiliary model or instrument output");
+    restore_good(kResetNonFiniteModel);
     return flags | kReset;
   }
   // The instrument's loop (eq. 29) runs the current model with the controller; a
   // wrong model can make that loop unstable even when every mode is stable.
   if (cfg.closed_loop && pow_ref > 0.0 && z * z > 1e8 * pow_ref) {
-    restore_good("the instrument's closed loop with the current model is unstable");
+    restore_good(kResetUnstableLoop);
     return flags | kReset;
   }
   // 2. Outliers: a sample far outside the residual spread is replaced by the
@@ -382,7 +397,7 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   if (rearm > 0) {
     --rearm;
   } else if (allow_update && e_var_good > 0.0 && e_short > cfg.divergence_ratio * cfg.divergence_ratio * e_var_good) {
-    restore_good("output error diverged (residual RMS above divergence_ratio x its last good value)");
+    restore_good(kResetDiverged);
     return flags | kReset;
   }
   // 3. Excitation: without input power the update only winds P up.
@@ -472,7 +487,7 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
     }
   }
   if (!healthy) {
-    restore_good("non-finite or degenerate update (NaN/Inf in theta, P or the gain)");
+    restore_good(kResetDegenerate);
     return flags | kReset;
   }
   for (auto& b : blocks) rediscretise(b);
@@ -628,11 +643,14 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
   const double T = m.cfg.sample_time;
   if (m.have_prev) {
     const double dt = s.t - m.t_prev;
-    if (dt < 0.5 * T) {  // duplicate or out of order
+    // The first sample after restore() may come on another time base (a
+    // restarted controller clock): earlier than the checkpoint is then a gap too.
+    const bool restarted = m.just_restored;
+    if (dt < 0.5 * T && !restarted) {  // duplicate or out of order
       ++m.status.rejected_out_of_order;
       return kRejectedOutOfOrder;
     }
-    if (dt > m.cfg.gap_factor * T) {
+    if (dt > m.cfg.gap_factor * T || restarted) {
       // The prefilter states no longer describe the signals: restart them, keep theta and P.
       ++m.status.gaps;
       flags |= kGap;
@@ -642,6 +660,7 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
   }
   m.t_prev = s.t;
   m.have_prev = true;
+  m.just_restored = false;
   if (bad_values && (m.status.warming_up || m.blocks.empty())) return flags;
   m.last_u = sample.u;
   m.last_r = sample.r;
@@ -721,5 +740,138 @@ Eigen::MatrixXd RecursiveEstimator::covariance(int i) const {
 double RecursiveEstimator::residual_rms() const noexcept { return std::sqrt(impl_->e_var); }
 double RecursiveEstimator::noise_variance() const noexcept { return impl_->e_var; }
 const EstimatorStatus& RecursiveEstimator::status() const noexcept { return impl_->status; }
+
+EstimatorState RecursiveEstimator::state() const {
+  const Impl& m = *impl_;
+  EstimatorState st;
+  st.warmed_up = !m.status.warming_up && !m.blocks.empty();
+  st.model = model();
+  if (st.warmed_up) {
+    for (const Block& b : m.blocks) {
+      st.P.emplace_back(b.P);
+      st.time_scale.push_back(b.ws);
+      st.P_bound.emplace_back(b.p_bound);
+      st.good_theta.emplace_back(b.good_theta.cwiseQuotient(b.scale));
+      st.good_P.emplace_back(b.good_P);
+    }
+  }
+  st.noise_variance = m.e_var;
+  st.residual_short = m.e_short;
+  st.noise_variance_good = m.e_var_good;
+  st.residual_count = m.e_count;
+  st.rearm = m.rearm;
+  st.input_power = m.pow_short;
+  st.input_power_reference = m.pow_ref;
+  st.input_power_count = m.pow_count;
+  st.since_update = m.since_update;
+  st.updates_since_good = m.updates_since_good;
+  st.have_last_sample = m.have_prev;
+  st.last_t = m.t_prev;
+  st.last_u = m.last_u;
+  st.last_r = m.last_r;
+  st.status = m.status;
+  return st;
+}
+
+void RecursiveEstimator::restore(const EstimatorState& st) {
+  const Impl& m = *impl_;
+  const auto fail = [](const std::string& what) { throw std::invalid_argument("estimator state: " + what); };
+  const auto finite = [](double v) { return std::isfinite(v); };
+  const std::size_t K = m.initial.submodels.size();
+  if (st.model.submodels.size() != K)
+    fail(std::to_string(st.model.submodels.size()) + " submodels, this estimator has " + std::to_string(K));
+  for (std::size_t i = 0; i < K; ++i) {
+    const Submodel& want = m.initial.submodels[i];
+    const Submodel& got = st.model.submodels[i];
+    const std::string where = "submodel " + std::to_string(i + 1) + " ('" + want.name + "'): ";
+    if (got.name != want.name || got.n != want.n || got.m != want.m || got.rigid_poles != want.rigid_poles)
+      fail(where + "name or orders (n, m, rigid poles) differ");
+    if (got.a.size() != got.n || got.b.size() != got.m + 1) fail(where + "coefficient count differs from n, m");
+    if (!got.a.allFinite() || !got.b.allFinite()) fail(where + "non-finite coefficient");
+    if (got.n > 0 && got.a(got.n - 1) == 0.0) fail(where + "a_n = 0 (order drop)");
+  }
+  if (st.warmed_up) {
+    if (st.P.size() != K || st.time_scale.size() != K || st.P_bound.size() != K || st.good_theta.size() != K ||
+        st.good_P.size() != K)
+      fail("per-submodel arrays (P, time_scale, P_bound, good_theta, good_P) do not have one entry per submodel");
+    for (std::size_t i = 0; i < K; ++i) {
+      const Eigen::Index nt = m.initial.submodels[i].n_theta();
+      const std::string where = "submodel " + std::to_string(i + 1) + ": ";
+      if (st.P[i].rows() != nt || st.P[i].cols() != nt || st.good_P[i].rows() != nt || st.good_P[i].cols() != nt ||
+          st.P_bound[i].size() != nt || st.good_theta[i].size() != nt)
+        fail(where + "P, P_bound, good_theta or good_P do not match n_theta = " + std::to_string(nt));
+      if (!st.P[i].allFinite() || !st.good_P[i].allFinite() || !st.P_bound[i].allFinite() ||
+          !st.good_theta[i].allFinite())
+        fail(where + "non-finite P, P_bound, good_theta or good_P");
+      if (!(st.time_scale[i] > 0.0) || !finite(st.time_scale[i])) fail(where + "time_scale must be finite and > 0");
+      if ((st.P_bound[i].array() <= 0.0).any()) fail(where + "P_bound must be > 0");
+    }
+  }
+  for (double v : {st.noise_variance, st.residual_short, st.noise_variance_good, st.input_power,
+                   st.input_power_reference})
+    if (!finite(v) || v < 0.0) fail("noise, residual or input-power statistic is negative or non-finite");
+  if (!finite(st.last_t) || !finite(st.last_u) || !finite(st.last_r)) fail("non-finite last sample");
+  const char* reason = "";
+  if (st.status.last_reset_reason && *st.status.last_reset_reason) {
+    reason = nullptr;
+    for (const char* r : reset_reasons())
+      if (std::string_view(r) == st.status.last_reset_reason) reason = r;
+    if (!reason) fail("unknown last_reset_reason");
+  }
+
+  // Built in a copy and moved in at the end: a throw below (derived numbers out
+  // of range, allocation) leaves this estimator as it was.
+  Impl next = m;
+  if (st.warmed_up) {
+    next.build(st.model, nullptr, 0.0, 1.0);  // structure, prefilters at rest; theta, P below
+    for (std::size_t i = 0; i < K; ++i) {
+      Block& b = next.blocks[i];
+      b.ws = st.time_scale[i];
+      for (int j = 1; j <= b.n; ++j) b.scale(j - 1) = std::pow(b.ws, j);
+      for (int k = 0; k <= b.m; ++k) b.scale(b.n + k) = std::pow(b.ws, k - b.l);
+      b.theta = st.model.submodels[i].theta().cwiseProduct(Eigen::VectorXd(b.scale));
+      if (!b.scale.allFinite() || !b.theta.allFinite() || (b.scale.array() == 0.0).any())
+        fail("submodel " + std::to_string(i + 1) + ": time_scale out of range for its coefficients");
+      b.P = st.P[i];
+      b.p_bound = st.P_bound[i];
+      b.good_theta = st.good_theta[i].cwiseProduct(Eigen::VectorXd(b.scale));
+      b.good_P = st.good_P[i];
+      const FilterVector a = b.a_poly(), den = b.denominator();
+      b.fy = Prefilter(a, b.ws * next.cfg.sample_time, next.cfg.output_hold);
+      b.fx = Prefilter(a, b.ws * next.cfg.sample_time, next.cfg.output_hold);
+      b.fu = Prefilter(den, b.ws * next.cfg.sample_time, Hold::zoh);
+      b.fz = Prefilter(den, b.ws * next.cfg.sample_time, Hold::zoh);
+    }
+    next.buffered = 0;
+  } else {
+    next.blocks.clear();
+    next.buffered = 0;
+  }
+  next.reset_filters();
+  next.e_var = st.noise_variance;
+  next.e_short = st.residual_short;
+  next.e_var_good = st.noise_variance_good;
+  next.e_count = st.residual_count;
+  next.rearm = st.rearm;
+  next.outlier_run = 0;
+  next.pow_short = st.input_power;
+  next.pow_ref = st.input_power_reference;
+  next.pow_count = st.input_power_count;
+  next.since_update = st.since_update;
+  next.updates_since_good = st.updates_since_good;
+  next.have_prev = st.have_last_sample;
+  next.just_restored = true;
+  next.t_prev = st.last_t;
+  next.last_u = st.last_u;
+  next.last_r = st.last_r;
+  next.status = st.status;
+  next.status.last_reset_reason = reason;
+  next.status.warming_up = !st.warmed_up && next.cfg.warmup_samples > 0;
+  if (!st.warmed_up && next.cfg.warmup_samples == 0) {
+    // No warm-up configured: the estimator starts from the configured model, as new.
+    next.build(next.initial, nullptr, 0.0, 1.0);
+  }
+  *impl_ = std::move(next);
+}
 
 }  // namespace modalwatch

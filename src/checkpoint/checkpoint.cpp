@@ -1,0 +1,468 @@
+#include "modalwatch/checkpoint.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <array>
+#include <bit>
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+#include <system_error>
+
+#include "modalwatch/error.hpp"
+#include "modalwatch/prefilter.hpp"
+
+namespace modalwatch {
+namespace {
+
+constexpr std::array<std::uint8_t, 8> kMagic = {'M', 'W', 'C', 'H', 'K', 'P', 'T', 0};
+constexpr std::size_t kHeaderSize = 8 + 4 + 8;
+constexpr std::uint32_t kMaxSubmodels = 64;
+constexpr std::uint32_t kMaxName = 256;
+constexpr std::uint32_t kMaxBaselines = 64;
+// Orders as the estimator allows them (n + l <= kMaxFilterOrder, m <= n + l).
+constexpr int kMaxOrder = kMaxFilterOrder;
+
+constexpr std::array<std::uint32_t, 256> make_crc_table() {
+  std::array<std::uint32_t, 256> t{};
+  for (std::uint32_t i = 0; i < 256; ++i) {
+    std::uint32_t c = i;
+    for (int k = 0; k < 8; ++k) c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+    t[i] = c;
+  }
+  return t;
+}
+constexpr auto kCrcTable = make_crc_table();
+
+// ---------------------------------------------------------------- writing
+
+class Writer {
+ public:
+  std::vector<std::uint8_t> bytes;
+  void u8(std::uint8_t v) { bytes.push_back(v); }
+  void u32(std::uint32_t v) {
+    for (int i = 0; i < 4; ++i) bytes.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
+  }
+  void u64(std::uint64_t v) {
+    for (int i = 0; i < 8; ++i) bytes.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
+  }
+  void i32(std::int32_t v) { u32(static_cast<std::uint32_t>(v)); }
+  void i64(std::int64_t v) { u64(static_cast<std::uint64_t>(v)); }
+  void f64(double v) { u64(std::bit_cast<std::uint64_t>(v)); }
+  void str(const std::string& s) {
+    u32(static_cast<std::uint32_t>(s.size()));
+    bytes.insert(bytes.end(), s.begin(), s.end());
+  }
+  void vec(const Eigen::VectorXd& v) {
+    for (Eigen::Index i = 0; i < v.size(); ++i) f64(v(i));
+  }
+  void mat(const Eigen::MatrixXd& m) {  // row-major
+    for (Eigen::Index i = 0; i < m.rows(); ++i)
+      for (Eigen::Index j = 0; j < m.cols(); ++j) f64(m(i, j));
+  }
+};
+
+int reason_index(const char* reason) {
+  if (!reason || !*reason) return -1;
+  const auto& all = reset_reasons();
+  for (std::size_t i = 0; i < all.size(); ++i)
+    if (std::strcmp(all[i], reason) == 0) return static_cast<int>(i);
+  return -1;
+}
+
+void put_status(Writer& w, const EstimatorStatus& s) {
+  for (std::uint64_t v : {s.samples, s.updates, s.rejected_nonfinite, s.rejected_out_of_order, s.gaps, s.outliers,
+                          s.low_excitation_samples, s.projections, s.covariance_clamps, s.resets})
+    w.u64(v);
+  w.i32(reason_index(s.last_reset_reason));
+  w.u8(s.warming_up);
+  w.u8(s.low_excitation);
+  w.u8(s.warmup_fit_used);
+}
+
+// ---------------------------------------------------------------- reading
+
+// Every read checks the remaining length first; every count is capped before
+// anything is allocated from it.
+class Reader {
+ public:
+  Reader(std::span<const std::uint8_t> b, std::size_t base, const std::string& source)
+      : b_(b), base_(base), source_(source) {}
+  [[noreturn]] void fail(const std::string& what) const {
+    throw InputError(source_, "checkpoint: byte offset " + std::to_string(base_ + pos_) + ": " + what);
+  }
+  void need(std::size_t n, const char* what) const {
+    if (b_.size() - pos_ < n)
+      fail(std::string("truncated ") + what + " (" + std::to_string(n) + " bytes needed, " +
+           std::to_string(b_.size() - pos_) + " left)");
+  }
+  std::uint64_t raw(int n, const char* what) {
+    need(static_cast<std::size_t>(n), what);
+    std::uint64_t v = 0;
+    for (int i = 0; i < n; ++i) v |= static_cast<std::uint64_t>(b_[pos_ + i]) << (8 * i);
+    pos_ += static_cast<std::size_t>(n);
+    return v;
+  }
+  std::uint8_t u8(const char* what) { return static_cast<std::uint8_t>(raw(1, what)); }
+  bool flag(const char* what) {
+    const std::size_t at = pos_;
+    const std::uint8_t v = u8(what);
+    if (v > 1) {
+      pos_ = at;
+      fail(std::string(what) + ": " + std::to_string(v) + " is not a boolean (0 or 1)");
+    }
+    return v == 1;
+  }
+  std::uint32_t u32(const char* what) { return static_cast<std::uint32_t>(raw(4, what)); }
+  std::uint64_t u64(const char* what) { return raw(8, what); }
+  std::int32_t i32(const char* what) { return static_cast<std::int32_t>(u32(what)); }
+  std::int64_t i64(const char* what) { return static_cast<std::int64_t>(u64(what)); }
+  double f64(const char* what) {
+    const std::size_t at = pos_;
+    const double v = std::bit_cast<double>(u64(what));
+    if (!std::isfinite(v)) {
+      pos_ = at;
+      fail(std::string(what) + " is not finite");
+    }
+    return v;
+  }
+  std::uint32_t count(const char* what, std::uint32_t cap) {
+    const std::size_t at = pos_;
+    const std::uint32_t n = u32(what);
+    if (n > cap) {
+      pos_ = at;
+      fail(std::string(what) + " " + std::to_string(n) + " exceeds the limit " + std::to_string(cap));
+    }
+    return n;
+  }
+  std::string str(const char* what, std::uint32_t cap) {
+    const std::uint32_t n = count(what, cap);
+    need(n, what);
+    std::string s(reinterpret_cast<const char*>(b_.data() + pos_), n);
+    pos_ += n;
+    return s;
+  }
+  Eigen::VectorXd vec(Eigen::Index n, const char* what) {
+    need(static_cast<std::size_t>(n) * 8, what);
+    Eigen::VectorXd v(n);
+    for (Eigen::Index i = 0; i < n; ++i) v(i) = f64(what);
+    return v;
+  }
+  Eigen::MatrixXd mat(Eigen::Index n, const char* what) {
+    need(static_cast<std::size_t>(n * n) * 8, what);
+    Eigen::MatrixXd m(n, n);
+    for (Eigen::Index i = 0; i < n; ++i)
+      for (Eigen::Index j = 0; j < n; ++j) m(i, j) = f64(what);
+    return m;
+  }
+  int order(const char* what) {
+    const std::size_t at = pos_;
+    const std::int32_t v = i32(what);
+    if (v < 0 || v > kMaxOrder) {
+      pos_ = at;
+      fail(std::string(what) + " " + std::to_string(v) + " outside [0, " + std::to_string(kMaxOrder) + "]");
+    }
+    return v;
+  }
+  std::size_t pos() const { return pos_; }
+  std::size_t left() const { return b_.size() - pos_; }
+
+ private:
+  std::span<const std::uint8_t> b_;
+  std::size_t base_;
+  std::size_t pos_ = 0;
+  const std::string& source_;
+};
+
+// FNV-1a, 64 bit.
+struct Fnv {
+  std::uint64_t h = 0xcbf29ce484222325ull;
+  void bytes(const void* p, std::size_t n) {
+    const auto* c = static_cast<const std::uint8_t*>(p);
+    for (std::size_t i = 0; i < n; ++i) h = (h ^ c[i]) * 0x100000001b3ull;
+  }
+  void u64(std::uint64_t v) {
+    std::uint8_t b[8];
+    for (int i = 0; i < 8; ++i) b[i] = static_cast<std::uint8_t>(v >> (8 * i));
+    bytes(b, 8);
+  }
+  void f64(double v) { u64(std::bit_cast<std::uint64_t>(v == 0.0 ? 0.0 : v)); }  // -0 == +0
+  void str(const std::string& s) {
+    u64(s.size());
+    bytes(s.data(), s.size());
+  }
+};
+
+[[noreturn]] void throw_errno(const std::string& what, int err) {
+  throw std::system_error(err, std::generic_category(), what);
+}
+
+}  // namespace
+
+std::uint32_t crc32(std::span<const std::uint8_t> bytes) {
+  std::uint32_t c = 0xFFFFFFFFu;
+  for (std::uint8_t b : bytes) c = kCrcTable[(c ^ b) & 0xFFu] ^ (c >> 8);
+  return c ^ 0xFFFFFFFFu;
+}
+
+std::uint64_t checkpoint_fingerprint(const Config& config) {
+  Fnv f;
+  f.str("modalwatch checkpoint fingerprint v1");
+  f.f64(config.sample_time);
+  f.u64(config.closed_loop ? 1 : 0);
+  if (config.closed_loop) {
+    f.u64(config.controller.numerator().size());
+    for (double v : config.controller.numerator()) f.f64(v);
+    f.u64(config.controller.denominator().size());
+    for (double v : config.controller.denominator()) f.f64(v);
+  }
+  f.u64(config.model.submodels.size());
+  for (std::size_t i = 0; i < config.model.submodels.size(); ++i) {
+    const Submodel& s = config.model.submodels[i];
+    f.str(s.name);
+    f.u64(static_cast<std::uint64_t>(s.n));
+    f.u64(static_cast<std::uint64_t>(s.m));
+    f.u64(static_cast<std::uint64_t>(s.rigid_poles));
+    const double lambda = i < config.estimator.forgetting.size() ? config.estimator.forgetting[i]
+                          : i < config.submodel_settings.size()  ? config.submodel_settings[i].forgetting
+                                                                 : 1.0;
+    f.f64(lambda);
+  }
+  return f.h;
+}
+
+std::vector<std::uint8_t> encode_checkpoint(const Checkpoint& c) {
+  // Refuse what decode_checkpoint would refuse, rather than write a file that cannot be read.
+  const EstimatorState& st = c.estimator;
+  if (st.model.submodels.size() > kMaxSubmodels || c.baselines.size() > kMaxBaselines)
+    throw std::invalid_argument("checkpoint: more than " + std::to_string(kMaxSubmodels) + " submodels or baselines");
+  for (const Submodel& s : st.model.submodels)
+    if (s.name.size() > kMaxName) throw std::invalid_argument("checkpoint: submodel name longer than 256 bytes");
+  Writer w;
+  w.bytes.insert(w.bytes.end(), kMagic.begin(), kMagic.end());
+  w.u32(kCheckpointVersion);
+  w.u64(0);  // payload length, filled in below
+  w.u64(c.config_fingerprint);
+  w.i64(c.last_utime);
+  w.i64(c.last_seq);
+
+  const EstimatorState& e = c.estimator;
+  w.u8(e.warmed_up);
+  w.u32(static_cast<std::uint32_t>(e.model.submodels.size()));
+  for (const Submodel& s : e.model.submodels) {
+    w.str(s.name);
+    w.i32(s.n);
+    w.i32(s.m);
+    w.i32(s.rigid_poles);
+    w.vec(s.a);
+    w.vec(s.b);
+  }
+  if (e.warmed_up) {
+    for (std::size_t i = 0; i < e.model.submodels.size(); ++i) {
+      w.f64(e.time_scale.at(i));
+      w.mat(e.P.at(i));
+      w.vec(e.P_bound.at(i));
+      w.vec(e.good_theta.at(i));
+      w.mat(e.good_P.at(i));
+    }
+  }
+  for (double v : {e.noise_variance, e.residual_short, e.noise_variance_good, e.input_power, e.input_power_reference})
+    w.f64(v);
+  for (std::uint64_t v : {e.residual_count, e.rearm, e.input_power_count, e.since_update, e.updates_since_good})
+    w.u64(v);
+  w.u8(e.have_last_sample);
+  w.f64(e.last_t);
+  w.f64(e.last_u);
+  w.f64(e.last_r);
+  put_status(w, e.status);
+
+  w.u32(static_cast<std::uint32_t>(c.baselines.size()));
+  for (const auto& b : c.baselines) {
+    w.u8(b.has_value());
+    if (b) {
+      w.f64(b->wn);
+      w.f64(b->zeta);
+      w.f64(b->gain);
+    }
+  }
+  const std::uint64_t payload = w.bytes.size() - kHeaderSize;
+  for (int i = 0; i < 8; ++i) w.bytes[12 + i] = static_cast<std::uint8_t>(payload >> (8 * i));
+  const std::uint32_t crc = crc32(w.bytes);
+  w.u32(crc);
+  return std::move(w.bytes);
+}
+
+Checkpoint decode_checkpoint(std::span<const std::uint8_t> bytes, const std::string& source) {
+  Reader h(bytes, 0, source);
+  h.need(kMagic.size(), "magic");
+  if (!std::equal(kMagic.begin(), kMagic.end(), bytes.begin()))
+    h.fail("not a modalwatch checkpoint (wrong magic)");
+  h.raw(8, "magic");
+  const std::uint32_t version = h.u32("version");
+  if (version != kCheckpointVersion)
+    throw InputError(source, "checkpoint: byte offset 8: format version " + std::to_string(version) +
+                                 ", this build reads version " + std::to_string(kCheckpointVersion));
+  const std::uint64_t length = h.u64("payload length");
+  if (length > kMaxCheckpointPayload)
+    throw InputError(source, "checkpoint: byte offset 12: payload length " + std::to_string(length) +
+                                 " exceeds the limit " + std::to_string(kMaxCheckpointPayload));
+  if (h.left() < length + 4)
+    throw InputError(source, "checkpoint: byte offset " + std::to_string(bytes.size()) + ": truncated (" +
+                                 std::to_string(kHeaderSize + length + 4) + " bytes expected, " +
+                                 std::to_string(bytes.size()) + " present)");
+  if (h.left() > length + 4)
+    throw InputError(source, "checkpoint: byte offset " + std::to_string(kHeaderSize + length + 4) + ": " +
+                                 std::to_string(h.left() - length - 4) + " trailing bytes");
+  const std::size_t end = kHeaderSize + static_cast<std::size_t>(length);
+  std::uint32_t stored = 0;
+  for (int i = 0; i < 4; ++i) stored |= static_cast<std::uint32_t>(bytes[end + i]) << (8 * i);
+#ifndef FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION  // fuzzing: let mutations reach the payload parser
+  if (crc32(bytes.first(end)) != stored)
+    throw InputError(source, "checkpoint: byte offset " + std::to_string(end) +
+                                 ": CRC-32 mismatch (the file is corrupt)");
+#else
+  (void)stored;
+#endif
+
+  Reader r(bytes.subspan(kHeaderSize, static_cast<std::size_t>(length)), kHeaderSize, source);
+  Checkpoint c;
+  c.config_fingerprint = r.u64("config fingerprint");
+  c.last_utime = r.i64("last utime");
+  c.last_seq = r.i64("last sequence number");
+  EstimatorState& e = c.estimator;
+  e.warmed_up = r.flag("warmed_up");
+  const std::uint32_t K = r.count("submodel count", kMaxSubmodels);
+  for (std::uint32_t i = 0; i < K; ++i) {
+    Submodel s;
+    s.name = r.str("submodel name length", kMaxName);
+    s.n = r.order("submodel order n");
+    s.m = r.order("submodel order m");
+    s.rigid_poles = r.order("submodel rigid poles");
+    if (s.n + s.rigid_poles > kMaxOrder || s.m > s.n + s.rigid_poles)
+      r.fail("submodel '" + s.name + "': orders n=" + std::to_string(s.n) + ", m=" + std::to_string(s.m) +
+             ", l=" + std::to_string(s.rigid_poles) + " are not a valid submodel");
+    s.a = r.vec(s.n, "coefficients a");
+    s.b = r.vec(s.m + 1, "coefficients b");
+    e.model.submodels.push_back(std::move(s));
+  }
+  if (e.warmed_up) {
+    for (const Submodel& s : e.model.submodels) {
+      const Eigen::Index nt = s.n_theta();
+      e.time_scale.push_back(r.f64("time scale"));
+      if (!(e.time_scale.back() > 0.0)) r.fail("time scale must be > 0");
+      e.P.push_back(r.mat(nt, "P"));
+      e.P_bound.push_back(r.vec(nt, "P bound"));
+      e.good_theta.push_back(r.vec(nt, "last good theta"));
+      e.good_P.push_back(r.mat(nt, "last good P"));
+    }
+  }
+  e.noise_variance = r.f64("noise variance");
+  e.residual_short = r.f64("short residual variance");
+  e.noise_variance_good = r.f64("last good noise variance");
+  e.input_power = r.f64("input power");
+  e.input_power_reference = r.f64("input power reference");
+  e.residual_count = r.u64("residual count");
+  e.rearm = r.u64("rearm");
+  e.input_power_count = r.u64("input power count");
+  e.since_update = r.u64("samples since update");
+  e.updates_since_good = r.u64("updates since good");
+  e.have_last_sample = r.flag("have_last_sample");
+  e.last_t = r.f64("last sample time");
+  e.last_u = r.f64("last u");
+  e.last_r = r.f64("last r");
+  EstimatorStatus& st = e.status;
+  for (std::uint64_t* v : {&st.samples, &st.updates, &st.rejected_nonfinite, &st.rejected_out_of_order, &st.gaps,
+                           &st.outliers, &st.low_excitation_samples, &st.projections, &st.covariance_clamps,
+                           &st.resets})
+    *v = r.u64("status counter");
+  const std::int32_t reason = r.i32("last reset reason");
+  const auto& reasons = reset_reasons();
+  if (reason < -1 || reason >= static_cast<std::int32_t>(reasons.size()))
+    r.fail("last reset reason " + std::to_string(reason) + " unknown");
+  st.last_reset_reason = reason < 0 ? "" : reasons[static_cast<std::size_t>(reason)];
+  st.warming_up = r.flag("warming_up");
+  st.low_excitation = r.flag("low_excitation");
+  st.warmup_fit_used = r.flag("warmup_fit_used");
+
+  const std::uint32_t nb = r.count("baseline count", kMaxBaselines);
+  for (std::uint32_t i = 0; i < nb; ++i) {
+    if (r.flag("baseline present")) {
+      ModalParameters p;
+      p.wn = r.f64("baseline wn");
+      p.zeta = r.f64("baseline zeta");
+      p.gain = r.f64("baseline gain");
+      c.baselines.emplace_back(p);
+    } else {
+      c.baselines.emplace_back(std::nullopt);
+    }
+  }
+  if (r.left() != 0) r.fail(std::to_string(r.left()) + " unread bytes at the end of the payload");
+  return c;
+}
+
+void write_checkpoint(const std::string& path, const Checkpoint& c) {
+  const std::vector<std::uint8_t> bytes = encode_checkpoint(c);
+  const std::filesystem::path target(path);
+  std::filesystem::path dir = target.parent_path();
+  if (dir.empty()) dir = ".";
+  std::string tmp = (dir / ("." + target.filename().string() + ".XXXXXX")).string();
+  const int fd = ::mkstemp(tmp.data());
+  if (fd < 0) throw_errno("checkpoint: cannot create a temporary file in " + dir.string(), errno);
+  auto abandon = [&](const std::string& what, int err) {
+    ::close(fd);
+    ::unlink(tmp.c_str());
+    throw_errno("checkpoint: " + what + " " + tmp, err);
+  };
+  std::size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      abandon("cannot write", errno);
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  if (::fchmod(fd, 0640) != 0) abandon("cannot set the mode of", errno);
+  if (::fsync(fd) != 0) abandon("cannot fsync", errno);
+  if (::close(fd) != 0) {
+    const int err = errno;
+    ::unlink(tmp.c_str());
+    throw_errno("checkpoint: cannot close " + tmp, err);
+  }
+  if (::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int err = errno;
+    ::unlink(tmp.c_str());
+    throw_errno("checkpoint: cannot rename " + tmp + " to " + path, err);
+  }
+  // The rename is durable only once the directory is.
+  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd < 0) throw_errno("checkpoint: cannot open directory " + dir.string(), errno);
+  if (::fsync(dfd) != 0) {
+    const int err = errno;
+    ::close(dfd);
+    throw_errno("checkpoint: cannot fsync directory " + dir.string(), err);
+  }
+  ::close(dfd);
+}
+
+Checkpoint read_checkpoint(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path, std::string("cannot open checkpoint: ") + std::strerror(errno));
+  in.seekg(0, std::ios::end);
+  const std::streamoff size = in.tellg();
+  if (size < 0) throw InputError(path, "cannot read checkpoint");
+  if (static_cast<std::uint64_t>(size) > kMaxCheckpointPayload + kHeaderSize + 4)
+    throw InputError(path, "checkpoint: " + std::to_string(size) + " bytes, larger than any valid checkpoint");
+  in.seekg(0);
+  std::vector<std::uint8_t> bytes(static_cast<std::size_t>(size));
+  if (size > 0 && !in.read(reinterpret_cast<char*>(bytes.data()), size))
+    throw InputError(path, "cannot read checkpoint");
+  return decode_checkpoint(bytes, path);
+}
+
+}  // namespace modalwatch

@@ -1,0 +1,23 @@
+#pragma once
+// Records for the subcommands: CSV (t,u,y[,r]) or an LCM log written by
+// lcm-logger, told apart by content (the LCM sync word), not by file name.
+#include <string>
+
+#include "modalwatch/csv.hpp"
+#include "modalwatch/record.hpp"
+
+namespace modalwatch::cli {
+
+struct RecordSource {
+  std::string path;
+  std::string channel;       // LCM logs: only this channel (empty: any channel with samples)
+  bool closed_loop = false;  // LCM logs: keep r (a CSV has it as a column)
+};
+
+// The same checks for both formats: time increases; with !allow_gaps evenly
+// (within 1 % of the mean step); with !allow_nonfinite no NaN/Inf. Errors name
+// the row (CSV) or the byte offset of the event (LCM). For an LCM log a line on
+// stderr says how many samples and which events were skipped.
+Record load_record(const RecordSource& source, const RecordReadOptions& options = {});
+
+}  // namespace modalwatch::cli

@@ -1,0 +1,304 @@
+// LCM logs as records: logs written by LCM itself (the file:// provider, as
+// lcm-logger writes them) read back equal to the CSV record they came from;
+// corrupt logs are InputErrors naming the byte offset; every CLI command that
+// reads a record takes a log; and `modalwatch replay` over real UDP multicast
+// (udpm on the loopback, ttl=0), received here with liblcm's C API.
+#include <lcm/lcm.h>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <random>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+#include "support.hpp"
+
+#include "modalwatch/config.hpp"
+#include "modalwatch/csv.hpp"
+#include "modalwatch/lcm_log.hpp"
+#include "modalwatch/messages.hpp"
+#include "modalwatch/simulator.hpp"
+
+namespace modalwatch {
+namespace {
+
+using test_support::error_of;
+using test_support::run_cli;
+using test_support::ScratchDir;
+
+// A group and port of this test process's own, so that other LCM traffic on
+// the machine (a daemon, another test run on the default URL) cannot interfere.
+std::string test_url() {
+  return "udpm://239.255.76." + std::to_string(100 + ::getpid() % 100) + ":" + std::to_string(7700 + ::getpid() % 200) +
+         "?ttl=0";
+}
+
+const std::string kConfig = std::string(MODALWATCH_SOURCE_DIR) + "/config/paper-sim.yaml";
+constexpr std::int64_t kStart = 1'700'000'000'000'000;  // us
+
+class LcmLog : public ScratchDir {
+ protected:
+  // The paper's closed loop, 100 s at 20 Hz (2000 samples), through CSV: what a
+  // user has on disk.
+  Record csv_record(const std::string& csv) {
+    const Config c = load_config(kConfig);
+    ExperimentSpec e = *c.experiment;
+    e.duration = 100.0;
+    write_record(csv, simulate(*c.plant, e).record);
+    return read_record(csv);
+  }
+  // Writes rec with LCM's own log writer: samples (batch 1) or batches on
+  // `channel`, with unrelated events in between as a real log has.
+  // Returns how many pairs of unrelated events it wrote.
+  int write_log(const std::string& path, const Record& rec, const std::string& channel, int batch) {
+    int pairs = 0;
+    lcm_t* lcm = lcm_create(("file://" + path + "?mode=w").c_str());
+    EXPECT_NE(lcm, nullptr);
+    if (!lcm) return 0;
+    const std::string other = "not samples";
+    for (Eigen::Index k = 0; k < rec.size(); k += batch) {
+      const Eigen::Index n = std::min<Eigen::Index>(batch, rec.size() - k);
+      std::vector<SampleRecord> s(static_cast<std::size_t>(n));
+      for (Eigen::Index i = 0; i < n; ++i)
+        s[i] = {kStart + std::llround(rec.t(k + i) * 1e6), k + i, rec.u(k + i), rec.y(k + i), rec.r(k + i)};
+      const auto msg = batch == 1 ? encode_sample(s[0]) : encode_batch(s, 0.05);
+      EXPECT_EQ(lcm_publish(lcm, channel.c_str(), msg.data(), static_cast<unsigned>(msg.size())), 0);
+      if (k % 500 == 0) {
+        ++pairs;
+        lcm_publish(lcm, "MODALWATCH_HEARTBEAT", other.data(), static_cast<unsigned>(other.size()));
+        lcm_publish(lcm, "OTHER_SAMPLES", msg.data(), static_cast<unsigned>(msg.size()));
+      }
+    }
+    lcm_destroy(lcm);
+    return pairs;
+  }
+};
+
+// u, y and r are the CSV's doubles bit for bit; t goes through an integer
+// microsecond utime, so it matches to 1 us (0.15000000000000002 s in the CSV is
+// 150000 us, read back as 0.15).
+void expect_same(const Record& a, const Record& b) {
+  ASSERT_EQ(a.size(), b.size());
+  ASSERT_TRUE(b.has_reference());
+  EXPECT_EQ(a.u, b.u);
+  EXPECT_EQ(a.y, b.y);
+  EXPECT_EQ(a.r, b.r);
+  EXPECT_LT((a.t - b.t).cwiseAbs().maxCoeff(), 0.5e-6);
+}
+
+TEST_F(LcmLog, LogsWrittenByLcmReadBackAsTheCsvRecord) {
+  const Record csv = csv_record(path("run.csv"));
+  for (int batch : {1, 64}) {
+    const std::string log = path("run" + std::to_string(batch) + ".lcm");
+    const int pairs = write_log(log, csv, "MODALWATCH_SAMPLES", batch);
+    ASSERT_TRUE(is_lcm_log(log));
+    EXPECT_FALSE(is_lcm_log(path("run.csv")));
+    LcmLogOptions o;
+    o.channel = "MODALWATCH_SAMPLES";
+    o.closed_loop = true;
+    const LcmLogRecord r = read_lcm_log(log, o);
+    expect_same(csv, r.record);
+    EXPECT_EQ(r.sample_events, static_cast<std::uint64_t>((2000 + batch - 1) / batch));
+    EXPECT_EQ(r.skipped_channel, 2u * pairs) << "heartbeat and OTHER_SAMPLES events";
+    EXPECT_EQ(r.skipped_type, 0u);
+    EXPECT_EQ(r.skipped_order, 0u);
+    // Without a channel the copies on OTHER_SAMPLES are duplicates by sequence number.
+    o.channel.clear();
+    const LcmLogRecord all = read_lcm_log(log, o);
+    EXPECT_EQ(all.skipped_type, static_cast<std::uint64_t>(pairs));
+    EXPECT_GT(all.skipped_order, 0u);
+    EXPECT_EQ(all.channels.size(), 2u);
+    o.closed_loop = false;
+    o.channel = "MODALWATCH_SAMPLES";
+    EXPECT_FALSE(read_lcm_log(log, o).record.has_reference());
+  }
+}
+
+TEST_F(LcmLog, CorruptLogsAreInputErrorsNamingTheByteOffset) {
+  const Record csv = csv_record(path("run.csv"));
+  const std::string log = path("run.lcm");
+  write_log(log, csv.segment(0, 10), "S", 1);
+  std::ifstream in(log, std::ios::binary);
+  const std::vector<std::uint8_t> good{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+  // Events: 28-byte header, channel "S", 48-byte sample_t; the first two events
+  // (a sample and the k % 500 == 0 heartbeat) start at 0 and 77.
+  ASSERT_EQ(parse_lcm_log(good, "x").record.size(), 10);
+  constexpr std::size_t kSecond = 28 + 1 + 48;
+  // Event boundaries: a cut there is a shorter, valid log.
+  std::vector<std::size_t> ends;
+  for (std::size_t pos = 0; pos < good.size();) {
+    const auto be32 = [&](std::size_t at) {
+      return (std::size_t{good[at]} << 24) | (std::size_t{good[at + 1]} << 16) | (std::size_t{good[at + 2]} << 8) |
+             good[at + 3];
+    };
+    pos += 28 + be32(pos + 20) + be32(pos + 24);
+    ends.push_back(pos);
+  }
+  ASSERT_EQ(ends.back(), good.size());
+  for (std::size_t n = 1; n < good.size(); ++n) {
+    if (std::find(ends.begin(), ends.end(), n) != ends.end()) {
+      EXPECT_NO_THROW(parse_lcm_log(std::span(good).first(n), "cut.lcm"));
+      continue;
+    }
+    const std::string msg = error_of([&] { parse_lcm_log(std::span(good).first(n), "cut.lcm"); });
+    EXPECT_NE(msg.find("cut.lcm: LCM log: byte offset"), std::string::npos) << n << ": " << msg;
+    EXPECT_NE(msg.find("truncated"), std::string::npos) << n << ": " << msg;
+  }
+  auto b = good;
+  b[kSecond] = 0x00;
+  EXPECT_NE(error_of([&] { parse_lcm_log(b, "sync.lcm"); }).find("byte offset 77: bad sync word 0x00A1DA01"),
+            std::string::npos);
+  b = good;
+  b[kSecond + 24] = 0x80;  // data length of the second event negative
+  EXPECT_NE(error_of([&] { parse_lcm_log(b, "neg.lcm"); }).find("byte offset 101: negative data length"),
+            std::string::npos);
+  b = good;
+  b[kSecond + 20] = 0x7F;  // channel length absurd
+  EXPECT_NE(error_of([&] { parse_lcm_log(b, "chan.lcm"); }).find("byte offset 97: channel length"), std::string::npos);
+  b = good;
+  b[kSecond + 25] = 0x7F;  // data length beyond the file
+  EXPECT_NE(error_of([&] { parse_lcm_log(b, "long.lcm"); }).find("byte offset 77: truncated event"), std::string::npos);
+  // A corrupt sample packet inside a well-formed event is skipped and counted.
+  b = good;
+  b[28 + 1 + 3] ^= 0xFF;  // fingerprint of the first sample
+  EXPECT_EQ(parse_lcm_log(b, "fp.lcm").skipped_type, 2u);  // it and the heartbeat
+  // Random bytes behind a sync word: an InputError or a record, never a crash.
+  std::mt19937 rng(7);
+  for (int trial = 0; trial < 2000; ++trial) {
+    std::vector<std::uint8_t> r = good;
+    const int flips = 1 + static_cast<int>(rng() % 8);
+    for (int f = 0; f < flips; ++f) r[rng() % r.size()] = static_cast<std::uint8_t>(rng());
+    r.resize(rng() % (r.size() + 1));
+    try {
+      parse_lcm_log(r, "fuzz");
+    } catch (const InputError&) {
+    }
+  }
+}
+
+TEST_F(LcmLog, FitAndTrackReadLogsExactlyAsTheyReadCsv) {
+  const Record csv = csv_record(path("run.csv"));
+  write_log(path("run.lcm"), csv, "MODALWATCH_SAMPLES", 1);
+  const auto fit_csv = run_cli("fit -c " + kConfig + " -d " + path("run.csv"));
+  const auto fit_lcm = run_cli("fit -c " + kConfig + " -d " + path("run.lcm") + " --channel MODALWATCH_SAMPLES");
+  ASSERT_EQ(fit_csv.code, 0) << fit_csv.output;
+  ASSERT_EQ(fit_lcm.code, 0) << fit_lcm.output;
+  EXPECT_NE(fit_lcm.output.find("2000 samples from LCM log"), std::string::npos) << fit_lcm.output;
+  // The modal table (everything after the reader's line) is the same.
+  const auto table = [](const std::string& s) { return s.substr(s.find("modalwatch fit:")); };
+  EXPECT_EQ(table(fit_lcm.output), table(fit_csv.output));
+  // Two channels with samples and no --channel: the user has to choose.
+  const auto ambiguous = run_cli("fit -c " + kConfig + " -d " + path("run.lcm"));
+  EXPECT_EQ(ambiguous.code, 2);
+  EXPECT_NE(ambiguous.output.find("choose one with --channel"), std::string::npos) << ambiguous.output;
+  const auto wrong = run_cli("fit -c " + kConfig + " -d " + path("run.lcm") + " --channel NOPE");
+  EXPECT_EQ(wrong.code, 2);
+  EXPECT_NE(wrong.output.find("on channel 'NOPE'"), std::string::npos) << wrong.output;
+
+  ASSERT_EQ(run_cli("track --no-progress -c " + kConfig + " -d " + path("run.csv") + " -o " + path("a.csv")).code, 0);
+  const auto tr = run_cli("track --no-progress -c " + kConfig + " -d " + path("run.lcm") +
+                          " --channel MODALWATCH_SAMPLES -o " + path("b.csv"));
+  ASSERT_EQ(tr.code, 0) << tr.output;
+  const Table a = read_table(path("a.csv")), b = read_table(path("b.csv"));
+  ASSERT_EQ(a.data.rows(), b.data.rows());
+  // Same samples, same estimates; only t carries the 1 us utime rounding.
+  EXPECT_EQ(a.data.rightCols(a.data.cols() - 1), b.data.rightCols(b.data.cols() - 1));
+}
+
+// ------------------------------------------------------------------ replay
+
+struct Received {
+  std::vector<SampleRecord> samples;
+  std::uint64_t packets = 0, bad = 0;
+};
+
+void on_message(const lcm_recv_buf_t* rbuf, const char*, void* user) {
+  auto* r = static_cast<Received*>(user);
+  SampleRecord buf[256];
+  int n = 0;
+  if (decode_samples(rbuf->data, static_cast<int>(rbuf->data_size), true, buf, 256, n) != DecodeResult::ok) {
+    ++r->bad;
+    return;
+  }
+  ++r->packets;
+  r->samples.insert(r->samples.end(), buf, buf + n);
+}
+
+// Receives on `url` while `modalwatch replay <args>` runs; returns its outcome.
+test_support::Outcome replay_into(const std::string& url, const std::string& channel, const std::string& args,
+                                  Received& got, bool& lcm_ok) {
+  lcm_t* lcm = lcm_create(url.c_str());
+  lcm_ok = lcm != nullptr;
+  if (!lcm) return {-1, ""};
+  lcm_subscription_t* sub = lcm_subscribe(lcm, channel.c_str(), on_message, &got);
+  std::atomic<bool> done{false};
+  test_support::Outcome out;
+  std::thread child([&] {
+    out = run_cli("replay " + args + " --url '" + url + "'");
+    done = true;
+  });
+  auto drain_until = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (std::chrono::steady_clock::now() < drain_until) {
+    if (lcm_handle_timeout(lcm, 100) == 0 && done) break;  // quiet for 100 ms after the replay ended
+  }
+  child.join();
+  lcm_unsubscribe(lcm, sub);
+  lcm_destroy(lcm);
+  return out;
+}
+
+TEST_F(LcmLog, ReplayPublishesEverySampleExactlyOverUdpMulticast) {
+  const Record csv = csv_record(path("run.csv"));
+  const std::string url = test_url();
+  for (int batch : {1, 50}) {
+    Received got;
+    bool lcm_ok = false;
+    const std::string channel = batch == 1 ? "MODALWATCH_SAMPLES" : "MODALWATCH_BATCHES";
+    // 100 s of record at 50 x real time: 2 s, 1000 packets/s at most.
+    const auto out = replay_into(url, channel,
+                                 "-c " + kConfig + " -d " + path("run.csv") + " --speed 50 --batch " +
+                                     std::to_string(batch) + " --start-utime " + std::to_string(kStart),
+                                 got, lcm_ok);
+    if (!lcm_ok) GTEST_SKIP() << "LCM cannot open " << url << " (no multicast route? see scripts/setup.sh)";
+    ASSERT_EQ(out.code, 0) << out.output;
+    EXPECT_NE(out.output.find("2000 samples in " + std::to_string((2000 + batch - 1) / batch)), std::string::npos)
+        << out.output;
+    EXPECT_EQ(got.bad, 0u);
+    ASSERT_EQ(got.samples.size(), 2000u) << "batch " << batch << ": " << got.packets << " packets received";
+    for (std::size_t k = 0; k < got.samples.size(); ++k) {
+      const SampleRecord& s = got.samples[k];
+      ASSERT_EQ(s.seq, static_cast<std::int64_t>(k));
+      ASSERT_EQ(s.utime, kStart + static_cast<std::int64_t>(k) * 50000) << k;
+      ASSERT_EQ(s.u, csv.u(static_cast<Eigen::Index>(k))) << k;
+      ASSERT_EQ(s.y, csv.y(static_cast<Eigen::Index>(k))) << k;
+      ASSERT_EQ(s.r, csv.r(static_cast<Eigen::Index>(k))) << k;
+    }
+  }
+}
+
+TEST_F(LcmLog, ReplayPacesAtTheRequestedSpeedAndReadsLogs) {
+  const Record csv = csv_record(path("run.csv"));
+  write_log(path("run.lcm"), csv.segment(0, 201), "IN", 1);  // 10 s of record
+  Received got;
+  bool lcm_ok = false;
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto out = replay_into(test_url(), "MODALWATCH_SAMPLES",
+                               "-c " + kConfig + " -d " + path("run.lcm") + " --channel IN --speed 10", got, lcm_ok);
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (!lcm_ok) GTEST_SKIP() << "no multicast";
+  ASSERT_EQ(out.code, 0) << out.output;
+  EXPECT_EQ(got.samples.size(), 201u);
+  // 10 s at 10 x: 1 s, plus process start and the 100 ms drain.
+  EXPECT_GT(wall, 0.95);
+  EXPECT_LT(wall, 3.0);
+  EXPECT_EQ(run_cli("replay -c " + kConfig + " -d " + path("run.csv") + " --speed fast").code, 2);
+}
+
+}  // namespace
+}  // namespace modalwatch
