@@ -33,8 +33,24 @@ struct PlantMode {
   Trajectory wn, zeta, gain;
 };
 
+// Effects a model of modes alone does not describe; `modalwatch diagnose` is
+// tested on records that carry them. The nonlinear branches are fed back from
+// the previous sample's noise-free output (y_{k-1}, and the velocity sign from
+// y_{k-1} - y_{k-2}), so the loop stays explicit; diagnose fits the same structure.
+struct PlantEffects {
+  double output_offset = 0.0;  // added to y (sensor offset)
+  double input_offset = 0.0;   // added to the plant input (force offset)
+  int input_delay = 0;         // samples: the plant sees u_{k-d}
+  double coulomb = 0.0;        // Fc: plant input u - Fc sign(v)
+  double cubic = 0.0;          // c: plant input u - c y^3 (cubic stiffness)
+  bool any() const {
+    return output_offset != 0.0 || input_offset != 0.0 || input_delay != 0 || coulomb != 0.0 || cubic != 0.0;
+  }
+};
+
 struct PlantSpec {
   std::vector<PlantMode> modes;
+  PlantEffects effects;
   // Output noise: white Gaussian with this variance, or set by snr_db
   // (10 log10 of noise-free output power over noise power) when given.
   double noise_variance = 0.0;
