@@ -29,7 +29,23 @@ struct TrackArgs {
   bool progress = true;  // progress bar on stderr
 };
 
+struct DiagnoseArgs {
+  std::string config;
+  std::string data;
+  std::string validate;                // validation record (optional)
+  std::optional<double> split;         // estimation fraction of --data (default 0.7)
+  std::string estimate_samples;        // "A:B" rows of --data
+  std::string validate_samples;        // "A:B" rows of the validation record
+  std::string report;                  // output directory
+  std::string effects;                 // comma-separated library (default: all)
+  std::string plot_script;             // scripts/plot_diagnose.py, run when given
+  int max_steps = 5;
+  double min_improvement = 0.10;
+  int max_delay = 10;
+};
+
 int simulate(const SimulateArgs& args);
+int diagnose(const DiagnoseArgs& args);
 int track(const TrackArgs& args);
 int fit(const FitArgs& args);
 

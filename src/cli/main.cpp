@@ -36,6 +36,23 @@ int main(int argc, char** argv) {
   track_cmd->add_option("--out,-o", track_args.out, "estimates CSV to write (one row per sample)")->required();
   track_cmd->add_flag("--no-progress", no_progress, "no progress bar on stderr");
 
+  DiagnoseArgs diag;
+  auto* diagnose_cmd = app.add_subcommand("diagnose", "Residual analysis and model augmentation: writes a report");
+  diagnose_cmd->add_option("--config,-c", diag.config, "YAML with the model: section")->required();
+  diagnose_cmd->add_option("--data,-d", diag.data, "record CSV with columns t,u,y[,r]")->required();
+  diagnose_cmd->add_option("--validate", diag.validate, "validation record CSV");
+  diagnose_cmd->add_option("--split", diag.split, "estimation fraction of --data, the rest validates (0.7)");
+  diagnose_cmd->add_option("--estimate-samples", diag.estimate_samples, "FIRST:END rows of --data to estimate on");
+  diagnose_cmd->add_option("--validate-samples", diag.validate_samples, "FIRST:END rows to validate on");
+  diagnose_cmd->add_option("--report,-r", diag.report, "directory for report.md, summary.json, model.yaml")->required();
+  diagnose_cmd->add_option("--effects", diag.effects, "comma-separated candidate effects (default: all)");
+  diagnose_cmd->add_option("--plot-script", diag.plot_script, "run this scripts/plot_diagnose.py on the report");
+  diagnose_cmd->add_option("--max-steps", diag.max_steps, "effects added at most")->check(CLI::NonNegativeNumber);
+  diagnose_cmd->add_option("--min-improvement", diag.min_improvement, "relative drop of the validation RMS to add")
+      ->check(CLI::Range(0.0, 1.0));
+  diagnose_cmd->add_option("--max-delay", diag.max_delay, "largest input delay tried [samples]")
+      ->check(CLI::PositiveNumber);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -48,6 +65,7 @@ int main(int argc, char** argv) {
   }
   if (simulate_cmd->parsed()) return simulate(sim);
   if (fit_cmd->parsed()) return fit(fit_args);
+  if (diagnose_cmd->parsed()) return diagnose(diag);
   if (track_cmd->parsed()) {
     track_args.progress = !no_progress;
     return track(track_args);
