@@ -106,9 +106,8 @@ struct EffectCase {
 class DiagnoseEffect : public ::testing::TestWithParam<EffectCase> {};
 
 // Cubic coefficient: the closed loop keeps y smaller (about 0.6 rms against 1.8
-// in open loop), so its effect needs a larger c to be of similar size; in open
-// loop c = 0.02 already drives this plant unstable at its peaks.
-double cubic_for(bool closed) { return closed ? 0.3 : 0.01; }
+// in open loop), so its effect needs a larger c to be of similar size.
+double cubic_for(bool closed) { return closed ? 0.3 : 0.02; }
 
 PlantSpec plant_with(const std::string& effect, bool closed) {
   PlantSpec p;

@@ -7,13 +7,16 @@
 // The augmented model is the additive model of eq. (5) driven by a plant input
 // that carries the effects, plus output terms:
 //
-//   u_p(t_k) = u(t_{k-d}) + u_off - Fc sign(v_{k-1}) - c y_{k-1}^3
+//   u_p(t_k) = u(t_{k-d}) + u_off - Fc sign(y_k - y_{k-1}) - c y_m^3   (held over [t_k, t_k+1))
+//   y_m = 1.5 y_k - 0.5 y_{k-1}   (y extrapolated to the middle of the hold interval)
 //   y(t_k)   = sum_i G_i(p) u_p + y_off + drift (t_k - t_0)
 //
 // The nonlinear branches (Coulomb, cubic) are additive branches driven by their
-// own signal through the same dynamics, A(p) y = B(p) (u - c y^3); they are fed
-// by the previous sample of the simulated (noise-free) output, the same
-// structure as the simulator's PlantEffects. Only the modes and rigid bodies
+// own signal through the same dynamics, A(p) y = B(p) (u - c y^3). For
+// strictly proper submodels y_k is fixed by the inputs before t_k, so the
+// branches are sampled at t_k and held with the input (no extra delay; for a
+// biproper submodel they use its output without the feedthrough). The
+// simulator's PlantEffects have the same structure. Only the modes and rigid bodies
 // are carried by the recursive estimator (`track`) and the daemon; offset,
 // drift, delay, Coulomb and cubic terms are fitted by `diagnose` alone.
 #include <string>
@@ -65,6 +68,11 @@ struct LoopSpec {
 // from r and u_ext), and the plant input it used in `u_sim` when given.
 Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& data, const LoopSpec& loop,
                                    Eigen::VectorXd* u_sim = nullptr);
+
+// A band-limited (not held) input sampled at t_k is closer to the held value
+// (u_k + u_k+1) / 2 over [t_k, t_k+1) than to u_k: the first-order-hold
+// equivalent for the ZOH simulation (open-loop records such as the Silverbox).
+Eigen::VectorXd midpoint_hold(const Eigen::VectorXd& u);
 
 // One residual test: its statistic against a threshold.
 struct ResidualTest {

@@ -150,6 +150,7 @@ std::string report_md(const DiagnoseResult& r, const DiagnoseArgs& args, const C
   o << "Config `" << args.config << "` (" << (config.closed_loop ? "closed" : "open") << " loop), data `"
     << args.data << "`";
   if (!args.validate.empty()) o << ", validation `" << args.validate << "`";
+  o << ". Input intersample: " << (args.input_hold == "foh" ? "band-limited (held value (u_k + u_k+1)/2)" : "held (ZOH)");
   o << ". Estimation part: " << n_est << " samples; validation part: " << n_val << " samples.\n\n";
   o << "Validation error: the model simulated on the validation part ("
     << (config.closed_loop ? "closed loop from r, with the measured excitation besides the controller"
@@ -277,6 +278,11 @@ int diagnose(const DiagnoseArgs& args) {
                              num(1.0 / config.sample_time) + " of " + config.source);
       if (config.closed_loop && !r->has_reference())
         throw InputError(r == &est ? args.data : args.validate, "closed loop (model.loop) needs a column 'r'");
+    }
+    if (args.input_hold == "foh") {
+      if (config.closed_loop) throw InputError("--input-hold", "foh is for open-loop records (u is simulated in closed loop)");
+      est.u = midpoint_hold(est.u);
+      val.u = midpoint_hold(val.u);
     }
     DiagnoseOptions options;
     options.max_steps = args.max_steps;

@@ -103,27 +103,33 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
   if (u_sim) u_sim->resize(N);
   std::vector<double> u_past(static_cast<std::size_t>(e.delay), 0.0);  // ring of the last d inputs
   std::size_t head = 0;
-  double y1 = 0.0, y2 = 0.0;  // simulated plant output (before offset and drift) at k-1, k-2
+  double y1 = 0.0;  // plant output (before offset and drift, without feedthrough) at k-1
   const double t0 = data.t(0);
   for (Eigen::Index k = 0; k < N; ++k) {
-    // The nonlinear branches use the previous sample's output (explicit loop).
-    const double v_sign = (y1 > y2) ? 1.0 : ((y1 < y2) ? -1.0 : 0.0);
-    double branches = 0.0;
-    if (e.input_offset_on) branches += e.input_offset;
-    if (e.coulomb_on) branches -= e.coulomb * v_sign;
-    if (e.cubic_on) branches -= e.cubic * y1 * y1 * y1;
-    const double delayed = e.delay > 0 ? u_past[head] : 0.0;
+    // Move every submodel to t_k: for strictly proper submodels their output
+    // y_k is then known before the input sample u_k, which the nonlinear
+    // branches use (sampled and held like the input).
     double y_free = 0.0, feed = 0.0;
     for (SubmodelRunner& r : runners) {
       y_free += r.advance();
       feed += r.feedthrough();
     }
+    const double v_sign = (y_free > y1) ? 1.0 : ((y_free < y1) ? -1.0 : 0.0);
+    double branches = 0.0;
+    if (e.input_offset_on) branches += e.input_offset;
+    if (e.coulomb_on) branches -= e.coulomb * v_sign;
+    // The cubic branch is held over [t_k, t_k+1): take y at the middle of the
+    // interval, extrapolated, so the held stiffness adds no half-sample lag
+    // (that lag acts as negative damping, felt at w T ~ 0.7 on the Silverbox).
+    const double y_mid = 1.5 * y_free - 0.5 * y1;
+    if (e.cubic_on) branches -= e.cubic * y_mid * y_mid * y_mid;
+    const double delayed = e.delay > 0 ? u_past[head] : 0.0;
     double out_terms = 0.0;
     if (e.output_offset_on) out_terms += e.output_offset;
     if (e.drift_on) out_terms += e.drift * (data.t(k) - t0);
     double u = data.u(k);
     if (loop.closed) {
-      // y_k = y_free + D (u_p) + out_terms, u_p = (u_k or u_{k-d}) + branches.
+      // y_k = y_free + D u_p + out_terms, u_p = (u_k or u_{k-d}) + branches.
       const bool direct = e.delay == 0;
       const double y_known = y_free + feed * (branches + (direct ? 0.0 : delayed)) + out_terms;
       const double gain = 1.0 + c0 * (direct ? feed : 0.0);
@@ -139,10 +145,15 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
     y(k) = y_plant + out_terms;
     if (loop.closed) controller.step(data.r(k) - y(k));
     if (u_sim) (*u_sim)(k) = u;
-    y2 = y1;
-    y1 = y_plant;
+    y1 = y_free;
   }
   return y;
+}
+
+Eigen::VectorXd midpoint_hold(const Eigen::VectorXd& u) {
+  Eigen::VectorXd h = u;
+  for (Eigen::Index k = 0; k + 1 < u.size(); ++k) h(k) = 0.5 * (u(k) + u(k + 1));
+  return h;
 }
 
 }  // namespace modalwatch
