@@ -96,7 +96,8 @@ Spectra welch_spectra(const Eigen::VectorXd& e, const Eigen::VectorXd& u, double
 
 struct ResidualAnalysis {
   // Autocorrelation of e at lags 1..M against the 99 % band 2.58/sqrt(N):
-  // statistic = the largest |rho|, pass when at most 5 % of the lags are outside.
+  // statistic = the largest |rho|, pass when at most 5 % of the lags are outside
+  // and none is outside twice the band.
   ResidualTest whiteness;
   // Cross-correlation of e with past input u(k - tau), tau = 0..M, same band and rule.
   ResidualTest independence;
@@ -117,6 +118,9 @@ struct DiagnoseOptions {
   int max_lag = 25;                 // residual correlation lags
   int oe_iterations = 40;           // Levenberg-Marquardt iterations of the output-error refinement
   int max_modes_added = 4;
+  // Samples at the start of the validation record that only set the model's
+  // state (the estimation part before a split): simulated, not scored.
+  Eigen::Index validation_lead_in = 0;
   Hold output_hold = Hold::zoh;     // SRIVC prefilters
   std::vector<EffectKind> library = all_effects();
 };

@@ -39,6 +39,7 @@ struct DiagnoseArgs {
   std::string report;                  // output directory
   std::string effects;                 // comma-separated library (default: all)
   std::string plot_script;             // scripts/plot_diagnose.py, run when given
+  std::string t_column = "t", y_column = "y";  // record columns (e.g. n, y2)
   std::string input_hold = "zoh";     // zoh, or foh: held value (u_k + u_k+1)/2 (open loop)
   int max_steps = 5;
   double min_improvement = 0.10;

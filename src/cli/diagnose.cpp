@@ -203,7 +203,8 @@ std::string report_md(const DiagnoseResult& r, const DiagnoseArgs& args, const C
   return o.str();
 }
 
-void write_tables(const std::string& dir, const DiagnoseResult& r, const Record& val) {
+void write_tables(const std::string& dir, const DiagnoseResult& r, const Record& full_val, Eigen::Index lead_in) {
+  const Record val = full_val.segment(lead_in, full_val.size() - lead_in);
   const DiagnoseStep& first = r.steps.front();
   const DiagnoseStep& last = r.steps.back();
   {
@@ -220,7 +221,7 @@ void write_tables(const std::string& dir, const DiagnoseResult& r, const Record&
   }
   {
     Eigen::MatrixXd t(val.size(), 4);
-    t << val.t, val.y, first.validation_output, last.validation_output;
+    t << val.t, val.y, first.validation_output.tail(val.size()), last.validation_output.tail(val.size());
     write_table(dir + "/validation.csv", {"t", "y", "y_before", "y_after"}, t);
   }
   {
@@ -253,11 +254,15 @@ int diagnose(const DiagnoseArgs& args) {
   return guarded("diagnose", [&] {
     const Config config = load_config(args.config);
     if (!args.validate.empty() && args.split) throw InputError("--split", "give --validate or --split, not both");
-    const Record full = read_record(args.data);
+    RecordColumns columns;
+    columns.t = args.t_column;
+    columns.y = args.y_column;
+    const Record full = read_record(args.data, columns);
     Record est, val;
+    Eigen::Index lead_in = 0;
     if (!args.validate.empty()) {
       est = samples(full, args.estimate_samples, "--estimate-samples", args.data);
-      val = samples(read_record(args.validate), args.validate_samples, "--validate-samples", args.validate);
+      val = samples(read_record(args.validate, columns), args.validate_samples, "--validate-samples", args.validate);
     } else if (!args.estimate_samples.empty() || !args.validate_samples.empty()) {
       if (args.estimate_samples.empty() || args.validate_samples.empty())
         throw InputError("--estimate-samples", "give both --estimate-samples and --validate-samples");
@@ -268,7 +273,10 @@ int diagnose(const DiagnoseArgs& args) {
       if (!(f > 0.0 && f < 1.0)) throw InputError("--split", "must be in (0, 1)");
       const auto n = static_cast<Eigen::Index>(std::floor(f * static_cast<double>(full.size())));
       est = full.segment(0, n);
-      val = full.segment(n, full.size() - n);
+      // The validation run starts at the record's start so the model's state
+      // is right at the split; only the samples after it are scored.
+      val = full;
+      lead_in = n;
     }
     for (const Record* r : {&est, &val}) {
       const double T = r->sample_time();
@@ -286,6 +294,7 @@ int diagnose(const DiagnoseArgs& args) {
     }
     DiagnoseOptions options;
     options.max_steps = args.max_steps;
+    options.validation_lead_in = lead_in;
     options.min_improvement = args.min_improvement;
     options.max_delay = args.max_delay;
     options.output_hold = config.output_hold;
@@ -298,7 +307,7 @@ int diagnose(const DiagnoseArgs& args) {
 
     std::filesystem::create_directories(args.report);
     write_text(args.report + "/summary.json", summary_json(r));
-    write_tables(args.report, r, val);
+    write_tables(args.report, r, val, lead_in);
     std::string yaml = config_to_yaml(config, r.steps.back().model.linear);
     const std::string eff = effects_comment(r.steps.back().model.effects);
     if (!eff.empty())
@@ -310,7 +319,7 @@ int diagnose(const DiagnoseArgs& args) {
       plots = std::system(cmd.c_str()) == 0;
       if (!plots) std::fprintf(stderr, "modalwatch diagnose: plots failed (%s)\n", cmd.c_str());
     }
-    write_text(args.report + "/report.md", report_md(r, args, config, est.size(), val.size(), plots));
+    write_text(args.report + "/report.md", report_md(r, args, config, est.size(), val.size() - options.validation_lead_in, plots));
 
     std::printf("%-4s %-11s %-44s %12s %12s %8s %10s\n", "step", "effect", "parameters", "est. RMS", "val. RMS",
                 "fit %", "whiteness");

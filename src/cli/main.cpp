@@ -47,6 +47,8 @@ int main(int argc, char** argv) {
   diagnose_cmd->add_option("--report,-r", diag.report, "directory for report.md, summary.json, model.yaml")->required();
   diagnose_cmd->add_option("--effects", diag.effects, "comma-separated candidate effects (default: all)");
   diagnose_cmd->add_option("--plot-script", diag.plot_script, "run this scripts/plot_diagnose.py on the report");
+  diagnose_cmd->add_option("--t-column", diag.t_column, "time column of the records (e.g. n: sample index)");
+  diagnose_cmd->add_option("--y-column", diag.y_column, "output column of the records (e.g. y2)");
   diagnose_cmd->add_option("--input-hold", diag.input_hold, "zoh (held input) or foh (band-limited input, open loop)")
       ->check(CLI::IsMember({"zoh", "foh"}));
   diagnose_cmd->add_option("--max-steps", diag.max_steps, "effects added at most")->check(CLI::NonNegativeNumber);

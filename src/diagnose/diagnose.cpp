@@ -211,7 +211,7 @@ struct Scored {
   Eigen::VectorXd validation_output;
 };
 
-Scored score(const AugmentedModel& m, double est_cost, const Problem& est, const Problem& val) {
+Scored score(const AugmentedModel& m, double est_cost, const Problem& est, const Problem& val, Eigen::Index lead_in) {
   Scored s;
   const double N = static_cast<double>(est.data.size());
   if (!std::isfinite(est_cost)) return s;
@@ -219,8 +219,9 @@ Scored score(const AugmentedModel& m, double est_cost, const Problem& est, const
   s.bic = N * std::log(std::max(est_cost / N, 1e-300)) + m.n_params() * std::log(N);
   s.validation_output = output(m, val);
   if (s.validation_output.size() != val.data.size()) return s;
-  s.validation_rms = rms(val.data.y - s.validation_output);
-  s.fit_percent = fit_percent(val.data.y, s.validation_output);
+  const Eigen::Index n = val.data.size() - lead_in;
+  s.validation_rms = rms(val.data.y.tail(n) - s.validation_output.tail(n));
+  s.fit_percent = fit_percent(val.data.y.tail(n), s.validation_output.tail(n));
   return s;
 }
 
@@ -242,7 +243,7 @@ Candidate finish(EffectKind kind, const Refined& r, const Context& ctx) {
   Candidate c;
   c.kind = kind;
   c.model = r.model;
-  const Scored s = score(r.model, r.cost, ctx.est, ctx.val);
+  const Scored s = score(r.model, r.cost, ctx.est, ctx.val, ctx.options.validation_lead_in);
   c.estimation_rms = s.estimation_rms;
   c.validation_rms = s.validation_rms;
   c.fit_percent = s.fit_percent;
@@ -362,6 +363,10 @@ Candidate candidate_coulomb(const AugmentedModel& current, const Eigen::VectorXd
   if (!std::isfinite(r.cost)) return invalid(EffectKind::coulomb, "no sensitivity");
   Candidate c = finish(EffectKind::coulomb, r, ctx);
   if (c.valid) c.params = {{"fc", c.model.effects.coulomb}};
+  if (c.valid && !(c.model.effects.coulomb > 0.0)) {
+    c.valid = false;  // friction that pushes: not a physical effect
+    c.note = "negative friction level";
+  }
   return c;
 }
 
@@ -431,15 +436,16 @@ DiagnoseStep make_step(const std::string& effect, const EffectParams& params, co
   s.effect = effect;
   s.params = params;
   s.model = m;
-  const Scored sc = score(m, cost, est, val);
+  const Scored sc = score(m, cost, est, val, options.validation_lead_in);
   s.estimation_rms = sc.estimation_rms;
   s.validation_rms = sc.validation_rms;
   s.fit_percent = sc.fit_percent;
   s.bic = sc.bic;
   s.validation_output = sc.validation_output;
+  const Eigen::Index n = val.data.size() - options.validation_lead_in;
   if (s.validation_output.size() == val.data.size())
-    s.residual = analyse_residual(val.data.y - s.validation_output, val.data.u, val.data.sample_time(),
-                                  options.max_lag);
+    s.residual = analyse_residual(val.data.y.tail(n) - s.validation_output.tail(n), val.data.u.tail(n),
+                                  val.data.sample_time(), options.max_lag);
   return s;
 }
 
@@ -448,7 +454,9 @@ DiagnoseStep make_step(const std::string& effect, const EffectParams& params, co
 DiagnoseResult diagnose(const Record& estimation, const Record& validation, const AdditiveModel& initial,
                         const LoopSpec& loop, const DiagnoseOptions& options) {
   const int min_samples = std::max(8 * options.max_lag, 4 * initial.n_beta() + 16);
-  if (estimation.size() < min_samples || validation.size() < min_samples)
+  if (options.validation_lead_in < 0 || options.validation_lead_in >= validation.size())
+    throw std::invalid_argument("diagnose: validation_lead_in outside the validation record");
+  if (estimation.size() < min_samples || validation.size() - options.validation_lead_in < min_samples)
     throw std::invalid_argument("diagnose: estimation and validation parts need at least " +
                                 std::to_string(min_samples) + " samples each");
   if (loop.closed && (!estimation.has_reference() || !validation.has_reference()))
