@@ -62,17 +62,20 @@ struct AugmentedModel {
 struct LoopSpec {
   bool closed = false;
   DiscreteTransferFunction controller;
+  // Open loop, band-limited input (not held): the input over [t_k, t_k+1) is
+  // the straight line from u_k to u_k+1 (first-order hold), taken at the middle
+  // of each substep. With one substep that is the held value (u_k + u_k+1) / 2.
+  bool interpolate_input = false;
+  // Integration substeps per sample: the nonlinear branches are re-evaluated
+  // every T / substeps (a cubic term makes harmonics near Nyquist when
+  // w T ~ 0.7, as on the Silverbox). 1 is the simulator's structure.
+  int substeps = 1;
 };
 
 // The model's output on a record (open loop from the measured u, closed loop
 // from r and u_ext), and the plant input it used in `u_sim` when given.
 Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& data, const LoopSpec& loop,
                                    Eigen::VectorXd* u_sim = nullptr);
-
-// A band-limited (not held) input sampled at t_k is closer to the held value
-// (u_k + u_k+1) / 2 over [t_k, t_k+1) than to u_k: the first-order-hold
-// equivalent for the ZOH simulation (open-loop records such as the Silverbox).
-Eigen::VectorXd midpoint_hold(const Eigen::VectorXd& u);
 
 // One residual test: its statistic against a threshold.
 struct ResidualTest {

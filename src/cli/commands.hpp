@@ -41,6 +41,7 @@ struct DiagnoseArgs {
   std::string plot_script;             // scripts/plot_diagnose.py, run when given
   std::string t_column = "t", y_column = "y";  // record columns (e.g. n, y2)
   std::string input_hold = "zoh";     // zoh, or foh: held value (u_k + u_k+1)/2 (open loop)
+  int substeps = 1;                    // integration substeps per sample
   int max_steps = 5;
   double min_improvement = 0.10;
   int max_delay = 10;

@@ -150,7 +150,8 @@ std::string report_md(const DiagnoseResult& r, const DiagnoseArgs& args, const C
   o << "Config `" << args.config << "` (" << (config.closed_loop ? "closed" : "open") << " loop), data `"
     << args.data << "`";
   if (!args.validate.empty()) o << ", validation `" << args.validate << "`";
-  o << ". Input intersample: " << (args.input_hold == "foh" ? "band-limited (held value (u_k + u_k+1)/2)" : "held (ZOH)");
+  o << ". Input intersample: " << (args.input_hold == "foh" ? "band-limited (first-order hold)" : "held (ZOH)")
+    << ", " << args.substeps << " integration substep(s) per sample";
   o << ". Estimation part: " << n_est << " samples; validation part: " << n_val << " samples.\n\n";
   o << "Validation error: the model simulated on the validation part ("
     << (config.closed_loop ? "closed loop from r, with the measured excitation besides the controller"
@@ -289,8 +290,6 @@ int diagnose(const DiagnoseArgs& args) {
     }
     if (args.input_hold == "foh") {
       if (config.closed_loop) throw InputError("--input-hold", "foh is for open-loop records (u is simulated in closed loop)");
-      est.u = midpoint_hold(est.u);
-      val.u = midpoint_hold(val.u);
     }
     DiagnoseOptions options;
     options.max_steps = args.max_steps;
@@ -302,6 +301,8 @@ int diagnose(const DiagnoseArgs& args) {
     LoopSpec loop;
     loop.closed = config.closed_loop;
     loop.controller = config.controller;
+    loop.interpolate_input = args.input_hold == "foh";
+    loop.substeps = args.substeps;
 
     const DiagnoseResult r = diagnose(est, val, config.model, loop, options);
 

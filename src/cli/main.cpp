@@ -51,6 +51,8 @@ int main(int argc, char** argv) {
   diagnose_cmd->add_option("--y-column", diag.y_column, "output column of the records (e.g. y2)");
   diagnose_cmd->add_option("--input-hold", diag.input_hold, "zoh (held input) or foh (band-limited input, open loop)")
       ->check(CLI::IsMember({"zoh", "foh"}));
+  diagnose_cmd->add_option("--substeps", diag.substeps, "integration substeps per sample (nonlinear effects)")
+      ->check(CLI::Range(1, 64));
   diagnose_cmd->add_option("--max-steps", diag.max_steps, "effects added at most")->check(CLI::NonNegativeNumber);
   diagnose_cmd->add_option("--min-improvement", diag.min_improvement, "relative drop of the validation RMS to add")
       ->check(CLI::Range(0.0, 1.0));

@@ -3,6 +3,7 @@
 // around them, open or closed loop.
 #include "modalwatch/diagnose.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -85,7 +86,8 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
   if (N < 2 || !(T > 0.0)) throw std::invalid_argument("diagnose: record too short");
   if (loop.closed && !data.has_reference()) throw std::invalid_argument("diagnose: closed loop needs r");
   std::vector<SubmodelRunner> runners;
-  for (const Submodel& s : model.linear.submodels) runners.emplace_back(s, T);
+  const int substeps = std::max(1, loop.substeps);
+  for (const Submodel& s : model.linear.submodels) runners.emplace_back(s, T / substeps);
   const ModelEffects& e = model.effects;
 
   // Closed loop: the excitation besides the controller, from the measured signals.
@@ -103,8 +105,23 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
   if (u_sim) u_sim->resize(N);
   std::vector<double> u_past(static_cast<std::size_t>(e.delay), 0.0);  // ring of the last d inputs
   std::size_t head = 0;
-  double y1 = 0.0;  // plant output (before offset and drift, without feedthrough) at k-1
+  double y1 = 0.0;  // plant output (before offset and drift, without feedthrough) one substep back
   const double t0 = data.t(0);
+  const bool interpolate = loop.interpolate_input && !loop.closed;
+  // The input to the plant besides u: offset and the nonlinear branches, from
+  // the output at the start of the (sub)interval before its input acts.
+  auto branches_at = [&](double y_now, double y_before) {
+    const double v_sign = (y_now > y_before) ? 1.0 : ((y_now < y_before) ? -1.0 : 0.0);
+    double b = 0.0;
+    if (e.input_offset_on) b += e.input_offset;
+    if (e.coulomb_on) b -= e.coulomb * v_sign;
+    // The cubic branch is held over the interval: take y at its middle,
+    // extrapolated, so the held stiffness adds no half-interval lag (that lag
+    // acts as negative damping, felt at w T ~ 0.7 on the Silverbox).
+    const double y_mid = 1.5 * y_now - 0.5 * y_before;
+    if (e.cubic_on) b -= e.cubic * y_mid * y_mid * y_mid;
+    return b;
+  };
   for (Eigen::Index k = 0; k < N; ++k) {
     // Move every submodel to t_k: for strictly proper submodels their output
     // y_k is then known before the input sample u_k, which the nonlinear
@@ -114,15 +131,7 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
       y_free += r.advance();
       feed += r.feedthrough();
     }
-    const double v_sign = (y_free > y1) ? 1.0 : ((y_free < y1) ? -1.0 : 0.0);
-    double branches = 0.0;
-    if (e.input_offset_on) branches += e.input_offset;
-    if (e.coulomb_on) branches -= e.coulomb * v_sign;
-    // The cubic branch is held over [t_k, t_k+1): take y at the middle of the
-    // interval, extrapolated, so the held stiffness adds no half-sample lag
-    // (that lag acts as negative damping, felt at w T ~ 0.7 on the Silverbox).
-    const double y_mid = 1.5 * y_free - 0.5 * y1;
-    if (e.cubic_on) branches -= e.cubic * y_mid * y_mid * y_mid;
+    const double branches = branches_at(y_free, y1);
     const double delayed = e.delay > 0 ? u_past[head] : 0.0;
     double out_terms = 0.0;
     if (e.output_offset_on) out_terms += e.output_offset;
@@ -135,9 +144,17 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
       const double gain = 1.0 + c0 * (direct ? feed : 0.0);
       u = (controller.peek(data.r(k) - y_known) + u_ext(k)) / gain;
     }
-    const double u_plant = (e.delay > 0 ? delayed : u) + branches;
+    // The input over [t_k, t_k+1): held, or (open loop, band-limited input)
+    // linear towards the next sample, at the middle of each substep.
+    const double u_a = e.delay > 0 ? delayed : u;
+    double u_b = u_a;
+    if (interpolate) {
+      const Eigen::Index j = k + 1 - e.delay;
+      u_b = j < 0 ? 0.0 : (j < N ? data.u(j) : u_a);
+    }
+    auto held = [&](int sub) { return interpolate ? u_a + (u_b - u_a) * (sub + 0.5) / substeps : u_a; };
     double y_plant = 0.0;
-    for (SubmodelRunner& r : runners) y_plant += r.complete(u_plant);
+    for (SubmodelRunner& r : runners) y_plant += r.complete(held(0) + branches);
     if (e.delay > 0) {
       u_past[head] = u;
       head = (head + 1) % u_past.size();
@@ -146,14 +163,15 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
     if (loop.closed) controller.step(data.r(k) - y(k));
     if (u_sim) (*u_sim)(k) = u;
     y1 = y_free;
+    for (int sub = 1; sub < substeps; ++sub) {
+      double y_sub = 0.0;
+      for (SubmodelRunner& r : runners) y_sub += r.advance();
+      const double b = branches_at(y_sub, y1);
+      for (SubmodelRunner& r : runners) r.complete(held(sub) + b);
+      y1 = y_sub;
+    }
   }
   return y;
-}
-
-Eigen::VectorXd midpoint_hold(const Eigen::VectorXd& u) {
-  Eigen::VectorXd h = u;
-  for (Eigen::Index k = 0; k + 1 < u.size(); ++k) h(k) = 0.5 * (u(k) + u(k + 1));
-  return h;
 }
 
 }  // namespace modalwatch
