@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <numbers>
 #include <optional>
+#include <ostream>
 #include <random>
 #include <string>
 #include <filesystem>
@@ -108,6 +109,8 @@ struct EffectCase {
   std::string name;  // expected effect
   bool closed;
 };
+
+void PrintTo(const EffectCase& c, std::ostream* os) { *os << c.name << (c.closed ? ", closed loop" : ", open loop"); }
 
 class DiagnoseEffect : public ::testing::TestWithParam<EffectCase> {};
 
