@@ -44,8 +44,27 @@ struct ReplayArgs {
   std::optional<std::int64_t> start_utime;  // utime of the first sample, us (default: now)
 };
 
+struct DiagnoseArgs {
+  std::string config;
+  std::string data;
+  std::string validate;                // validation record (optional)
+  std::optional<double> split;         // estimation fraction of --data (default 0.7)
+  std::string estimate_samples;        // "A:B" rows of --data
+  std::string validate_samples;        // "A:B" rows of the validation record
+  std::string report;                  // output directory
+  std::string effects;                 // comma-separated library (default: all)
+  std::string plot_script;             // scripts/plot_diagnose.py, run when given
+  std::string t_column = "t", y_column = "y";  // record columns (e.g. n, y2)
+  std::string input_hold = "zoh";     // zoh, or foh: held value (u_k + u_k+1)/2 (open loop)
+  int substeps = 1;                    // integration substeps per sample
+  int max_steps = 5;
+  double min_improvement = 0.10;
+  int max_delay = 10;
+};
+
 int simulate(const SimulateArgs& args);
 int replay(const ReplayArgs& args);
+int diagnose(const DiagnoseArgs& args);
 int track(const TrackArgs& args);
 int fit(const FitArgs& args);
 

@@ -52,6 +52,28 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 100000))->capture_default_str();
   replay_cmd->add_option("--url", replay_args.url, "LCM URL (overrides lcm.url)");
   replay_cmd->add_option("--start-utime", replay_args.start_utime, "utime of the first sample [us] (default: now)");
+  DiagnoseArgs diag;
+  auto* diagnose_cmd = app.add_subcommand("diagnose", "Residual analysis and model augmentation: writes a report");
+  diagnose_cmd->add_option("--config,-c", diag.config, "YAML with the model: section")->required();
+  diagnose_cmd->add_option("--data,-d", diag.data, "record CSV with columns t,u,y[,r]")->required();
+  diagnose_cmd->add_option("--validate", diag.validate, "validation record CSV");
+  diagnose_cmd->add_option("--split", diag.split, "estimation fraction of --data, the rest validates (0.7)");
+  diagnose_cmd->add_option("--estimate-samples", diag.estimate_samples, "FIRST:END rows of --data to estimate on");
+  diagnose_cmd->add_option("--validate-samples", diag.validate_samples, "FIRST:END rows to validate on");
+  diagnose_cmd->add_option("--report,-r", diag.report, "directory for report.md, summary.json, model.yaml")->required();
+  diagnose_cmd->add_option("--effects", diag.effects, "comma-separated candidate effects (default: all)");
+  diagnose_cmd->add_option("--plot-script", diag.plot_script, "run this scripts/plot_diagnose.py on the report");
+  diagnose_cmd->add_option("--t-column", diag.t_column, "time column of the records (e.g. n: sample index)");
+  diagnose_cmd->add_option("--y-column", diag.y_column, "output column of the records (e.g. y2)");
+  diagnose_cmd->add_option("--input-hold", diag.input_hold, "zoh (held input) or foh (band-limited input, open loop)")
+      ->check(CLI::IsMember({"zoh", "foh"}));
+  diagnose_cmd->add_option("--substeps", diag.substeps, "integration substeps per sample (nonlinear effects)")
+      ->check(CLI::Range(1, 64));
+  diagnose_cmd->add_option("--max-steps", diag.max_steps, "effects added at most")->check(CLI::NonNegativeNumber);
+  diagnose_cmd->add_option("--min-improvement", diag.min_improvement, "relative drop of the validation RMS to add")
+      ->check(CLI::Range(0.0, 1.0));
+  diagnose_cmd->add_option("--max-delay", diag.max_delay, "largest input delay tried [samples]")
+      ->check(CLI::PositiveNumber);
 
   try {
     app.parse(argc, argv);
@@ -81,6 +103,7 @@ int main(int argc, char** argv) {
     }
     return replay(replay_args);
   }
+  if (diagnose_cmd->parsed()) return diagnose(diag);
   if (track_cmd->parsed()) {
     track_args.progress = !no_progress;
     return track(track_args);

@@ -428,7 +428,8 @@ void parse_trajectory(const Map& m, PlantMode& mode) {
 }
 
 PlantSpec parse_plant(const Map& plant) {
-  plant.allow({"modes", "noise_variance", "snr_db"}, "plant");
+  plant.allow({"modes", "noise_variance", "snr_db", "output_offset", "input_offset", "input_delay", "coulomb", "cubic"},
+              "plant");
   PlantSpec spec;
   const Value list = plant.require("modes");
   const std::vector<Value> items = list.items();
@@ -453,6 +454,12 @@ PlantSpec parse_plant(const Map& plant) {
     if (spec.noise_variance < 0.0) variance->fail("must be >= 0");
   }
   if (snr) spec.snr_db = snr->number();
+  // Undeclared effects for `diagnose` (PlantEffects).
+  spec.effects.output_offset = optional_number(plant, "output_offset", 0.0);
+  spec.effects.input_offset = optional_number(plant, "input_offset", 0.0);
+  if (const auto d = plant.get("input_delay")) spec.effects.input_delay = static_cast<int>(d->integer(0, 1000));
+  if (const auto c = plant.get("coulomb")) spec.effects.coulomb = c->at_least(0.0);
+  spec.effects.cubic = optional_number(plant, "cubic", 0.0);
   return spec;
 }
 
@@ -855,6 +862,12 @@ void write_plant(YamlWriter& w, const PlantSpec& plant) {
     w.number(1, "snr_db", *plant.snr_db);
   else
     w.number(1, "noise_variance", plant.noise_variance);
+  const PlantEffects& e = plant.effects;
+  if (e.output_offset != 0.0) w.number(1, "output_offset", e.output_offset);
+  if (e.input_offset != 0.0) w.number(1, "input_offset", e.input_offset);
+  if (e.input_delay != 0) w.number(1, "input_delay", e.input_delay);
+  if (e.coulomb != 0.0) w.number(1, "coulomb", e.coulomb);
+  if (e.cubic != 0.0) w.number(1, "cubic", e.cubic);
   w.line(1, "modes:");
   for (const auto& mode : plant.modes) {
     if (!mode.resonant) {

@@ -1,0 +1,167 @@
+#pragma once
+// Closing the loop with measured data (DESIGN.md, "Closing the loop"): fit the
+// configured additive model, test the residual, trace it to an effect the model
+// lacks, add the best effect, refit, and repeat while the validation error drops
+// significantly and the residual tests still fail.
+//
+// The augmented model is the additive model of eq. (5) driven by a plant input
+// that carries the effects, plus output terms:
+//
+//   u_p(t_k) = u(t_{k-d}) + u_off - Fc sign(y_k - y_{k-1}) - c y_m^3   (held over [t_k, t_k+1))
+//   y_m = 1.5 y_k - 0.5 y_{k-1}   (y extrapolated to the middle of the hold interval)
+//   y(t_k)   = sum_i G_i(p) u_p + y_off + drift (t_k - t_0)
+//
+// The nonlinear branches (Coulomb, cubic) are additive branches driven by their
+// own signal through the same dynamics, A(p) y = B(p) (u - c y^3). For
+// strictly proper submodels y_k is fixed by the inputs before t_k, so the
+// branches are sampled at t_k and held with the input (no extra delay; for a
+// biproper submodel they use its output without the feedthrough). The
+// simulator's PlantEffects have the same structure. Only the modes and rigid bodies
+// are carried by the recursive estimator (`track`) and the daemon; offset,
+// drift, delay, Coulomb and cubic terms are fitted by `diagnose` alone.
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "modalwatch/model.hpp"
+#include "modalwatch/prefilter.hpp"
+#include "modalwatch/record.hpp"
+#include "modalwatch/transfer_function.hpp"
+
+namespace modalwatch {
+
+enum class EffectKind { mode, rigid_body, offset, drift, delay, coulomb, cubic };
+const char* effect_name(EffectKind kind);
+std::vector<EffectKind> all_effects();
+
+// What a model of modes does not carry. A flag says the parameter is part of
+// the model (and fitted); its value may still be small.
+struct ModelEffects {
+  bool output_offset_on = false, input_offset_on = false, drift_on = false, coulomb_on = false, cubic_on = false;
+  double output_offset = 0.0;  // y units
+  double input_offset = 0.0;   // u units
+  double drift = 0.0;          // y units per s, from the first sample of the record
+  int delay = 0;               // samples
+  double coulomb = 0.0;        // Fc, u units
+  double cubic = 0.0;          // c, u units per y unit cubed
+  int n_params() const;        // continuous parameters plus one for a delay
+};
+
+struct AugmentedModel {
+  AdditiveModel linear;
+  ModelEffects effects;
+  int n_params() const { return linear.n_beta() + effects.n_params(); }
+};
+
+// How a model is run on a record. Closed loop: u = C_d(q)(r - y_sim) + u_ext with
+// u_ext = u - C_d(q)(r - y) from the measured signals, the excitation the loop
+// adds besides the controller (zero for a record made by this controller; an
+// injected pulse or a two-degree-of-freedom law otherwise).
+struct LoopSpec {
+  bool closed = false;
+  DiscreteTransferFunction controller;
+  // Open loop, band-limited input (not held): the input over [t_k, t_k+1) is
+  // the straight line from u_k to u_k+1 (first-order hold), taken at the middle
+  // of each substep. With one substep that is the held value (u_k + u_k+1) / 2.
+  bool interpolate_input = false;
+  // Integration substeps per sample: the nonlinear branches are re-evaluated
+  // every T / substeps (a cubic term makes harmonics near Nyquist when
+  // w T ~ 0.7, as on the Silverbox). 1 is the simulator's structure.
+  int substeps = 1;
+};
+
+// The model's output on a record (open loop from the measured u, closed loop
+// from r and u_ext), and the plant input it used in `u_sim` when given.
+Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& data, const LoopSpec& loop,
+                                   Eigen::VectorXd* u_sim = nullptr);
+
+// One residual test: its statistic against a threshold.
+struct ResidualTest {
+  std::string name;
+  double statistic = 0.0;
+  double threshold = 0.0;
+  bool pass = false;
+};
+
+// Welch estimates (Hann window, 50 % overlap).
+struct Spectra {
+  Eigen::VectorXd frequency_hz;
+  Eigen::VectorXd residual_psd;
+  Eigen::VectorXd input_psd;
+  Eigen::VectorXd residual_to_input;  // |S_eu / S_uu|
+  Eigen::VectorXd coherence;          // |S_eu|^2 / (S_ee S_uu)
+  int segments = 0;
+  Eigen::VectorXcd cross;             // S_eu / S_uu (complex), for mode starts
+};
+Spectra welch_spectra(const Eigen::VectorXd& e, const Eigen::VectorXd& u, double T, int segment_length);
+
+struct ResidualAnalysis {
+  // Autocorrelation of e at lags 1..M against the 99 % band 2.58/sqrt(N):
+  // statistic = the largest |rho|, pass when at most 5 % of the lags are outside
+  // and none is outside twice the band.
+  ResidualTest whiteness;
+  // Cross-correlation of e with past input u(k - tau), tau = 0..M, same band and rule.
+  ResidualTest independence;
+  // Largest residual-input coherence against its 99 % level for zero coherence
+  // with K averaged segments, 1 - 0.01^(1/(K-1)).
+  ResidualTest coherence;
+  Eigen::VectorXd autocorrelation;    // lags 0..M
+  Eigen::VectorXd cross_correlation;  // lags 0..M
+  Spectra spectra;
+  bool pass() const { return whiteness.pass && independence.pass; }
+};
+ResidualAnalysis analyse_residual(const Eigen::VectorXd& e, const Eigen::VectorXd& u, double T, int max_lag);
+
+struct DiagnoseOptions {
+  int max_steps = 5;                // effects added at most
+  double min_improvement = 0.10;    // an effect is added when it lowers the validation RMS by this fraction
+  int max_delay = 10;               // samples
+  int max_lag = 25;                 // residual correlation lags
+  int oe_iterations = 40;           // Levenberg-Marquardt iterations of the output-error refinement
+  int max_modes_added = 4;
+  // Samples at the start of the validation record that only set the model's
+  // state (the estimation part before a split): simulated, not scored.
+  Eigen::Index validation_lead_in = 0;
+  Hold output_hold = Hold::zoh;     // SRIVC prefilters
+  std::vector<EffectKind> library = all_effects();
+};
+
+using EffectParams = std::vector<std::pair<std::string, double>>;
+
+struct Candidate {
+  EffectKind kind = EffectKind::mode;
+  EffectParams params;
+  AugmentedModel model;
+  double estimation_rms = 0.0;
+  double validation_rms = 0.0;
+  double fit_percent = 0.0;  // validation
+  double bic = 0.0;          // N ln(MSE_est) + k ln N on the estimation part
+  bool valid = true;         // false when the fit failed (note says why)
+  std::string note;
+};
+
+struct DiagnoseStep {
+  std::string effect = "none";  // effect_name of the added effect
+  EffectParams params;
+  AugmentedModel model;
+  double estimation_rms = 0.0;
+  double validation_rms = 0.0;
+  double fit_percent = 0.0;
+  double bic = 0.0;
+  ResidualAnalysis residual;         // on the validation part
+  Eigen::VectorXd validation_output; // simulated
+  std::vector<Candidate> ranking;    // candidates tried from this step, best first
+};
+
+struct DiagnoseResult {
+  std::vector<DiagnoseStep> steps;  // steps[0]: the configured structure
+  std::string stop_reason;
+};
+
+// Throws std::invalid_argument for records too short or a closed loop without r.
+DiagnoseResult diagnose(const Record& estimation, const Record& validation, const AdditiveModel& initial,
+                        const LoopSpec& loop, const DiagnoseOptions& options);
+
+}  // namespace modalwatch

@@ -1,0 +1,86 @@
+#!/usr/bin/python3
+"""PNGs for a `modalwatch diagnose` report directory.
+
+Usage: scripts/plot_diagnose.py REPORT_DIR
+
+Reads spectra.csv, validation.csv and bode.csv written by `modalwatch diagnose`
+and writes residual_spectrum.png, validation.png and bode.png next to them
+(the report links these). Needs Debian's python3-matplotlib (Agg backend).
+"""
+import os
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def load(path):
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    return data
+
+
+def main():
+    if len(sys.argv) != 2:
+        sys.stderr.write(__doc__)
+        return 2
+    d = sys.argv[1]
+
+    s = load(os.path.join(d, "spectra.csv"))
+    f = s["f_hz"][1:]
+    fig, ax = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    ax[0].semilogy(f, s["psd_before"][1:], label="before (configured model)")
+    ax[0].semilogy(f, s["psd_after"][1:], label="after (augmented)")
+    ax[0].set_ylabel("residual PSD")
+    ax[0].legend()
+    ax[0].grid(True, which="both", alpha=0.3)
+    ax[1].semilogy(f, s["e_to_u_before"][1:], label="before")
+    ax[1].semilogy(f, s["e_to_u_after"][1:], label="after")
+    ax[1].set_ylabel("|S_eu / S_uu|")
+    ax[1].set_xlabel("frequency [Hz]")
+    ax[1].grid(True, which="both", alpha=0.3)
+    fig.suptitle("Residual spectrum on the validation part (Welch)")
+    fig.tight_layout()
+    fig.savefig(os.path.join(d, "residual_spectrum.png"), dpi=110)
+    plt.close(fig)
+
+    v = load(os.path.join(d, "validation.csv"))
+    fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    ax[0].plot(v["t"], v["y"], "k", lw=0.8, label="measured")
+    ax[0].plot(v["t"], v["y_before"], lw=0.8, label="configured model")
+    ax[0].plot(v["t"], v["y_after"], lw=0.8, label="augmented model")
+    ax[0].set_ylabel("y")
+    ax[0].legend(loc="upper right")
+    ax[1].plot(v["t"], v["y"] - v["y_before"], lw=0.8, label="error before")
+    ax[1].plot(v["t"], v["y"] - v["y_after"], lw=0.8, label="error after")
+    ax[1].set_ylabel("y - y_sim")
+    ax[1].set_xlabel("t [s]")
+    ax[1].legend(loc="upper right")
+    fig.suptitle("Simulated against measured, validation part")
+    fig.tight_layout()
+    fig.savefig(os.path.join(d, "validation.png"), dpi=110)
+    plt.close(fig)
+
+    b = load(os.path.join(d, "bode.csv"))
+    fig, ax = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    ax[0].loglog(b["f_hz"], b["mag_before"], label="configured model")
+    ax[0].loglog(b["f_hz"], b["mag_after"], "--", label="augmented (linear part)")
+    ax[0].set_ylabel("|G|")
+    ax[0].legend()
+    ax[0].grid(True, which="both", alpha=0.3)
+    ax[1].semilogx(b["f_hz"], b["phase_before_deg"])
+    ax[1].semilogx(b["f_hz"], b["phase_after_deg"], "--")
+    ax[1].set_ylabel("phase [deg]")
+    ax[1].set_xlabel("frequency [Hz]")
+    ax[1].grid(True, which="both", alpha=0.3)
+    fig.suptitle("Bode of both models")
+    fig.tight_layout()
+    fig.savefig(os.path.join(d, "bode.png"), dpi=110)
+    plt.close(fig)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

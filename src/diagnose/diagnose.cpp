@@ -1,0 +1,526 @@
+// modalwatch diagnose: fit, test the residual, trace it to an effect, add the
+// best effect, refit, repeat (DESIGN.md "Closing the loop").
+//
+// Fitting. The configured structure starts from the additive SRIVC of the
+// paper (fit_srivc; open or closed loop) and from the configured values; each
+// start is refined by output-error Levenberg-Marquardt on the simulated
+// augmented model (simulate_augmented), which also fits the effects: the
+// effects enter the simulated output, not the SRIVC regressors, because the
+// nonlinear branches are fed by the simulated output. A candidate effect starts
+// from one Gauss-Newton step from zero on the current residual (its
+// least-squares size), an extra mode from the peak of the residual-to-input
+// spectrum (then SRIVC of the enlarged additive model), a delay by a scan of
+// whole samples with a short refit each (the cross-correlation lag is reported).
+//
+// Ranking. By the validation RMS each candidate leaves; the Bayesian
+// information criterion BIC = N ln(MSE_est) + k ln N on the estimation part is
+// reported, and the best candidate is added only when it lowers both the
+// validation RMS (by DiagnoseOptions::min_improvement) and the BIC.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <stdexcept>
+
+#include <Eigen/Cholesky>
+
+#include "modalwatch/diagnose.hpp"
+#include "modalwatch/srivc.hpp"
+
+namespace modalwatch {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+double rms(const Eigen::VectorXd& x) { return x.size() ? std::sqrt(x.squaredNorm() / x.size()) : 0.0; }
+
+// ------------------------------------------------------------ parameters
+
+// p = [beta; effect parameters that are on], in physical units.
+Eigen::VectorXd pack(const AugmentedModel& m) {
+  const ModelEffects& e = m.effects;
+  std::vector<double> extra;
+  if (e.output_offset_on) extra.push_back(e.output_offset);
+  if (e.input_offset_on) extra.push_back(e.input_offset);
+  if (e.drift_on) extra.push_back(e.drift);
+  if (e.coulomb_on) extra.push_back(e.coulomb);
+  if (e.cubic_on) extra.push_back(e.cubic);
+  const int nb = m.linear.n_beta();
+  Eigen::VectorXd p(nb + static_cast<int>(extra.size()));
+  p.head(nb) = m.linear.beta();
+  for (std::size_t i = 0; i < extra.size(); ++i) p(nb + static_cast<int>(i)) = extra[i];
+  return p;
+}
+
+void unpack(const Eigen::VectorXd& p, AugmentedModel& m) {
+  const int nb = m.linear.n_beta();
+  m.linear.set_beta(p.head(nb));
+  int i = nb;
+  ModelEffects& e = m.effects;
+  if (e.output_offset_on) e.output_offset = p(i++);
+  if (e.input_offset_on) e.input_offset = p(i++);
+  if (e.drift_on) e.drift = p(i++);
+  if (e.coulomb_on) e.coulomb = p(i++);
+  if (e.cubic_on) e.cubic = p(i++);
+}
+
+// ------------------------------------------------------------ output error
+
+struct Problem {
+  const Record& data;
+  const LoopSpec& loop;
+};
+
+// Simulated output, or empty when the model cannot be simulated or diverges.
+Eigen::VectorXd output(const AugmentedModel& m, const Problem& pb) {
+  try {
+    Eigen::VectorXd y = simulate_augmented(m, pb.data, pb.loop);
+    if (!y.allFinite()) return {};
+    return y;
+  } catch (const std::exception&) {
+    return {};
+  }
+}
+
+double cost_of(const Eigen::VectorXd& y_hat, const Eigen::VectorXd& y) {
+  if (y_hat.size() != y.size()) return kInf;
+  const double c = (y - y_hat).squaredNorm();
+  return std::isfinite(c) ? c : kInf;
+}
+
+struct Refined {
+  AugmentedModel model;
+  double cost = kInf;  // sum of squared output errors on the estimation part
+};
+
+// Levenberg-Marquardt on the output error with a forward-difference Jacobian,
+// in parameters scaled by their start values (p = p0 (1 + delta)).
+Refined refine(const AugmentedModel& start, const Problem& pb, int iterations) {
+  Refined best{start, kInf};
+  const Eigen::VectorXd p0 = pack(start);
+  const int P = static_cast<int>(p0.size());
+  Eigen::VectorXd scale(P);
+  const double typical = p0.size() ? p0.cwiseAbs().maxCoeff() : 1.0;
+  for (int j = 0; j < P; ++j) scale(j) = p0(j) != 0.0 ? std::abs(p0(j)) : 1e-6 * std::max(typical, 1e-12);
+  auto model_at = [&](const Eigen::VectorXd& delta) {
+    AugmentedModel m = start;
+    unpack(p0 + scale.cwiseProduct(delta), m);
+    return m;
+  };
+  Eigen::VectorXd delta = Eigen::VectorXd::Zero(P);
+  Eigen::VectorXd y_hat = output(start, pb);
+  double cost = cost_of(y_hat, pb.data.y);
+  if (!std::isfinite(cost)) return best;
+  best.cost = cost;
+  double lambda = 1e-3;
+  const double h = 1e-6;
+  for (int it = 0; it < iterations && P > 0; ++it) {
+    Eigen::MatrixXd J(pb.data.size(), P);
+    for (int j = 0; j < P; ++j) {
+      Eigen::VectorXd d = delta;
+      d(j) += h;
+      const Eigen::VectorXd yj = output(model_at(d), pb);
+      J.col(j) = yj.size() == y_hat.size() ? Eigen::VectorXd((yj - y_hat) / h) : Eigen::VectorXd::Zero(y_hat.size());
+    }
+    const Eigen::VectorXd r = pb.data.y - y_hat;
+    const Eigen::MatrixXd A = J.transpose() * J;
+    const Eigen::VectorXd g = J.transpose() * r;
+    bool accepted = false;
+    for (int tries = 0; tries < 12; ++tries) {
+      Eigen::MatrixXd M = A;
+      for (int j = 0; j < P; ++j) M(j, j) += lambda * std::max(A(j, j), 1e-12);
+      const Eigen::VectorXd step = M.ldlt().solve(g);
+      if (!step.allFinite()) {
+        lambda *= 4.0;
+        continue;
+      }
+      const Eigen::VectorXd trial = delta + step;
+      const Eigen::VectorXd y_trial = output(model_at(trial), pb);
+      const double c = cost_of(y_trial, pb.data.y);
+      if (c < cost) {
+        const double drop = (cost - c) / cost;
+        delta = trial;
+        y_hat = y_trial;
+        cost = c;
+        lambda = std::max(lambda / 3.0, 1e-9);
+        accepted = true;
+        if (drop < 1e-10) it = iterations;  // converged
+        break;
+      }
+      lambda *= 4.0;
+    }
+    if (!accepted) break;
+  }
+  best.model = model_at(delta);
+  best.cost = cost;
+  return best;
+}
+
+// ------------------------------------------------------------ starts
+
+// SRIVC of the linear part on the record with the output terms removed; only
+// for models whose effects do not act on the plant input.
+bool srivc_start(const AdditiveModel& linear, const ModelEffects& e, const Record& data, const LoopSpec& loop,
+                 const DiagnoseOptions& options, AdditiveModel& out) {
+  if (e.input_offset_on || e.coulomb_on || e.cubic_on || e.delay > 0) return false;
+  Record corrected = data;
+  if (e.output_offset_on) corrected.y.array() -= e.output_offset;
+  if (e.drift_on) corrected.y.array() -= e.drift * (data.t.array() - data.t(0));
+  SrivcOptions so;
+  so.closed_loop = loop.closed;
+  so.controller = loop.controller;
+  so.output_hold = options.output_hold;
+  so.max_iterations = 60;
+  try {
+    out = fit_srivc(corrected, linear, so).model;
+    return out.beta().allFinite();
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+// The best of: the given model refined, and its SRIVC refit refined.
+Refined fit_structure(const AugmentedModel& start, const Problem& pb, const DiagnoseOptions& options,
+                      bool try_srivc) {
+  Refined best = refine(start, pb, options.oe_iterations);
+  AdditiveModel srivc;
+  if (try_srivc && srivc_start(start.linear, start.effects, pb.data, pb.loop, options, srivc)) {
+    AugmentedModel s = start;
+    s.linear = srivc;
+    Refined r = refine(s, pb, options.oe_iterations);
+    if (r.cost < best.cost) best = r;
+  }
+  return best;
+}
+
+// Least-squares size of one new scalar parameter from zero: one Gauss-Newton
+// step with the sensitivity (y(h) - y(0)) / h.
+double gauss_newton_start(const AugmentedModel& with_h, const Eigen::VectorXd& y0, double h, const Problem& pb) {
+  const Eigen::VectorXd yh = output(with_h, pb);
+  if (yh.size() != y0.size()) return 0.0;
+  const Eigen::VectorXd J = (yh - y0) / h;
+  const double jj = J.squaredNorm();
+  if (!(jj > 0.0) || !std::isfinite(jj)) return 0.0;
+  return J.dot(pb.data.y - y0) / jj;
+}
+
+// ------------------------------------------------------------ evaluation
+
+struct Scored {
+  double estimation_rms = kInf, validation_rms = kInf, fit_percent = -kInf, bic = kInf;
+  Eigen::VectorXd validation_output;
+};
+
+Scored score(const AugmentedModel& m, double est_cost, const Problem& est, const Problem& val, Eigen::Index lead_in) {
+  Scored s;
+  const double N = static_cast<double>(est.data.size());
+  if (!std::isfinite(est_cost)) return s;
+  s.estimation_rms = std::sqrt(est_cost / N);
+  s.bic = N * std::log(std::max(est_cost / N, 1e-300)) + m.n_params() * std::log(N);
+  s.validation_output = output(m, val);
+  if (s.validation_output.size() != val.data.size()) return s;
+  const Eigen::Index n = val.data.size() - lead_in;
+  s.validation_rms = rms(val.data.y.tail(n) - s.validation_output.tail(n));
+  s.fit_percent = fit_percent(val.data.y.tail(n), s.validation_output.tail(n));
+  return s;
+}
+
+double rms_or_one(const Eigen::VectorXd& x) {
+  const double r = rms(x.array() - x.mean());
+  return r > 0.0 ? r : 1.0;
+}
+
+// ------------------------------------------------------------ candidates
+
+struct Context {
+  const Problem& est;
+  const Problem& val;
+  const DiagnoseOptions& options;
+  const AdditiveModel& configured;  // the configured starting values
+};
+
+Candidate finish(EffectKind kind, const Refined& r, const Context& ctx) {
+  Candidate c;
+  c.kind = kind;
+  c.model = r.model;
+  const Scored s = score(r.model, r.cost, ctx.est, ctx.val, ctx.options.validation_lead_in);
+  c.estimation_rms = s.estimation_rms;
+  c.validation_rms = s.validation_rms;
+  c.fit_percent = s.fit_percent;
+  c.bic = s.bic;
+  c.valid = std::isfinite(s.validation_rms);
+  if (!c.valid) c.note = "fit failed or diverged on validation";
+  return c;
+}
+
+Candidate invalid(EffectKind kind, const std::string& why) {
+  Candidate c;
+  c.kind = kind;
+  c.valid = false;
+  c.note = why;
+  c.estimation_rms = c.validation_rms = c.bic = kInf;
+  return c;
+}
+
+std::string next_mode_name(const AdditiveModel& m) {
+  for (int i = 1;; ++i) {
+    const std::string name = "added" + std::to_string(i);
+    bool used = false;
+    for (const auto& s : m.submodels) used = used || s.name == name;
+    if (!used) return name;
+  }
+}
+
+Candidate candidate_mode(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
+  const Record& d = ctx.est.data;
+  const double T = d.sample_time();
+  // The input is the measured u in both loops: in closed loop S_eu/S_uu is
+  // only a start, the fit decides.
+  const Spectra sp = welch_spectra(d.y - y0, d.u, T, static_cast<int>(std::min<Eigen::Index>(2048, d.size() / 4)));
+  const double excited = 1e-3 * sp.input_psd.maxCoeff();
+  Eigen::Index peak = -1;
+  for (Eigen::Index f = 2; f < sp.frequency_hz.size(); ++f)
+    if (sp.input_psd(f) > excited && (peak < 0 || sp.residual_to_input(f) > sp.residual_to_input(peak))) peak = f;
+  if (peak < 0) return invalid(EffectKind::mode, "no excited frequency");
+  ModalParameters start;
+  start.wn = 2.0 * std::numbers::pi * sp.frequency_hz(peak);
+  start.zeta = 0.05;
+  // At resonance b0 / (j 2 zeta) = H: b0 = -2 zeta Im(H).
+  start.gain = -2.0 * start.zeta * sp.cross(peak).imag();
+  if (start.gain == 0.0) start.gain = 2.0 * start.zeta * sp.residual_to_input(peak);
+  AugmentedModel m = current;
+  m.linear.submodels.push_back(make_mode(next_mode_name(current.linear), start));
+  Candidate c = finish(EffectKind::mode, fit_structure(m, ctx.est, ctx.options, true), ctx);
+  if (c.valid) {
+    const ModalParameters p = modal_parameters(c.model.linear.submodels.back());
+    c.params = {{"wn", p.wn}, {"zeta", p.zeta}, {"gain", p.gain}, {"hz", p.hz()}};
+  }
+  return c;
+}
+
+Candidate candidate_rigid_body(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
+  for (const auto& s : current.linear.submodels)
+    if (s.rigid_poles > 0) return invalid(EffectKind::rigid_body, "the model has a rigid body");
+  const Record& d = ctx.est.data;
+  const double D = d.t(d.size() - 1) - d.t(0);
+  const double h = 1e-3 * rms_or_one(d.y) / (rms_or_one(d.u) * std::max(D * D, 1e-12));
+  AugmentedModel m = current;
+  m.linear.submodels.push_back(make_rigid_body("rigid", h, 2));
+  double g = gauss_newton_start(m, y0, h, ctx.est);
+  if (g == 0.0) return invalid(EffectKind::rigid_body, "no sensitivity");
+  m.linear.submodels.back().b(0) = g;
+  Candidate c = finish(EffectKind::rigid_body, fit_structure(m, ctx.est, ctx.options, true), ctx);
+  if (c.valid) c.params = {{"gain", c.model.linear.submodels.back().b(0)}};
+  return c;
+}
+
+// A scalar effect switched on at h, started by Gauss-Newton and refined with the rest.
+template <class Set>
+Refined scalar_effect(const AugmentedModel& current, const Eigen::VectorXd& y0, double h, Set set, const Context& ctx) {
+  AugmentedModel m = current;
+  set(m.effects, h);
+  const double start = gauss_newton_start(m, y0, h, ctx.est);
+  if (start == 0.0) return {};
+  set(m.effects, start);
+  return fit_structure(m, ctx.est, ctx.options, true);
+}
+
+Candidate candidate_offset(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
+  const Record& d = ctx.est.data;
+  Refined out, in;
+  if (!current.effects.output_offset_on)
+    out = scalar_effect(current, y0, 1e-3 * rms_or_one(d.y),
+                        [](ModelEffects& e, double v) { e.output_offset_on = true; e.output_offset = v; }, ctx);
+  if (!current.effects.input_offset_on)
+    in = scalar_effect(current, y0, 1e-3 * rms_or_one(d.u),
+                       [](ModelEffects& e, double v) { e.input_offset_on = true; e.input_offset = v; }, ctx);
+  if (!std::isfinite(out.cost) && !std::isfinite(in.cost)) return invalid(EffectKind::offset, "already in the model");
+  // Output (sensor) or input (force) offset: the one with the lower estimation error.
+  const bool input = in.cost < out.cost;
+  Candidate c = finish(EffectKind::offset, input ? in : out, ctx);
+  if (c.valid)
+    c.params = {{"value", input ? c.model.effects.input_offset : c.model.effects.output_offset},
+                {"input", input ? 1.0 : 0.0}};
+  return c;
+}
+
+Candidate candidate_drift(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
+  if (current.effects.drift_on) return invalid(EffectKind::drift, "already in the model");
+  const Record& d = ctx.est.data;
+  const double D = std::max(d.t(d.size() - 1) - d.t(0), 1e-12);
+  const Refined r = scalar_effect(current, y0, 1e-3 * rms_or_one(d.y) / D,
+                                  [](ModelEffects& e, double v) { e.drift_on = true; e.drift = v; }, ctx);
+  if (!std::isfinite(r.cost)) return invalid(EffectKind::drift, "no sensitivity");
+  Candidate c = finish(EffectKind::drift, r, ctx);
+  if (c.valid) c.params = {{"slope", c.model.effects.drift}};
+  return c;
+}
+
+Candidate candidate_coulomb(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
+  if (current.effects.coulomb_on) return invalid(EffectKind::coulomb, "already in the model");
+  const Refined r = scalar_effect(current, y0, 1e-3 * rms_or_one(ctx.est.data.u),
+                                  [](ModelEffects& e, double v) { e.coulomb_on = true; e.coulomb = v; }, ctx);
+  if (!std::isfinite(r.cost)) return invalid(EffectKind::coulomb, "no sensitivity");
+  Candidate c = finish(EffectKind::coulomb, r, ctx);
+  if (c.valid) c.params = {{"fc", c.model.effects.coulomb}};
+  if (c.valid && !(c.model.effects.coulomb > 0.0)) {
+    c.valid = false;  // friction that pushes: not a physical effect
+    c.note = "negative friction level";
+  }
+  return c;
+}
+
+Candidate candidate_cubic(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
+  if (current.effects.cubic_on) return invalid(EffectKind::cubic, "already in the model");
+  const Record& d = ctx.est.data;
+  const double sy = rms_or_one(d.y);
+  const Refined r = scalar_effect(current, y0, 1e-3 * rms_or_one(d.u) / (sy * sy * sy),
+                                  [](ModelEffects& e, double v) { e.cubic_on = true; e.cubic = v; }, ctx);
+  if (!std::isfinite(r.cost)) return invalid(EffectKind::cubic, "no sensitivity");
+  Candidate c = finish(EffectKind::cubic, r, ctx);
+  if (c.valid) c.params = {{"c", c.model.effects.cubic}};
+  return c;
+}
+
+// Lag of the largest |cross-correlation| of the residual with past input.
+int correlation_lag(const Eigen::VectorXd& e, const Eigen::VectorXd& u, int max_lag) {
+  const Eigen::VectorXd ec = e.array() - e.mean(), uc = u.array() - u.mean();
+  int best = 0;
+  double best_value = -1.0;
+  for (int tau = 0; tau <= max_lag; ++tau) {
+    double s = 0.0;
+    for (Eigen::Index k = tau; k < e.size(); ++k) s += ec(k) * uc(k - tau);
+    if (std::abs(s) > best_value) {
+      best_value = std::abs(s);
+      best = tau;
+    }
+  }
+  return best;
+}
+
+Candidate candidate_delay(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
+  if (current.effects.delay > 0) return invalid(EffectKind::delay, "already in the model");
+  const int lag = correlation_lag(ctx.est.data.y - y0, ctx.est.data.u, ctx.options.max_delay);
+  // Whole samples 1..max_delay, each with a short refit from the current model
+  // and from the configured values (the current fit has bent its modes to
+  // mimic the delay); the best gets the full refit.
+  Refined best;
+  int best_d = 0;
+  for (int d = 1; d <= ctx.options.max_delay; ++d) {
+    for (int from = 0; from < 2; ++from) {
+      AugmentedModel m = current;
+      if (from == 1) m.linear = ctx.configured;
+      m.effects.delay = d;
+      const Refined r = refine(m, ctx.est, std::min(8, ctx.options.oe_iterations));
+      if (r.cost < best.cost) {
+        best = r;
+        best_d = d;
+      }
+    }
+  }
+  if (best_d == 0) return invalid(EffectKind::delay, "no delay could be fitted");
+  Candidate c = finish(EffectKind::delay, refine(best.model, ctx.est, ctx.options.oe_iterations), ctx);
+  if (c.valid) c.params = {{"samples", static_cast<double>(best_d)}, {"xcorr_lag", static_cast<double>(lag)}};
+  return c;
+}
+
+int added_modes(const AugmentedModel& m) {
+  int n = 0;
+  for (const auto& s : m.linear.submodels) n += s.name.rfind("added", 0) == 0 ? 1 : 0;
+  return n;
+}
+
+DiagnoseStep make_step(const std::string& effect, const EffectParams& params, const AugmentedModel& m, double cost,
+                       const Problem& est, const Problem& val, const DiagnoseOptions& options) {
+  DiagnoseStep s;
+  s.effect = effect;
+  s.params = params;
+  s.model = m;
+  const Scored sc = score(m, cost, est, val, options.validation_lead_in);
+  s.estimation_rms = sc.estimation_rms;
+  s.validation_rms = sc.validation_rms;
+  s.fit_percent = sc.fit_percent;
+  s.bic = sc.bic;
+  s.validation_output = sc.validation_output;
+  const Eigen::Index n = val.data.size() - options.validation_lead_in;
+  if (s.validation_output.size() == val.data.size())
+    s.residual = analyse_residual(val.data.y.tail(n) - s.validation_output.tail(n), val.data.u.tail(n),
+                                  val.data.sample_time(), options.max_lag);
+  return s;
+}
+
+}  // namespace
+
+DiagnoseResult diagnose(const Record& estimation, const Record& validation, const AdditiveModel& initial,
+                        const LoopSpec& loop, const DiagnoseOptions& options) {
+  const int min_samples = std::max(8 * options.max_lag, 4 * initial.n_beta() + 16);
+  if (options.validation_lead_in < 0 || options.validation_lead_in >= validation.size())
+    throw std::invalid_argument("diagnose: validation_lead_in outside the validation record");
+  if (estimation.size() < min_samples || validation.size() - options.validation_lead_in < min_samples)
+    throw std::invalid_argument("diagnose: estimation and validation parts need at least " +
+                                std::to_string(min_samples) + " samples each");
+  if (loop.closed && (!estimation.has_reference() || !validation.has_reference()))
+    throw std::invalid_argument("diagnose: closed loop needs the reference r in both parts");
+  if (loop.closed && loop.controller.empty()) throw std::invalid_argument("diagnose: closed loop needs a controller");
+  const Problem est{estimation, loop};
+  const Problem val{validation, loop};
+  const Context ctx{est, val, options, initial};
+
+  DiagnoseResult result;
+  AugmentedModel configured;
+  configured.linear = initial;
+  Refined current = fit_structure(configured, est, options, true);
+  if (!std::isfinite(current.cost)) throw std::runtime_error("diagnose: the configured model cannot be fitted");
+  result.steps.push_back(make_step("none", {}, current.model, current.cost, est, val, options));
+
+  auto enabled = [&](EffectKind k) {
+    return std::find(options.library.begin(), options.library.end(), k) != options.library.end();
+  };
+  for (int step = 0; step < options.max_steps; ++step) {
+    DiagnoseStep& now = result.steps.back();
+    if (!std::isfinite(now.validation_rms)) {
+      result.stop_reason = "the model diverges on the validation part";
+      break;
+    }
+    if (now.residual.pass()) {
+      result.stop_reason = "residual tests pass";
+      break;
+    }
+    const Eigen::VectorXd y0 = output(now.model, est);
+    std::vector<Candidate> candidates;
+    if (enabled(EffectKind::mode) && added_modes(now.model) < options.max_modes_added)
+      candidates.push_back(candidate_mode(now.model, y0, ctx));
+    if (enabled(EffectKind::rigid_body)) candidates.push_back(candidate_rigid_body(now.model, y0, ctx));
+    if (enabled(EffectKind::offset)) candidates.push_back(candidate_offset(now.model, y0, ctx));
+    if (enabled(EffectKind::drift)) candidates.push_back(candidate_drift(now.model, y0, ctx));
+    if (enabled(EffectKind::delay)) candidates.push_back(candidate_delay(now.model, y0, ctx));
+    if (enabled(EffectKind::coulomb)) candidates.push_back(candidate_coulomb(now.model, y0, ctx));
+    if (enabled(EffectKind::cubic)) candidates.push_back(candidate_cubic(now.model, y0, ctx));
+    std::stable_sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
+      if (a.valid != b.valid) return a.valid;
+      return a.validation_rms < b.validation_rms;
+    });
+    now.ranking = candidates;
+    if (candidates.empty() || !candidates.front().valid) {
+      result.stop_reason = "no candidate could be fitted";
+      break;
+    }
+    const Candidate& best = candidates.front();
+    if (!(best.validation_rms < (1.0 - options.min_improvement) * now.validation_rms)) {
+      result.stop_reason = std::string("best candidate (") + effect_name(best.kind) +
+                           ") lowers the validation RMS by less than " +
+                           std::to_string(static_cast<int>(std::lround(100 * options.min_improvement))) + " %";
+      break;
+    }
+    if (!(best.bic < now.bic)) {
+      result.stop_reason = std::string("best candidate (") + effect_name(best.kind) + ") does not lower the BIC";
+      break;
+    }
+    const double cost = best.estimation_rms * best.estimation_rms * static_cast<double>(estimation.size());
+    result.steps.push_back(make_step(effect_name(best.kind), best.params, best.model, cost, est, val, options));
+  }
+  if (result.stop_reason.empty()) result.stop_reason = "maximum number of steps";
+  return result;
+}
+
+}  // namespace modalwatch

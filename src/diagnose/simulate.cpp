@@ -1,0 +1,177 @@
+// The augmented model on a record (include/modalwatch/diagnose.hpp): the
+// submodels exactly discretised under ZOH in normalised time, the effects
+// around them, open or closed loop.
+#include "modalwatch/diagnose.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace modalwatch {
+
+const char* effect_name(EffectKind kind) {
+  switch (kind) {
+    case EffectKind::mode: return "mode";
+    case EffectKind::rigid_body: return "rigid_body";
+    case EffectKind::offset: return "offset";
+    case EffectKind::drift: return "drift";
+    case EffectKind::delay: return "delay";
+    case EffectKind::coulomb: return "coulomb";
+    case EffectKind::cubic: return "cubic";
+  }
+  return "?";
+}
+
+std::vector<EffectKind> all_effects() {
+  return {EffectKind::mode,  EffectKind::rigid_body, EffectKind::offset, EffectKind::drift,
+          EffectKind::delay, EffectKind::coulomb,    EffectKind::cubic};
+}
+
+int ModelEffects::n_params() const {
+  return int(output_offset_on) + int(input_offset_on) + int(drift_on) + int(coulomb_on) + int(cubic_on) +
+         (delay > 0 ? 1 : 0);
+}
+
+namespace {
+
+// The time scale of a submodel: |a_n|^(-1/n) (wn for a mode), 1 without A.
+double time_scale(const Submodel& s) {
+  if (s.n > 0 && s.a(s.n - 1) != 0.0) return std::pow(std::abs(s.a(s.n - 1)), -1.0 / s.n);
+  return 1.0;
+}
+
+// B(p)/(p^l A(p)) under ZOH. With p = ws p' the filter runs in t' = ws t and
+// coefficient j is multiplied by ws^(j-l), which leaves the output unchanged.
+class SubmodelRunner {
+ public:
+  SubmodelRunner(const Submodel& s, double T) {
+    const int l = s.rigid_poles;
+    order_ = s.n + l;
+    if (order_ < 1 || order_ > kMaxFilterOrder) throw std::invalid_argument("diagnose: submodel order out of range");
+    const double ws = time_scale(s);
+    const Eigen::VectorXd den = s.denominator();
+    Eigen::VectorXd d = Eigen::VectorXd::Zero(order_ + 1);
+    b_ = Eigen::VectorXd::Zero(order_ + 1);
+    for (Eigen::Index j = 0; j < den.size(); ++j) d(j) = den(j) * std::pow(ws, double(j - l));
+    for (Eigen::Index j = 0; j < s.b.size(); ++j) b_(j) = s.b(j) * std::pow(ws, double(j - l));
+    filter_ = Prefilter(d, ws * T, Hold::zoh);
+    feed_ = b_(order_) / d(order_);
+  }
+  // Output at t_k for a zero input sample, after moving the state to t_k.
+  double advance() {
+    filter_.advance();
+    filter_.complete(0.0);
+    return filter_.combine(b_);
+  }
+  // Output for the input sample w at t_k (after advance()).
+  double complete(double w) {
+    filter_.complete(w);
+    return filter_.combine(b_);
+  }
+  double feedthrough() const { return feed_; }
+
+ private:
+  int order_ = 0;
+  Prefilter filter_;
+  Eigen::VectorXd b_;
+  double feed_ = 0.0;
+};
+
+}  // namespace
+
+Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& data, const LoopSpec& loop,
+                                   Eigen::VectorXd* u_sim) {
+  const Eigen::Index N = data.size();
+  const double T = data.sample_time();
+  if (N < 2 || !(T > 0.0)) throw std::invalid_argument("diagnose: record too short");
+  if (loop.closed && !data.has_reference()) throw std::invalid_argument("diagnose: closed loop needs r");
+  std::vector<SubmodelRunner> runners;
+  const int substeps = std::max(1, loop.substeps);
+  for (const Submodel& s : model.linear.submodels) runners.emplace_back(s, T / substeps);
+  const ModelEffects& e = model.effects;
+
+  // Closed loop: the excitation besides the controller, from the measured signals.
+  Eigen::VectorXd u_ext;
+  DiscreteTransferFunction controller = loop.controller;
+  if (loop.closed) {
+    controller.reset();
+    u_ext.resize(N);
+    for (Eigen::Index k = 0; k < N; ++k) u_ext(k) = data.u(k) - controller.step(data.r(k) - data.y(k));
+    controller.reset();
+  }
+  const double c0 = loop.closed ? controller.feedthrough() : 0.0;
+
+  Eigen::VectorXd y(N);
+  if (u_sim) u_sim->resize(N);
+  std::vector<double> u_past(static_cast<std::size_t>(e.delay), 0.0);  // ring of the last d inputs
+  std::size_t head = 0;
+  double y1 = 0.0;  // plant output (before offset and drift, without feedthrough) one substep back
+  const double t0 = data.t(0);
+  const bool interpolate = loop.interpolate_input && !loop.closed;
+  // The input to the plant besides u: offset and the nonlinear branches, from
+  // the output at the start of the (sub)interval before its input acts.
+  auto branches_at = [&](double y_now, double y_before) {
+    const double v_sign = (y_now > y_before) ? 1.0 : ((y_now < y_before) ? -1.0 : 0.0);
+    double b = 0.0;
+    if (e.input_offset_on) b += e.input_offset;
+    if (e.coulomb_on) b -= e.coulomb * v_sign;
+    // The cubic branch is held over the interval: take y at its middle,
+    // extrapolated, so the held stiffness adds no half-interval lag (that lag
+    // acts as negative damping, felt at w T ~ 0.7 on the Silverbox).
+    const double y_mid = 1.5 * y_now - 0.5 * y_before;
+    if (e.cubic_on) b -= e.cubic * y_mid * y_mid * y_mid;
+    return b;
+  };
+  for (Eigen::Index k = 0; k < N; ++k) {
+    // Move every submodel to t_k: for strictly proper submodels their output
+    // y_k is then known before the input sample u_k, which the nonlinear
+    // branches use (sampled and held like the input).
+    double y_free = 0.0, feed = 0.0;
+    for (SubmodelRunner& r : runners) {
+      y_free += r.advance();
+      feed += r.feedthrough();
+    }
+    const double branches = branches_at(y_free, y1);
+    const double delayed = e.delay > 0 ? u_past[head] : 0.0;
+    double out_terms = 0.0;
+    if (e.output_offset_on) out_terms += e.output_offset;
+    if (e.drift_on) out_terms += e.drift * (data.t(k) - t0);
+    double u = data.u(k);
+    if (loop.closed) {
+      // y_k = y_free + D u_p + out_terms, u_p = (u_k or u_{k-d}) + branches.
+      const bool direct = e.delay == 0;
+      const double y_known = y_free + feed * (branches + (direct ? 0.0 : delayed)) + out_terms;
+      const double gain = 1.0 + c0 * (direct ? feed : 0.0);
+      u = (controller.peek(data.r(k) - y_known) + u_ext(k)) / gain;
+    }
+    // The input over [t_k, t_k+1): held, or (open loop, band-limited input)
+    // linear towards the next sample, at the middle of each substep.
+    const double u_a = e.delay > 0 ? delayed : u;
+    double u_b = u_a;
+    if (interpolate) {
+      const Eigen::Index j = k + 1 - e.delay;
+      u_b = j < 0 ? 0.0 : (j < N ? data.u(j) : u_a);
+    }
+    auto held = [&](int sub) { return interpolate ? u_a + (u_b - u_a) * (sub + 0.5) / substeps : u_a; };
+    double y_plant = 0.0;
+    for (SubmodelRunner& r : runners) y_plant += r.complete(held(0) + branches);
+    if (e.delay > 0) {
+      u_past[head] = u;
+      head = (head + 1) % u_past.size();
+    }
+    y(k) = y_plant + out_terms;
+    if (loop.closed) controller.step(data.r(k) - y(k));
+    if (u_sim) (*u_sim)(k) = u;
+    y1 = y_free;
+    for (int sub = 1; sub < substeps; ++sub) {
+      double y_sub = 0.0;
+      for (SubmodelRunner& r : runners) y_sub += r.advance();
+      const double b = branches_at(y_sub, y1);
+      for (SubmodelRunner& r : runners) r.complete(held(sub) + b);
+      y1 = y_sub;
+    }
+  }
+  return y;
+}
+
+}  // namespace modalwatch
