@@ -4,11 +4,14 @@
 #
 #   scripts/sanitize.sh                 # both (the ASan build takes ~8 min on 2 cores)
 #   SKIP_ASAN=1 scripts/sanitize.sh     # TSan only (~2 min)
+#   ASAN_TARGETS="test_messages test_csv" ASAN_TESTS="Messages|Csv" scripts/sanitize.sh
+#                                       # ASan+UBSan on some suites only (.ci/run)
 #
 # 1. ASan+UBSan: configures build-asan with -DMODALWATCH_SANITIZE=ON (benchmarks
-#    off: they are not tests), builds everything, runs ctest without the tests
-#    whose names match ASAN_EXCLUDE (MonteCarlo: long statistical runs that
-#    exercise no code the other tests do not).
+#    off: they are not tests), builds everything (or ASAN_TARGETS), runs ctest
+#    without the tests whose names match ASAN_EXCLUDE (MonteCarlo: long
+#    statistical runs that exercise no code the other tests do not), and only
+#    those matching ASAN_TESTS when it is set.
 # 2. TSan: configures build-tsan with -fsanitize=thread passed through
 #    CMAKE_CXX_FLAGS / CMAKE_EXE_LINKER_FLAGS (Debug, so "-O1 -g" is the
 #    optimisation level and assertions stay on), builds only TSAN_TARGETS and runs
@@ -16,7 +19,7 @@
 #    ctest as *_NOT_BUILT and do not match the filter.
 #
 # Environment: JOBS (2), ASAN_DIR (build-asan), TSAN_DIR (build-tsan),
-# ASAN_EXCLUDE (MonteCarlo), TSAN_TARGETS ("test_spsc_ring", space separated),
+# ASAN_EXCLUDE (MonteCarlo), ASAN_TARGETS (all), ASAN_TESTS (all, a ctest -R regex), TSAN_TARGETS ("test_spsc_ring", space separated),
 # TSAN_TESTS (SpscRing, a ctest -R regex), SKIP_ASAN / SKIP_TSAN (1 to skip),
 # MODALWATCH_STRESS_ITEMS (items per threaded stress test; the tests pick a
 # smaller default under sanitizers), and ASAN_OPTIONS / UBSAN_OPTIONS /
@@ -28,6 +31,8 @@ JOBS=${JOBS:-2}
 ASAN_DIR=${ASAN_DIR:-build-asan}
 TSAN_DIR=${TSAN_DIR:-build-tsan}
 ASAN_EXCLUDE=${ASAN_EXCLUDE:-MonteCarlo}
+ASAN_TARGETS=${ASAN_TARGETS:-}
+ASAN_TESTS=${ASAN_TESTS:-}
 TSAN_TARGETS=${TSAN_TARGETS:-test_spsc_ring}
 TSAN_TESTS=${TSAN_TESTS:-SpscRing}
 SKIP_ASAN=${SKIP_ASAN:-0}
@@ -82,10 +87,12 @@ if [ "$SKIP_ASAN" != 1 ]; then
   mkdir -p "$ASAN_DIR"
   if step "asan: configure" "$ASAN_DIR/sanitize-configure.log" \
       cmake -S . -B "$ASAN_DIR" -DMODALWATCH_SANITIZE=ON -DMODALWATCH_BENCHMARKS=OFF &&
-     step "asan: build (-j$JOBS)" "$ASAN_DIR/sanitize-build.log" \
-      cmake --build "$ASAN_DIR" -j"$JOBS"; then
-    step "asan: ctest -E '$ASAN_EXCLUDE'" - \
-      ctest --test-dir "$ASAN_DIR" -j"$JOBS" -E "$ASAN_EXCLUDE" --output-on-failure --no-tests=error
+     step "asan: build ${ASAN_TARGETS:-all} (-j$JOBS)" "$ASAN_DIR/sanitize-build.log" \
+      cmake --build "$ASAN_DIR" -j"$JOBS" $(for t in $ASAN_TARGETS; do printf -- '--target %s ' "$t"; done); then
+    asan_filter=()
+    [ -n "$ASAN_TESTS" ] && asan_filter=(-R "$ASAN_TESTS")
+    step "asan: ctest -E '$ASAN_EXCLUDE' ${ASAN_TESTS:+-R '$ASAN_TESTS'}" - \
+      ctest --test-dir "$ASAN_DIR" -j"$JOBS" -E "$ASAN_EXCLUDE" "${asan_filter[@]}" --output-on-failure --no-tests=error
   fi
 fi
 
