@@ -36,6 +36,13 @@ int main(int argc, char** argv) {
   track_cmd->add_option("--out,-o", track_args.out, "estimates CSV to write (one row per sample)")->required();
   track_cmd->add_flag("--no-progress", no_progress, "no progress bar on stderr");
 
+  WatchArgs watch_args;
+  auto* watch_cmd = app.add_subcommand("watch", "Print the daemon's estimates and fault status as they arrive (LCM)");
+  watch_cmd->add_option("--config,-c", watch_args.config, "YAML whose lcm: section names the URL and channels")->required();
+  watch_cmd->add_option("--count", watch_args.count, "stop after this many estimates messages");
+  watch_cmd->add_option("--timeout", watch_args.timeout, "stop after this many seconds");
+  watch_cmd->add_option("--every", watch_args.every, "print every n-th message of each kind")->check(CLI::PositiveNumber);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -48,6 +55,7 @@ int main(int argc, char** argv) {
   }
   if (simulate_cmd->parsed()) return simulate(sim);
   if (fit_cmd->parsed()) return fit(fit_args);
+  if (watch_cmd->parsed()) return watch(watch_args);
   if (track_cmd->parsed()) {
     track_args.progress = !no_progress;
     return track(track_args);
