@@ -13,6 +13,8 @@
 //   than one gap past the last sample: then the sender has restarted (a new
 //   replay, a controller reboot) and the sample is taken, and the time gap
 //   resets the prefilter states as any gap does.
+// - NaN/Inf in u, y or r: counted and not used for estimation, but passed to
+//   the estimator, which keeps the sample's time slot (see process()).
 // - Gaps. The estimator detects them itself (estimator.gap_factor, which
 //   daemon.gap_time sets), so track and the daemon apply one rule; the daemon
 //   counts the StepFlags::kGap it reports.
@@ -256,6 +258,7 @@ struct Daemon::Impl {
   lcm_subscription_t* sub_samples = nullptr;
   lcm_subscription_t* sub_batches = nullptr;
   std::vector<SampleRecord> decode_buffer;
+  bool closed_loop = false;  // a copy: reload() rewrites `config` while this thread runs
   std::atomic<int> last_decode_error{0};
 
   // ---- input ring: subscriber -> estimation loop
@@ -359,6 +362,7 @@ Daemon::Impl::Impl(const Config& cfg, lcm_t* shared, LoopProbe* p)
   det_std.resize(static_cast<std::size_t>(K));
   det_changes.reserve(static_cast<std::size_t>(3 * K));
   decode_buffer.resize(kMaxBatch);
+  closed_loop = config.closed_loop;
   encode_buffer.reserve(4096);
   if (shared) {
     lcm = shared;
@@ -392,8 +396,8 @@ void Daemon::Impl::on_packet(const lcm_recv_buf_t* rbuf, bool batch) noexcept {
                        ? std::numeric_limits<int>::max()
                        : static_cast<int>(rbuf->data_size);
   const DecodeResult r =
-      batch ? decode_batch(rbuf->data, size, config.closed_loop, decode_buffer.data(), kMaxBatch, n)
-            : decode_sample(rbuf->data, size, config.closed_loop, decode_buffer.data(), kMaxBatch, n);
+      batch ? decode_batch(rbuf->data, size, closed_loop, decode_buffer.data(), kMaxBatch, n)
+            : decode_sample(rbuf->data, size, closed_loop, decode_buffer.data(), kMaxBatch, n);
   if (r != DecodeResult::ok) {
     bump(counters.decode_errors);
     last_decode_error.store(static_cast<int>(r), std::memory_order_relaxed);
@@ -473,10 +477,6 @@ void Daemon::Impl::process(const SampleRecord& s) noexcept {
   }
   have_seq = true;
   last_seq = s.seq;
-  if (!finite(s)) {
-    bump(counters.samples_nonfinite);
-    return;
-  }
   if (!have_time) {
     have_time = true;
     utime0 = s.utime;
@@ -489,8 +489,11 @@ void Daemon::Impl::process(const SampleRecord& s) noexcept {
   last_utime = s.utime;
   have_ref_time = true;
   const double t = static_cast<double>(s.utime - utime0) * 1e-6;
+  // A non-finite sample goes to the estimator too, which keeps its time slot
+  // (holds u and r, lets the model stand in for y, does not update): dropping it
+  // here would leave a hole of 2 T that resets the prefilters as a gap.
   const unsigned flags = estimator.step(Sample{t, s.u, s.y, s.r});
-  bump(counters.samples_processed);
+  bump(finite(s) ? counters.samples_processed : counters.samples_nonfinite);
   if (flags & kGap) {
     bump(counters.gaps);
     pending_health |= Fault::HEALTH_INPUT_GAP;
@@ -711,7 +714,10 @@ void Daemon::Impl::log_snapshot(const Snapshot& s) {
     spdlog::warn("input gap: prefilter states reset (parameters kept); {} gaps so far", s.counters.gaps);
   if (!logged_warmup_over && !s.warming_up && s.counters.samples_processed > 0) {
     logged_warmup_over = true;
-    spdlog::info("warm-up over after {} samples; estimating", s.counters.samples_processed);
+    if (plan.restored)
+      spdlog::info("estimating from the restored checkpoint (no warm-up)");
+    else
+      spdlog::info("warm-up over after {} samples; estimating", s.counters.samples_processed);
   }
   for (int i = 0; i < s.n_modes; ++i) {
     const auto k = static_cast<std::size_t>(i);
@@ -794,6 +800,9 @@ void Daemon::Impl::start_threads(bool with_subscriber) {
     sub_samples = lcm_subscribe(lcm, config.lcm.samples_channel.c_str(), &Impl::on_sample_packet, this);
     sub_batches = lcm_subscribe(lcm, config.lcm.batches_channel.c_str(), &Impl::on_batch_packet, this);
     if (!sub_samples || !sub_batches) throw std::runtime_error("lcm_subscribe failed");
+    // LCM's default of 30 queued packets per subscription drops bursts before we see them.
+    lcm_subscription_set_queue_capacity(sub_samples, 100000);
+    lcm_subscription_set_queue_capacity(sub_batches, 10000);
     subscriber = std::thread([this] { subscriber_main(); });
   }
   running = true;
