@@ -25,6 +25,20 @@ if ((${#missing[@]})); then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
 
+# LCM's udpm (the daemon's default URL, ttl=0) needs a route for multicast. A
+# machine with a default route has one; a sandbox without a network does not:
+# send multicast over loopback there (DESIGN.md).
+if ! ip route get 239.255.76.67 >/dev/null 2>&1; then
+  if [ "$(id -u)" -eq 0 ]; then
+    echo "setup: no multicast route; routing 224.0.0.0/4 over lo"
+    ip link set lo up
+    ip link set lo multicast on
+    ip route add 224.0.0.0/4 dev lo
+  else
+    echo "setup: no multicast route; as root run: ip link set lo multicast on; ip route add 224.0.0.0/4 dev lo" >&2
+  fi
+fi
+
 build_dir="${BUILD_DIR:-build}"
 jobs="${JOBS:-$(nproc)}"
 # shellcheck disable=SC2086

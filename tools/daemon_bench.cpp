@@ -4,7 +4,7 @@
 //
 //   replay   --config C --data D.csv [--speed X] [--batch N]
 //            the record as sample_batch_t packets at X times real time
-//            (0: as fast as possible), utime = t * 1e6 + 1 s, seq = row.
+//            (0: as fast as possible), utime = t * 1e6, seq = row.
 //   latency  --config C --data D.csv --rate R --seconds S
 //            one sample_t per packet at R Hz (cycling the record), utime = the
 //            wall clock (CLOCK_REALTIME) when sent; listens to the estimates and
@@ -124,7 +124,7 @@ int main(int argc, char** argv) {
     const Eigen::Index n = rec.size();
     const auto t0 = std::chrono::steady_clock::now();
     if (mode == "replay") {
-      const std::int64_t offset = 1'000'000;
+      const std::int64_t offset = 0;  // utime = t: the watch lines show the simulation time
       for (Eigen::Index k = 0; k < n; k += batch) {
         const Eigen::Index m = std::min<Eigen::Index>(batch, n - k);
         const auto bytes = encode_batch(rec, k, m, offset, 0);
