@@ -6,12 +6,15 @@
 //            the record as sample_batch_t packets at X times real time
 //            (0: as fast as possible), utime = t * 1e6, seq = row.
 //   latency  --config C --data D.csv --rate R --seconds S
-//            one sample_t per packet at R Hz (cycling the record), utime = the
-//            wall clock (CLOCK_REALTIME) when sent; listens to the estimates and
-//            prints p50/p99/max of (arrival time - utime of the newest sample
-//            included) and the daemon's drop counters.
+//            one sample_t per packet at R Hz (cycling the record); sample k has
+//            utime = start + k / R on the wall clock (CLOCK_REALTIME) and is sent
+//            at that time, so a late sender counts as latency too; listens to the
+//            estimates and prints p50/p99/max of (arrival time - utime of the
+//            newest sample included) and the daemon's drop counters.
 //   rate     --config C --data D.csv --rate R --seconds S [--batch N]
-//            batches at R samples/s; prints received/dropped from the daemon.
+//            batches at R samples/s of wall time, the samples on the config's
+//            sample grid (replay R / sample_rate_hz times faster than real
+//            time); prints sent, received, dropped and processed.
 #include <lcm/lcm.h>
 #include <time.h>
 
@@ -47,10 +50,11 @@ std::int64_t realtime_us() {
 
 struct Listener {
   std::mutex mutex;
-  std::vector<double> latency_us;
+  std::vector<std::pair<std::int64_t, double>> latency_us;  // (utime, latency)
   modalwatch::fault_status_t last_status;
   bool have_status = false;
   long long estimates = 0;
+  long long processed = 0;  // samples_processed of the newest estimates
 };
 
 void on_estimates(const lcm_recv_buf_t* rbuf, const char*, void* user) {
@@ -59,8 +63,9 @@ void on_estimates(const lcm_recv_buf_t* rbuf, const char*, void* user) {
   modalwatch::estimates_t msg;
   if (msg.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) < 0) return;
   std::lock_guard<std::mutex> lock(l.mutex);
-  l.latency_us.push_back(static_cast<double>(now - msg.utime));
+  l.latency_us.emplace_back(msg.utime, static_cast<double>(now - msg.utime));
   ++l.estimates;
+  l.processed = msg.samples_processed;
 }
 
 void on_status(const lcm_recv_buf_t* rbuf, const char*, void* user) {
@@ -91,7 +96,7 @@ int main(int argc, char** argv) {
   CLI::App app{"modalwatch_daemon_bench: replay stand-in and benchmark driver for modalwatchd"};
   app.require_subcommand(1);
   std::string config_path, data_path;
-  double speed = 1.0, rate = 4096.0, seconds = 10.0;
+  double speed = 1.0, rate = 4096.0, seconds = 10.0, skip = 6.0;
   int batch = 64;
   for (const char* name : {"replay", "latency", "rate"}) {
     auto* sub = app.add_subcommand(name, name);
@@ -101,6 +106,7 @@ int main(int argc, char** argv) {
     sub->add_option("--rate", rate);
     sub->add_option("--seconds", seconds);
     sub->add_option("--batch", batch)->check(CLI::Range(1, 8192));
+    sub->add_option("--skip", skip, "latency: ignore estimates of the first SKIP s (warm-up fit)");
   }
   CLI11_PARSE(app, argc, argv);
   const std::string mode = app.get_subcommands().front()->get_name();
@@ -134,31 +140,35 @@ int main(int argc, char** argv) {
       std::printf("replay: %lld samples published\n", static_cast<long long>(n));
     } else {
       const long long total = std::llround(rate * seconds);
-      const double period = 1.0 / rate;
+      const double period = 1.0 / rate;                                         // wall clock
+      const double grid = mode == "latency" ? period : config.sample_time;     // utime
       const int per_packet = mode == "latency" ? 1 : batch;
+      const std::int64_t start_us = realtime_us() + 10'000;
+      const auto t_start = t0 + std::chrono::milliseconds(10);
       std::vector<SampleRecord> buf(static_cast<std::size_t>(per_packet));
       for (long long k = 0; k < total; k += per_packet) {
         const int m = static_cast<int>(std::min<long long>(per_packet, total - k));
-        sleep_until(t0, static_cast<double>(k + m - 1) * period);
-        const std::int64_t now = realtime_us();
+        sleep_until(t_start, static_cast<double>(k + m - 1) * period);
         for (int i = 0; i < m; ++i) {
           const Eigen::Index j = (k + i) % n;
           auto& s = buf[static_cast<std::size_t>(i)];
           s.seq = k + i;
-          s.utime = now - std::llround(static_cast<double>(m - 1 - i) * period * 1e6);
+          s.utime = start_us + std::llround(static_cast<double>(k + i) * grid * 1e6);
           s.u = rec.u(j);
           s.y = rec.y(j);
           s.r = rec.has_reference() ? rec.r(j) : 0.0;
         }
         const auto bytes = m == 1 && mode == "latency" ? encode_sample(buf[0])
-                                                       : encode_batch(std::span<const SampleRecord>(buf.data(), m), period);
+                                                       : encode_batch(std::span<const SampleRecord>(buf.data(), m), grid);
         if (m == 1 && mode == "latency")
           lcm_publish(lcm, config.lcm.samples_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
         else
           lcm_publish(lcm, config.lcm.batches_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
       }
       const double sent_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // the last status messages
+      // The daemon works through its backlog (sample time: a publish period of
+      // samples must arrive before the next estimate), then the last status messages.
+      std::this_thread::sleep_for(std::chrono::milliseconds(mode == "latency" ? 1500 : 4000));
       stop = true;
       handler.join();
       std::lock_guard<std::mutex> lock(listener.mutex);
@@ -166,19 +176,22 @@ int main(int argc, char** argv) {
                   static_cast<double>(total) / sent_s, per_packet);
       if (listener.have_status) {
         const auto& s = listener.last_status;
-        std::printf("  daemon: received %lld, dropped %lld (ring full), duplicate %lld, out of order %lld, gaps %lld\n",
-                    static_cast<long long>(s.samples_received), static_cast<long long>(s.samples_dropped),
-                    static_cast<long long>(s.samples_duplicate), static_cast<long long>(s.samples_out_of_order),
-                    static_cast<long long>(s.gaps));
+        std::printf("  daemon: sent %lld, received %lld, dropped %lld (ring full), processed %lld, duplicate %lld, out of "
+                    "order %lld, gaps %lld\n",
+                    total, static_cast<long long>(s.samples_received), static_cast<long long>(s.samples_dropped),
+                    listener.processed, static_cast<long long>(s.samples_duplicate),
+                    static_cast<long long>(s.samples_out_of_order), static_cast<long long>(s.gaps));
       } else {
         std::printf("  daemon: no fault status received\n");
       }
       if (mode == "latency") {
-        // Skip the first second (warm-up fit, start-up).
-        std::vector<double> lat(listener.latency_us.begin() + std::min<std::size_t>(listener.latency_us.size(), 10),
-                                listener.latency_us.end());
-        std::printf("  latency sample utime -> estimate received (us): p50 %.0f, p99 %.0f, max %.0f over %zu estimates\n",
-                    percentile(lat, 0.5), percentile(lat, 0.99), percentile(lat, 1.0), lat.size());
+        // Without the warm-up window and its fit, which runs on the estimation thread.
+        std::vector<double> lat;
+        for (const auto& [utime, l] : listener.latency_us)
+          if (utime >= start_us + std::llround(skip * 1e6)) lat.push_back(l);
+        std::printf("  latency sample utime -> estimate received (us), after the first %.0f s: p50 %.0f, p99 %.0f, max %.0f "
+                    "over %zu estimates\n",
+                    skip, percentile(lat, 0.5), percentile(lat, 0.99), percentile(lat, 1.0), lat.size());
       }
     }
     lcm_destroy(lcm);
