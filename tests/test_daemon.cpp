@@ -559,3 +559,38 @@ TEST_F(DaemonProcess, BadConfigOrLcmUrlExitsWithAMessage) {
   text.replace(text.find(url_), url_.size(), "nosuchprovider://x");
   start_expect_exit(write("url.yaml", text), 2, "cannot open LCM provider");
 }
+
+// A checkpoint that cannot be written (here: its directory is missing; a full
+// disk fails the same way, with ENOSPC) is counted and logged, the previous one
+// stays, and estimation goes on.
+TEST_F(DaemonInProcess, CheckpointFailureIsLoggedAndEstimationContinues) {
+  drift_data();
+  Config c = load_config(kDriftConfig);
+  c.daemon.checkpoint_path = path("missing-dir/state.ckpt");
+  c.daemon.checkpoint_period = 0.1;
+  lcm_t* lcm = lcm_create("memq://");
+  ASSERT_NE(lcm, nullptr);
+  Received rx;
+  rx.subscribe(lcm, c.lcm);
+  {
+    Daemon d(c, lcm);
+    d.start();
+    std::uint64_t published = 0;
+    publish_paced(lcm, c, d, 0, samples_at(8.0), published);
+    ASSERT_TRUE(wait_for([&] { return d.counters().checkpoint_failures >= 2; }, 10.0));
+    publish_paced(lcm, c, d, samples_at(8.0), samples_at(12.0), published);
+    ASSERT_TRUE(wait_for([&] { return all_handled(d) && d.counters().samples_received == published; }, 20.0));
+    d.stop();
+    EXPECT_FALSE(d.write_checkpoint());
+    const DaemonCounters k = d.counters();
+    EXPECT_EQ(k.checkpoints_written, 0u);
+    EXPECT_GE(k.checkpoint_failures, 3u);
+    EXPECT_EQ(k.samples_processed, published);
+  }
+  dispatch_rest(lcm);
+  lcm_destroy(lcm);
+  EXPECT_FALSE(std::filesystem::exists(path("missing-dir")));
+  ASSERT_FALSE(rx.estimates.empty());
+  EXPECT_GT(static_cast<double>(rx.estimates.back().utime - kUtime0) * 1e-6, 11.8);
+  EXPECT_NEAR(rx.estimates.back().modes[kFlex].hz, 90.0, 0.5);
+}
