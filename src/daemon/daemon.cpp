@@ -60,8 +60,10 @@ constexpr int kMaxEntries = 3 * kMaxModes;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Largest batch the subscriber decodes (36 + 24 * 8192 bytes, about 200 kB).
 constexpr int kMaxBatch = 8192;
-// The publisher polls its ring at this period (it must not make the loop wait).
-constexpr long kPublisherPollNs = 100'000;
+// The publisher checks its ring once per loop tick, shortly after the loop has
+// woken (the estimation thread cannot wake it without a system call), and at
+// least this often.
+constexpr std::int64_t kPublisherMaxSleepNs = 10'000'000;
 constexpr double kRateLogPeriod = 10.0;  // s
 
 using Fault = modalwatch::fault_status_t;
@@ -268,6 +270,7 @@ struct Daemon::Impl {
   // ---- estimation thread (the only thread touching these while it runs)
   std::thread estimation;
   std::atomic<bool> stop_estimation{false};
+  std::int64_t tick_origin_ns = 0, tick_period_ns = 0;  // set before the threads start
   RecursiveEstimator estimator;
   std::optional<FaultDetector> detector;
   std::vector<ModalParameters> det_value, det_std;
@@ -426,9 +429,8 @@ void Daemon::Impl::estimation_main() noexcept {
   // Linux delays a sleeping thread's wake-up by up to its timer slack (50 us by
   // default) to batch timers: too much for a 0.1..1 ms tick. Set at start-up.
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
-  const std::int64_t period_ns =
-      std::max<std::int64_t>(1000, static_cast<std::int64_t>(std::llround(1e9 / config.daemon.loop_rate_hz)));
-  std::int64_t next = mono_ns();
+  const std::int64_t period_ns = tick_period_ns;
+  std::int64_t tick = 0;  // ticks at tick_origin_ns + k period_ns, a grid the publisher follows too
   for (;;) {
     const bool stopping = stop_estimation.load(std::memory_order_acquire);
     if (probe && !probe_fired && !estimator.status().warming_up &&
@@ -450,13 +452,13 @@ void Daemon::Impl::estimation_main() noexcept {
       push_snapshot(Snapshot::final_state, mono_ns(), false);
       break;
     }
-    next += period_ns;
+    ++tick;
     now = mono_ns();
-    if (now > next) {  // this tick ended after the next one was due
+    if (now > tick_origin_ns + tick * period_ns) {  // this tick ended after the next one was due
       bump(counters.overruns);
-      next = now;
+      tick = (now - tick_origin_ns) / period_ns + 1;  // the next tick on the grid
     }
-    sleep_until(next);
+    sleep_until(tick_origin_ns + tick * period_ns);
   }
   if (probe) probe->exiting();
 }
@@ -611,8 +613,12 @@ void Daemon::Impl::publisher_main() {
       next_checkpoint_ns = now + static_cast<std::int64_t>(config.daemon.checkpoint_period * 1e9);
     }
     if (stopping) break;
-    timespec ts{0, kPublisherPollNs};
-    nanosleep(&ts, nullptr);
+    // Just after the loop's next tick (a quarter period, at most 50 us, later).
+    const std::int64_t after = std::min<std::int64_t>(tick_period_ns / 4, 50'000);
+    const std::int64_t t = mono_ns();
+    std::int64_t wake = tick_origin_ns + ((t - after - tick_origin_ns) / tick_period_ns + 1) * tick_period_ns + after;
+    wake = std::min(wake, t + kPublisherMaxSleepNs);
+    sleep_until(wake);
   }
 }
 
@@ -796,6 +802,9 @@ void Daemon::Impl::start_threads(bool with_subscriber) {
   publish_period_us = std::max<std::int64_t>(1, std::llround(config.daemon.publish_period * 1e6));
   gap_us = std::llround(config.estimator.gap_factor * config.sample_time * 1e6);
   if (have_time) next_publish_utime = last_utime + publish_period_us;
+  tick_period_ns =
+      std::max<std::int64_t>(10'000, static_cast<std::int64_t>(std::llround(1e9 / config.daemon.loop_rate_hz)));
+  tick_origin_ns = mono_ns();
   stop_estimation.store(false);
   stop_publisher.store(false);
   publisher = std::thread([this] { publisher_main(); });
