@@ -594,3 +594,39 @@ TEST_F(DaemonInProcess, CheckpointFailureIsLoggedAndEstimationContinues) {
   EXPECT_GT(static_cast<double>(rx.estimates.back().utime - kUtime0) * 1e-6, 11.8);
   EXPECT_NEAR(rx.estimates.back().modes[kFlex].hz, 90.0, 0.5);
 }
+
+// `modalwatch watch` prints the daemon's messages as they arrive, one line each.
+TEST_F(DaemonProcess, WatchPrintsEstimatesAndFlags) {
+  const std::string cfg = write_config("c.yaml", "", "");
+  start(cfg);
+  std::string out;
+  std::thread watcher([&] {
+    const std::string cmd = std::string(MODALWATCH_CLI) + " watch --config " + cfg + " --count 20 --timeout 20 2>&1";
+    FILE* pipe = popen(cmd.c_str(), "r");
+    char buf[4096];
+    while (pipe && std::fgets(buf, sizeof buf, pipe)) out += buf;
+    if (pipe) pclose(pipe);
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // watch subscribes
+  publish(0, samples_at(8.0), 20.0);
+  watcher.join();
+  EXPECT_EQ(stop(SIGTERM), 0) << log();
+  // 20 estimates lines (0.1 s apart) and the fault status lines between them.
+  std::istringstream lines(out);
+  std::string line;
+  int estimates = 0, faults = 0;
+  while (std::getline(lines, line)) {
+    if (line.rfind("estimates t =", 0) == 0) {
+      ++estimates;
+      EXPECT_NE(line.find("| suspension: f ="), std::string::npos) << line;
+      EXPECT_NE(line.find("| flex: f ="), std::string::npos) << line;
+    }
+    if (line.rfind("faults    t =", 0) == 0) {
+      ++faults;
+      EXPECT_NE(line.find("| flags: none"), std::string::npos) << line;  // no drift before 30 s
+      EXPECT_NE(line.find("| health: "), std::string::npos) << line;
+    }
+  }
+  EXPECT_EQ(estimates, 20) << out;
+  EXPECT_GE(faults, 15) << out;
+}
