@@ -11,11 +11,16 @@
 //   loopback (ttl=0, a port of its own) and signals it.
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/un.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
+#include <cstddef>
+#include <cstring>
 #include <cmath>
 #include <fstream>
 #include <numbers>
@@ -352,6 +357,7 @@ class DaemonProcess : public ScratchDir {
     pid_ = ::fork();
     ASSERT_GE(pid_, 0);
     if (pid_ == 0) {
+      for (const auto& [k, v] : env_) ::setenv(k.c_str(), v.c_str(), 1);
       const int fd = ::open(log_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
       ::dup2(fd, 1);
       ::dup2(fd, 2);
@@ -417,6 +423,7 @@ class DaemonProcess : public ScratchDir {
   std::atomic<bool> stop_handler_{false};
   pid_t pid_ = -1;
   int starts_ = 0;
+  std::vector<std::pair<std::string, std::string>> env_;  // for the child
   std::vector<Sent> sent_;
 };
 
@@ -629,4 +636,61 @@ TEST_F(DaemonProcess, WatchPrintsEstimatesAndFlags) {
   }
   EXPECT_EQ(estimates, 20) << out;
   EXPECT_GE(faults, 15) << out;
+}
+
+// systemd's protocol, with a stand-in for systemd: an abstract unix datagram
+// socket in NOTIFY_SOCKET, WatchdogSec=0.2 s in WATCHDOG_USEC.
+TEST_F(DaemonProcess, NotifiesSystemdReadyWatchdogReloadingStopping) {
+  const int sock = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  ASSERT_GE(sock, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  const std::string name = "modalwatch-notify-" + std::to_string(::getpid());
+  std::memcpy(addr.sun_path + 1, name.data(), name.size());  // abstract: leading NUL
+  const auto len = static_cast<socklen_t>(offsetof(sockaddr_un, sun_path) + 1 + name.size());
+  ASSERT_EQ(::bind(sock, reinterpret_cast<sockaddr*>(&addr), len), 0);
+  timeval tv{0, 100'000};
+  ::setsockopt(sock, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  std::mutex mutex;
+  std::vector<std::pair<std::string, std::chrono::steady_clock::time_point>> got;
+  std::atomic<bool> done{false};
+  std::thread reader([&] {
+    char buf[512];
+    while (!done) {
+      const ssize_t n = ::recv(sock, buf, sizeof buf, 0);
+      if (n <= 0) continue;
+      std::lock_guard<std::mutex> lock(mutex);
+      got.emplace_back(std::string(buf, static_cast<std::size_t>(n)), std::chrono::steady_clock::now());
+    }
+  });
+  const auto count = [&](const std::string& what) {
+    std::lock_guard<std::mutex> lock(mutex);
+    return std::count_if(got.begin(), got.end(), [&](const auto& m) { return m.first.find(what) != std::string::npos; });
+  };
+  env_ = {{"NOTIFY_SOCKET", "@" + name}, {"WATCHDOG_USEC", "200000"}};
+  const std::string cfg = write_config("c.yaml", "", "");
+  start(cfg);
+  EXPECT_TRUE(wait_for([&] { return count("READY=1") == 1; }, 5.0)) << log();
+  publish(0, samples_at(8.0), 20.0);  // 0.4 s
+  std::this_thread::sleep_for(std::chrono::milliseconds(600));
+  // WATCHDOG=1 every half WatchdogSec from the estimation loop: about 10 in 1 s.
+  EXPECT_GE(count("WATCHDOG=1"), 7) << log();
+  EXPECT_NE(log().find("systemd watchdog 200 ms"), std::string::npos) << log();
+  ::kill(pid_, SIGHUP);
+  EXPECT_TRUE(wait_for([&] { return count("READY=1") == 2; }, 5.0)) << log();
+  EXPECT_EQ(count("RELOADING=1"), 1);
+  EXPECT_EQ(stop(SIGTERM), 0) << log();
+  EXPECT_TRUE(wait_for([&] { return count("STOPPING=1") == 1; }, 2.0));
+  done = true;
+  reader.join();
+  ::close(sock);
+  // Order: READY, then RELOADING before the second READY, STOPPING last.
+  std::vector<std::string> lifecycle;
+  for (const auto& [m, t] : got)
+    if (m.find("WATCHDOG") == std::string::npos) lifecycle.push_back(m.substr(0, m.find('\n')));
+  ASSERT_EQ(lifecycle.size(), 4u);
+  EXPECT_EQ(lifecycle[0], "READY=1");
+  EXPECT_EQ(lifecycle[1], "RELOADING=1");
+  EXPECT_EQ(lifecycle[2], "READY=1");
+  EXPECT_EQ(lifecycle[3], "STOPPING=1");
 }
