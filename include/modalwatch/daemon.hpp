@@ -92,10 +92,10 @@ class Daemon {
   // Call from the control thread only, after start().
   std::string reload(const Config& next);
 
-  // Writes daemon.checkpoint from the current state (call after stop(), or on
-  // the control thread for a periodic checkpoint the publisher did not make).
-  // False (and an error log) on failure, e.g. a full disk. No-op (true) when
-  // no checkpoint path is configured.
+  // Writes daemon.checkpoint from the final state; call after stop() only
+  // (while running, the publisher thread writes the periodic checkpoints from
+  // the newest snapshot). Skipped (true) during the warm-up and without a
+  // checkpoint path; false (and an error log) on failure, e.g. a full disk.
   bool write_checkpoint();
 
   DaemonCounters counters() const;
