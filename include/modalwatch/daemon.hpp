@@ -5,8 +5,11 @@
 //   LCM subscriber ──SampleRecord──► SpscRing ──► estimation loop ──Snapshot──► SpscRing ──► publisher
 //   (lcm_handle, decode,                          (fixed rate, input policy,                (estimates_t,
 //    validate, never blocks)                       RecursiveEstimator::step,                 fault_status_t,
-//                                                  FaultDetector per publish period)         heartbeat_t, logs,
-//                                                                                           checkpoints)
+//                                                  FaultDetector per publish period)         heartbeat_t, logs)
+//
+// A fourth, control-side thread writes the periodic checkpoint: it pauses the
+// estimation loop (joins it; the input ring buffers meanwhile), copies the
+// state, restarts the loop and writes the file; reload() pauses it the same way.
 //
 // The estimation loop neither locks, allocates nor makes a system call after
 // start-up, apart from its absolute-time sleep (clock_nanosleep on
@@ -56,7 +59,8 @@ struct DaemonCounters {
 
 // Test hook, called on the estimation thread: warmed_up() at the start of the
 // first tick after the estimator's warm-up is over and at least one snapshot
-// went out; exiting() after the loop's last tick (the final drain included).
+// went out; exiting() after the loop's last tick (the final drain included),
+// each time the loop thread ends (stop, and the pauses of reload and checkpoints).
 class LoopProbe {
  public:
   virtual ~LoopProbe() = default;
@@ -93,9 +97,9 @@ class Daemon {
   std::string reload(const Config& next);
 
   // Writes daemon.checkpoint from the final state; call after stop() only
-  // (while running, the publisher thread writes the periodic checkpoints from
-  // the newest snapshot). Skipped (true) during the warm-up and without a
-  // checkpoint path; false (and an error log) on failure, e.g. a full disk.
+  // (while running, the checkpointer thread writes the periodic ones; throws
+  // std::logic_error otherwise). Skipped (true) during the warm-up and without
+  // a checkpoint path; false (and an error log) on failure, e.g. a full disk.
   bool write_checkpoint();
 
   DaemonCounters counters() const;

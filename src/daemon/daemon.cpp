@@ -38,6 +38,8 @@
 #include <optional>
 #include <stdexcept>
 #include <system_error>
+#include <condition_variable>
+#include <mutex>
 #include <thread>
 #include <vector>
 
@@ -295,10 +297,8 @@ struct Daemon::Impl {
   // ---- publisher thread
   std::thread publisher;
   std::atomic<bool> stop_publisher{false};
-  Snapshot last;      // the newest snapshot (checkpoint source)
-  bool have_last = false;
   std::vector<std::uint8_t> encode_buffer;
-  std::int64_t next_heartbeat_ns = 0, next_rate_log_ns = 0, next_checkpoint_ns = 0;
+  std::int64_t next_heartbeat_ns = 0, next_rate_log_ns = 0;
   DaemonCounters rate_base;
   std::int64_t rate_base_ns = 0;
   bool logged_warmup_over = false, logged_stale = false;
@@ -330,7 +330,17 @@ struct Daemon::Impl {
   void publish_heartbeat(std::int64_t now);
   void log_snapshot(const Snapshot& s);
   void log_rates(std::int64_t now);
-  bool checkpoint_from_last(bool final_one);
+  // checkpoints (control side): the estimation thread is paused for the copy
+  std::thread checkpointer;
+  std::mutex control;  // serialises reload(), stop() and the checkpointer's pauses
+  std::mutex wake_mutex;
+  std::condition_variable wake_checkpointer;
+  bool stop_checkpointer = false;  // under wake_mutex
+  void checkpointer_main();
+  std::optional<standin::Checkpoint> capture();  // estimation thread stopped
+  bool write(const standin::Checkpoint& ck, bool final_one);
+  void start_estimation();
+  void stop_estimation_thread();
 
   void start_threads(bool with_subscriber);
   void stop_threads(bool with_subscriber);
@@ -608,10 +618,6 @@ void Daemon::Impl::publisher_main() {
       log_rates(now);
       next_rate_log_ns = now + static_cast<std::int64_t>(kRateLogPeriod * 1e9);
     }
-    if (!config.daemon.checkpoint_path.empty() && now >= next_checkpoint_ns) {
-      if (next_checkpoint_ns != 0 && have_last) checkpoint_from_last(false);
-      next_checkpoint_ns = now + static_cast<std::int64_t>(config.daemon.checkpoint_period * 1e9);
-    }
     if (stopping) break;
     // Just after the loop's next tick (a quarter period, at most 50 us, later).
     const std::int64_t after = std::min<std::int64_t>(tick_period_ns / 4, 50'000);
@@ -623,8 +629,6 @@ void Daemon::Impl::publisher_main() {
 }
 
 void Daemon::Impl::handle(const Snapshot& s) {
-  last = s;
-  have_last = true;
   if (s.kind == Snapshot::estimate) publish_estimates(s);
   if (s.kind != Snapshot::final_state || s.n_changes) publish_fault_status(s);
   log_snapshot(s);
@@ -765,34 +769,66 @@ void Daemon::Impl::log_rates(std::int64_t now) {
   rate_base_ns = now;
 }
 
-bool Daemon::Impl::checkpoint_from_last(bool final_one) {
-  if (config.daemon.checkpoint_path.empty()) return true;
-  if (!have_last || !last.have_seq || last.warming_up) {
-    spdlog::info("checkpoint skipped: the estimator is still warming up (no estimate worth keeping)");
-    return true;
-  }
+// ---------------------------------------------------------------- checkpoints
+
+// The state to resume from. The estimation thread must be stopped: its
+// variables and the estimator are read here (and, with the io branch's
+// EstimatorState, state() allocates, which the estimation thread must not).
+std::optional<standin::Checkpoint> Daemon::Impl::capture() {
+  if (!have_seq || estimator.status().warming_up) return std::nullopt;
   standin::Checkpoint ck;
   ck.config_fingerprint = fingerprint;
-  ck.last_utime = last.utime;
-  ck.last_seq = last.last_seq;
-  for (int i = 0; i < last.n_modes; ++i) {
-    const auto k = static_cast<std::size_t>(i);
-    ck.submodels.push_back(last.value[k]);
-    ck.baselines.push_back(last.baseline_ready[k] ? std::optional<ModalParameters>(last.baseline[k]) : std::nullopt);
+  ck.last_utime = last_utime;
+  ck.last_seq = last_seq;
+  for (int i = 0; i < estimator.submodels(); ++i) {
+    ck.submodels.push_back(estimator.mode(i).value);
+    const ModeStatus& m = detector->status()[static_cast<std::size_t>(i)];
+    ck.baselines.push_back(m.baseline_ready ? std::optional<ModalParameters>(m.baseline.value) : std::nullopt);
   }
+  return ck;
+}
+
+bool Daemon::Impl::write(const standin::Checkpoint& ck, bool final_one) {
+  const std::string path = config.daemon.checkpoint_path;
   try {
-    standin::write_checkpoint(config.daemon.checkpoint_path, ck);
+    standin::write_checkpoint(path, ck);
     bump(counters.checkpoints_written);
     if (final_one)
-      spdlog::info("checkpoint written: {} (last seq {})", config.daemon.checkpoint_path, ck.last_seq);
+      spdlog::info("checkpoint written: {} (last seq {})", path, ck.last_seq);
     else
-      spdlog::debug("checkpoint written: {} (last seq {})", config.daemon.checkpoint_path, ck.last_seq);
+      spdlog::debug("checkpoint written: {} (last seq {})", path, ck.last_seq);
     return true;
   } catch (const std::system_error& e) {
     bump(counters.checkpoint_failures);
-    spdlog::error("checkpoint NOT written ({}): {}; the previous one is kept, the service continues",
-                  config.daemon.checkpoint_path, e.what());
+    spdlog::error("checkpoint NOT written ({}): {}; the previous one is kept, the service continues", path,
+                  e.what());
     return false;
+  }
+}
+
+// Every checkpoint period: pause the estimation loop (join it: the input ring
+// holds what arrives meanwhile), copy the state, restart the loop, then write
+// the file off the estimation path.
+void Daemon::Impl::checkpointer_main() {
+  for (;;) {
+    double period = 0.0;
+    {
+      std::lock_guard<std::mutex> lock(control);
+      period = config.daemon.checkpoint_period;
+    }
+    {
+      std::unique_lock<std::mutex> lock(wake_mutex);
+      if (wake_checkpointer.wait_for(lock, std::chrono::duration<double>(period), [this] { return stop_checkpointer; })) return;
+    }
+    std::optional<standin::Checkpoint> ck;
+    {
+      std::lock_guard<std::mutex> lock(control);
+      if (!running || config.daemon.checkpoint_path.empty()) continue;
+      stop_estimation_thread();
+      ck = capture();
+      start_estimation();
+    }
+    if (ck) write(*ck, false);
   }
 }
 
@@ -805,10 +841,9 @@ void Daemon::Impl::start_threads(bool with_subscriber) {
   tick_period_ns =
       std::max<std::int64_t>(10'000, static_cast<std::int64_t>(std::llround(1e9 / config.daemon.loop_rate_hz)));
   tick_origin_ns = mono_ns();
-  stop_estimation.store(false);
   stop_publisher.store(false);
   publisher = std::thread([this] { publisher_main(); });
-  estimation = std::thread([this] { estimation_main(); });
+  start_estimation();
   if (with_subscriber) {
     stop_subscriber.store(false);
     sub_samples = lcm_subscribe(lcm, config.lcm.samples_channel.c_str(), &Impl::on_sample_packet, this);
@@ -830,14 +865,22 @@ void Daemon::Impl::stop_threads(bool with_subscriber) {
     if (sub_batches) lcm_unsubscribe(lcm, sub_batches);
     sub_samples = sub_batches = nullptr;
   }
-  if (estimation.joinable()) {
-    stop_estimation.store(true, std::memory_order_release);
-    estimation.join();
-  }
+  stop_estimation_thread();
   if (publisher.joinable()) {
     stop_publisher.store(true, std::memory_order_release);
     publisher.join();
   }
+}
+
+void Daemon::Impl::start_estimation() {
+  stop_estimation.store(false);
+  estimation = std::thread([this] { estimation_main(); });
+}
+
+void Daemon::Impl::stop_estimation_thread() {
+  if (!estimation.joinable()) return;
+  stop_estimation.store(true, std::memory_order_release);
+  estimation.join();
 }
 
 // ============================================================================
@@ -865,7 +908,15 @@ void Daemon::start() {
                                              std::to_string(c.daemon.checkpoint_period) + " s",
       m.plan.restored ? "no warm-up" : "warm-up " + std::to_string(c.estimator.warmup_samples) + " samples",
       m.watchdog_usec ? ", systemd watchdog " + std::to_string(m.watchdog_usec / 1000) + " ms" : std::string());
-  m.start_threads(true);
+  {
+    std::lock_guard<std::mutex> lock(m.control);
+    m.start_threads(true);
+  }
+  {
+    std::lock_guard<std::mutex> lock(m.wake_mutex);
+    m.stop_checkpointer = false;
+  }
+  m.checkpointer = std::thread([&m] { m.checkpointer_main(); });
   m.state.store(static_cast<int>(RunState::running));
 }
 
@@ -873,6 +924,13 @@ void Daemon::stop() {
   Impl& m = *impl_;
   if (!m.running) return;
   m.state.store(static_cast<int>(RunState::stopping));
+  {
+    std::lock_guard<std::mutex> lock(m.wake_mutex);
+    m.stop_checkpointer = true;
+  }
+  m.wake_checkpointer.notify_all();
+  if (m.checkpointer.joinable()) m.checkpointer.join();
+  std::lock_guard<std::mutex> lock(m.control);
   m.stop_threads(true);
   m.running = false;
   const DaemonCounters c = m.counters.load();
@@ -903,6 +961,7 @@ std::string Daemon::reload(const Config& next) {
   if (next.daemon.sample_ring != m.config.daemon.sample_ring || next.daemon.snapshot_ring != m.config.daemon.snapshot_ring)
     kept.emplace_back("ring sizes");
 
+  std::lock_guard<std::mutex> control_lock(m.control);
   m.state.store(static_cast<int>(RunState::reloading));
   const bool was_running = m.running;
   if (was_running) m.stop_threads(false);  // the subscriber keeps filling the input ring
@@ -942,7 +1001,17 @@ std::string Daemon::reload(const Config& next) {
   return summary;
 }
 
-bool Daemon::write_checkpoint() { return impl_->checkpoint_from_last(true); }
+bool Daemon::write_checkpoint() {
+  Impl& m = *impl_;
+  if (m.running) throw std::logic_error("Daemon::write_checkpoint: call after stop()");
+  if (m.config.daemon.checkpoint_path.empty()) return true;
+  const std::optional<standin::Checkpoint> ck = m.capture();
+  if (!ck) {
+    spdlog::info("checkpoint skipped: the estimator is still warming up (no estimate worth keeping)");
+    return true;
+  }
+  return m.write(*ck, true);
+}
 
 DaemonCounters Daemon::counters() const { return impl_->counters.load(); }
 bool Daemon::restored_from_checkpoint() const { return impl_->plan.restored; }
