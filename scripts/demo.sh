@@ -1,29 +1,55 @@
 #!/usr/bin/env bash
-# The main job, end to end, on a fresh Debian machine: installs and builds
-# (scripts/setup.sh), simulates a 10 kHz motion stage (rigid body + modes at 150
-# and 700 Hz, closed loop), identifies it with the offline additive SRIVC and
-# prints the modal table next to the truth.
-#   scripts/demo.sh [config/motion-stage.yaml]
+# The main job, end to end: the daemon watching a motion system whose mode
+# drifts. Installs and builds when needed (scripts/setup.sh), simulates the
+# flexible beam of config/flexible-beam-drift.yaml (4096 Hz, closed loop; the
+# flexible mode loses 15 % stiffness at t = 30..32 s), starts modalwatchd,
+# replays the record onto LCM faster than real time, prints the estimates and
+# the fault flags as they arrive (`modalwatch watch`), then stops the daemon
+# with SIGTERM (drain, checkpoint, exit 0).
+#   scripts/demo.sh [config]          SPEED=2 (times real time), DEMO_DIR=dir
 set -euo pipefail
 cd "$(dirname "$0")/.."
-config="${1:-config/motion-stage.yaml}"
-[ -x build/modalwatch ] || scripts/setup.sh
+config="${1:-config/flexible-beam-drift.yaml}"
+speed="${SPEED:-2}"
+for b in modalwatch modalwatchd; do
+  [ -x "build/$b" ] || { scripts/setup.sh; break; }
+done
 out="${DEMO_DIR:-$(mktemp -d)}"
 mkdir -p "$out"
-echo "== simulate: $config -> $out/record.csv"
+
+# The daemon's own copy of the config, with a checkpoint in the demo directory.
+sed -e '/^daemon:/a\  checkpoint: {path: '"$out"'/modalwatchd.ckpt, period: 10}' "$config" > "$out/daemon.yaml"
+rm -f "$out/modalwatchd.ckpt"
+
+echo "== simulate: $config -> $out/record.csv (60 s at 4096 Hz; flex mode -15 % stiffness at t = 30..32 s)"
 build/modalwatch simulate --config "$config" --out "$out/record.csv" --truth "$out/truth.csv"
-echo "== truth (from $config, plant section):"
-python3 - "$out/truth.csv" <<'PY'
-import csv, math, sys
-row = next(csv.DictReader(open(sys.argv[1])))
-for key in row:
-    if key.endswith("_wn"):
-        n = key[:-3]
-        wn = float(row[key])
-        print(f"  {n:10s} f = {wn/2/math.pi:10.5f} Hz  wn = {wn:11.5f} rad/s  zeta = {float(row[n+'_zeta']):.5f}  gain = {float(row[n+'_gain']):.5g}")
-    elif key.endswith("_theta0"):
-        print(f"  {key[:-7]:10s} b0 = {float(row[key]):.6g}")
-PY
-echo "== fit: modalwatch fit --config $config --data $out/record.csv --out $out/fitted.yaml"
-build/modalwatch fit --config "$config" --data "$out/record.csv" --out "$out/fitted.yaml"
-echo "== fitted model written to $out/fitted.yaml"
+
+echo "== start: modalwatchd --config $out/daemon.yaml (log: $out/modalwatchd.log)"
+build/modalwatchd --config "$out/daemon.yaml" 2> >(tee "$out/modalwatchd.log" | grep --line-buffered -E "modalwatchd:|FLAG|flag cleared|baseline|warm-up|reset|gap|stale|SIGTERM|checkpoint|stopped" | sed -u 's/^/   [daemon] /' >&2) &
+daemon=$!
+cleanup() { kill "$daemon" "${watcher:-}" 2>/dev/null || true; }
+trap cleanup EXIT
+sleep 1
+kill -0 "$daemon" 2>/dev/null || { echo "modalwatchd did not start:"; cat "$out/modalwatchd.log"; exit 1; }
+
+echo "== watch: modalwatch watch (every 10th message: one line per second of sample time per channel)"
+build/modalwatch watch --config "$out/daemon.yaml" --every 10 &
+watcher=$!
+sleep 0.5
+
+echo "== replay: modalwatch replay $out/record.csv at ${speed}x real time"
+build/modalwatch replay --config "$out/daemon.yaml" --data "$out/record.csv" --speed "$speed" --batch 64 \
+  --start-utime 0 >/dev/null
+sleep 1.5
+
+echo "== stop: SIGTERM"
+kill -TERM "$daemon"
+status=0
+wait "$daemon" || status=$?
+kill "$watcher" 2>/dev/null || true
+wait "$watcher" 2>/dev/null || true
+trap - EXIT
+echo "== modalwatchd exited with code $status; checkpoint: $(ls "$out"/modalwatchd.ckpt 2>/dev/null || echo none)"
+echo "== flag changes logged by the daemon:"
+grep -E "FLAG RAISED|flag cleared" "$out/modalwatchd.log" | sed 's/^/   /' || echo "   (none)"
+exit "$status"

@@ -35,6 +35,7 @@ fi
 # Only as root, only when no route covers 224.0.0.0/4 yet; idempotent.
 if [ "$(id -u)" -eq 0 ] && command -v ip >/dev/null; then
   if ! ip route get 239.255.76.67 >/dev/null 2>&1; then
+    ip link set lo up
     ip link set lo multicast on
     ip route add 224.0.0.0/4 dev lo
     echo "setup: multicast routed over lo (224.0.0.0/4)"

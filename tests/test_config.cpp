@@ -1099,3 +1099,112 @@ TEST(ConfigErrors, Lcm) {
   EXPECT_EQ(parse_error(kBase + "lcm:\n  channels:\n    samples: \"\"\n"),
             "test.yaml:17: key 'lcm.channels.samples': expected a non-empty string (got \"\")");
 }
+
+TEST(Config, DaemonAndFaultDefaults) {
+  const Config c = parse_config(kBase, "test.yaml");
+  EXPECT_DOUBLE_EQ(c.daemon.loop_rate_hz, 1000.0);
+  EXPECT_DOUBLE_EQ(c.daemon.publish_period, 0.1);
+  EXPECT_EQ(c.daemon.sample_ring, 65536);
+  EXPECT_TRUE(c.daemon.checkpoint_path.empty());
+  EXPECT_EQ(c.daemon.log_level, "info");
+  EXPECT_DOUBLE_EQ(c.faults.learn_window, 30.0);
+  ASSERT_EQ(c.faults.baselines.size(), 2u);
+  EXPECT_FALSE(c.faults.baselines[0]);
+  EXPECT_DOUBLE_EQ(c.faults.thresholds[0].sigma_threshold, 4.0);
+}
+
+TEST(Config, DaemonAndFaultSectionsAndRoundTrip) {
+  const std::string extra =
+      "daemon:\n"                                           // 15
+      "  loop_rate_hz: 2000\n"                              // 16
+      "  publish_period: 0.5\n"                             // 17
+      "  heartbeat_period: 2\n"                             // 18
+      "  gap_time: 0.25\n"                                  // 19
+      "  stale_time: 3\n"                                   // 20
+      "  sample_ring: 1024\n"                               // 21
+      "  snapshot_ring: 16\n"                               // 22
+      "  checkpoint: {path: state/x.ckpt, period: 7}\n"     // 23
+      "  log_level: debug\n"                                // 24
+      "faults:\n"                                           // 25
+      "  learn_window: 12\n"                                // 26
+      "  wn: {sigma: 3, relative: 0.02, hold: 1.5}\n"       // 27
+      "  zeta: {clear_fraction: 0.25, clear_time: 4}\n"     // 28
+      "  baselines:\n"                                      // 29
+      "    m2: {frequency_hz: 1.5, zeta: 0.2, gain: 2}\n";  // 30
+  const Config c = parse_config(kBase + extra, "/cfg/test.yaml");
+  EXPECT_DOUBLE_EQ(c.daemon.loop_rate_hz, 2000.0);
+  EXPECT_DOUBLE_EQ(c.daemon.publish_period, 0.5);
+  EXPECT_DOUBLE_EQ(c.daemon.heartbeat_period, 2.0);
+  EXPECT_DOUBLE_EQ(c.estimator.gap_factor, 5.0);  // 0.25 s at 20 Hz
+  EXPECT_DOUBLE_EQ(c.daemon.stale_time, 3.0);
+  EXPECT_EQ(c.daemon.sample_ring, 1024);
+  EXPECT_EQ(c.daemon.snapshot_ring, 16);
+  EXPECT_EQ(c.daemon.checkpoint_path, "/cfg/state/x.ckpt");
+  EXPECT_DOUBLE_EQ(c.daemon.checkpoint_period, 7.0);
+  EXPECT_EQ(c.daemon.log_level, "debug");
+  EXPECT_DOUBLE_EQ(c.faults.learn_window, 12.0);
+  EXPECT_DOUBLE_EQ(c.faults.thresholds[0].sigma_threshold, 3.0);
+  EXPECT_DOUBLE_EQ(c.faults.thresholds[0].relative_threshold, 0.02);
+  EXPECT_DOUBLE_EQ(c.faults.thresholds[0].hold_time, 1.5);
+  EXPECT_DOUBLE_EQ(c.faults.thresholds[1].clear_fraction, 0.25);
+  EXPECT_DOUBLE_EQ(c.faults.thresholds[1].clear_time, 4.0);
+  EXPECT_DOUBLE_EQ(c.faults.thresholds[2].sigma_threshold, 4.0);  // default kept
+  ASSERT_FALSE(c.faults.baselines[0]);
+  ASSERT_TRUE(c.faults.baselines[1]);
+  EXPECT_DOUBLE_EQ(c.faults.baselines[1]->wn, 1.5 * kTwoPi);
+  EXPECT_DOUBLE_EQ(c.faults.baselines[1]->gain, 2.0);
+
+  const Config back = parse_config(config_to_yaml(c, c.model), "back.yaml");
+  EXPECT_DOUBLE_EQ(back.daemon.loop_rate_hz, c.daemon.loop_rate_hz);
+  EXPECT_DOUBLE_EQ(back.daemon.publish_period, c.daemon.publish_period);
+  EXPECT_DOUBLE_EQ(back.daemon.heartbeat_period, c.daemon.heartbeat_period);
+  EXPECT_DOUBLE_EQ(back.estimator.gap_factor, c.estimator.gap_factor);
+  EXPECT_DOUBLE_EQ(back.daemon.stale_time, c.daemon.stale_time);
+  EXPECT_EQ(back.daemon.sample_ring, c.daemon.sample_ring);
+  EXPECT_EQ(back.daemon.snapshot_ring, c.daemon.snapshot_ring);
+  EXPECT_EQ(back.daemon.checkpoint_path, c.daemon.checkpoint_path);
+  EXPECT_DOUBLE_EQ(back.daemon.checkpoint_period, c.daemon.checkpoint_period);
+  EXPECT_EQ(back.daemon.log_level, c.daemon.log_level);
+  EXPECT_DOUBLE_EQ(back.faults.learn_window, c.faults.learn_window);
+  for (int q = 0; q < 3; ++q) {
+    EXPECT_DOUBLE_EQ(back.faults.thresholds[q].sigma_threshold, c.faults.thresholds[q].sigma_threshold);
+    EXPECT_DOUBLE_EQ(back.faults.thresholds[q].relative_threshold, c.faults.thresholds[q].relative_threshold);
+    EXPECT_DOUBLE_EQ(back.faults.thresholds[q].hold_time, c.faults.thresholds[q].hold_time);
+    EXPECT_DOUBLE_EQ(back.faults.thresholds[q].clear_fraction, c.faults.thresholds[q].clear_fraction);
+    EXPECT_DOUBLE_EQ(back.faults.thresholds[q].clear_time, c.faults.thresholds[q].clear_time);
+  }
+  ASSERT_FALSE(back.faults.baselines[0]);
+  ASSERT_TRUE(back.faults.baselines[1]);
+  EXPECT_DOUBLE_EQ(back.faults.baselines[1]->wn, c.faults.baselines[1]->wn);
+  EXPECT_DOUBLE_EQ(back.faults.baselines[1]->zeta, c.faults.baselines[1]->zeta);
+}
+
+TEST(ConfigErrors, DaemonAndFaults) {
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  loop_rate: 5\n"),
+            "test.yaml:16: key 'daemon.loop_rate': unknown key for daemon (allowed: loop_rate_hz, publish_period, "
+            "heartbeat_period, gap_time, stale_time, sample_ring, snapshot_ring, checkpoint, log_level)");
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  loop_rate_hz: 0\n"),
+            "test.yaml:16: key 'daemon.loop_rate_hz': must be > 0 (got 0)");
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  publish_period: 0.01\n"),
+            "test.yaml:16: key 'daemon.publish_period': must be at least one sample period (got 0.01)");
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  gap_time: 0.05\n"),
+            "test.yaml:16: key 'daemon.gap_time': must exceed the sample period 0.050000000000000003 s (got 0.05)");
+  EXPECT_EQ(parse_error(kBase + "estimator:\n  gap_factor: 2\ndaemon:\n  gap_time: 1\n"),
+            "test.yaml:18: key 'daemon.gap_time': give daemon.gap_time or estimator.gap_factor, not both");
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  sample_ring: 8\n"),
+            "test.yaml:16: key 'daemon.sample_ring': must be in 16..16777216 (got 8)");
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  checkpoint: {period: 5}\n"),
+            "test.yaml:16: key 'daemon.checkpoint.path': missing required key");
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  log_level: verbose\n"),
+            "test.yaml:16: key 'daemon.log_level': must be one of trace, debug, info, warn, error, critical, off "
+            "(got verbose)");
+  EXPECT_EQ(parse_error(kBase + "faults:\n  wn: {sigma: -1}\n"),
+            "test.yaml:16: key 'faults.wn.sigma': must be > 0 (got -1)");
+  EXPECT_EQ(parse_error(kBase + "faults:\n  zeta: {clear_fraction: 1}\n"),
+            "test.yaml:16: key 'faults.zeta.clear_fraction': must be in (0, 1) (got 1)");
+  EXPECT_EQ(parse_error(kBase + "faults:\n  baselines:\n    m3: {wn: 1, zeta: 0.1, gain: 1}\n"),
+            "test.yaml:17: key 'faults.baselines.m3': unknown key for faults.baselines (the model's modes) "
+            "(allowed: m1, m2)");
+  EXPECT_EQ(parse_error(kBase + "faults:\n  baselines:\n    m1: {wn: 1, gain: 1}\n"),
+            "test.yaml:17: key 'faults.baselines.m1.zeta': missing required key (kind mode)");
+}

@@ -3,11 +3,13 @@
 // (controller), and optionally the simulated plant and experiment. Every key is
 // documented in config/README.md; an unknown key, a wrong type or an invalid
 // value is an InputError naming the key and its line.
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "modalwatch/estimator.hpp"
+#include "modalwatch/fault_detector.hpp"
 #include "modalwatch/model.hpp"
 #include "modalwatch/prefilter.hpp"
 #include "modalwatch/simulator.hpp"
@@ -30,6 +32,27 @@ struct LcmSettings {
   std::string heartbeat_channel = "MODALWATCH_HEARTBEAT";        // heartbeat_t out
 };
 
+// The `daemon:` section: rates, input policy, ring sizes, checkpoint, logging.
+struct DaemonSettings {
+  double loop_rate_hz = 1000.0;    // estimation loop tick (absolute-time sleep, CLOCK_MONOTONIC)
+  double publish_period = 0.1;     // s of sample time between estimates / fault status messages
+  double heartbeat_period = 1.0;   // s (wall clock) between heartbeats
+  double stale_time = 1.0;         // s (wall clock) without a sample: HEALTH_STALE_INPUT
+  int sample_ring = 65536;         // samples between the LCM thread and the estimation loop
+  int snapshot_ring = 256;         // snapshots between the estimation loop and the publisher
+  std::string checkpoint_path;     // empty: no checkpoint (relative paths: to the config file)
+  double checkpoint_period = 60.0; // s (wall clock) between periodic checkpoints
+  std::string log_level = "info";  // spdlog level name
+};
+
+// The `faults:` section: the fault detector (baselines, thresholds per quantity).
+struct FaultSettings {
+  double learn_window = 30.0;  // s of sample time
+  std::array<FaultThresholds, kQuantities> thresholds{};
+  // Per submodel (config order): a configured baseline, or none (learned).
+  std::vector<std::optional<ModalParameters>> baselines;
+};
+
 struct Config {
   std::string source;          // file name, for messages
   double sample_time = 0.0;    // s (from sample_rate_hz)
@@ -45,6 +68,11 @@ struct Config {
   // per-submodel initial_covariance come from the sections above.
   EstimatorSettings estimator;
   LcmSettings lcm;  // `lcm:` section (daemon, replay)
+  DaemonSettings daemon;  // `daemon:` section (modalwatchd)
+  // `faults:` section (modalwatchd). `daemon.gap_time`, when given, is written
+  // into estimator.gap_factor (= gap_time / sample_time): one gap rule for
+  // track and the daemon.
+  FaultSettings faults;
 };
 
 Config load_config(const std::string& path);

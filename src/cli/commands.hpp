@@ -65,6 +65,14 @@ struct DiagnoseArgs {
 int simulate(const SimulateArgs& args);
 int replay(const ReplayArgs& args);
 int diagnose(const DiagnoseArgs& args);
+struct WatchArgs {
+  std::string config;     // lcm: section (URL, channels)
+  long long count = 0;    // stop after this many estimates messages (0: never)
+  double timeout = 0.0;   // s; stop after this long (0: never)
+  long long every = 1;    // print every n-th message of each kind
+};
+
+int watch(const WatchArgs& args);
 int track(const TrackArgs& args);
 int fit(const FitArgs& args);
 

@@ -74,6 +74,12 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 1.0));
   diagnose_cmd->add_option("--max-delay", diag.max_delay, "largest input delay tried [samples]")
       ->check(CLI::PositiveNumber);
+  WatchArgs watch_args;
+  auto* watch_cmd = app.add_subcommand("watch", "Print the daemon's estimates and fault status as they arrive (LCM)");
+  watch_cmd->add_option("--config,-c", watch_args.config, "YAML whose lcm: section names the URL and channels")->required();
+  watch_cmd->add_option("--count", watch_args.count, "stop after this many estimates messages");
+  watch_cmd->add_option("--timeout", watch_args.timeout, "stop after this many seconds");
+  watch_cmd->add_option("--every", watch_args.every, "print every n-th message of each kind")->check(CLI::PositiveNumber);
 
   try {
     app.parse(argc, argv);
@@ -104,6 +110,7 @@ int main(int argc, char** argv) {
     return replay(replay_args);
   }
   if (diagnose_cmd->parsed()) return diagnose(diag);
+  if (watch_cmd->parsed()) return watch(watch_args);
   if (track_cmd->parsed()) {
     track_args.progress = !no_progress;
     return track(track_args);

@@ -693,10 +693,87 @@ void parse_lcm(const Map& m, LcmSettings& lcm) {
   }
 }
 
+
+// ---------------------------------------------------------------- daemon
+
+void parse_daemon(const Map& d, Config& config, const std::filesystem::path& dir, bool gap_factor_given) {
+  d.allow({"loop_rate_hz", "publish_period", "heartbeat_period", "gap_time", "stale_time", "sample_ring",
+           "snapshot_ring", "checkpoint", "log_level"},
+          "daemon");
+  DaemonSettings& s = config.daemon;
+  if (const auto v = d.get("loop_rate_hz")) {
+    s.loop_rate_hz = v->positive();
+    if (s.loop_rate_hz > 100000.0) v->fail("must be <= 100000 (a tick shorter than 10 us is a busy loop)");
+  }
+  if (const auto v = d.get("publish_period")) {
+    s.publish_period = v->positive();
+    if (s.publish_period < config.sample_time) v->fail("must be at least one sample period");
+  }
+  if (const auto v = d.get("heartbeat_period")) s.heartbeat_period = v->positive();
+  if (const auto v = d.get("gap_time")) {
+    if (gap_factor_given) v->fail_plain("give daemon.gap_time or estimator.gap_factor, not both");
+    const double gap = v->positive();
+    if (!(gap > config.sample_time)) v->fail("must exceed the sample period " + format_number(config.sample_time) + " s");
+    config.estimator.gap_factor = gap / config.sample_time;
+  }
+  if (const auto v = d.get("stale_time")) s.stale_time = v->positive();
+  constexpr long long kRingMax = 1LL << 24;
+  if (const auto v = d.get("sample_ring")) s.sample_ring = static_cast<int>(v->integer(16, kRingMax));
+  if (const auto v = d.get("snapshot_ring")) s.snapshot_ring = static_cast<int>(v->integer(2, 65536));
+  if (const auto c = d.get("checkpoint")) {
+    const Map m(*c);
+    m.allow({"path", "period"}, "daemon.checkpoint");
+    const Value path = m.require("path");
+    const std::filesystem::path file(path.text());
+    s.checkpoint_path = (file.is_absolute() ? file : dir / file).lexically_normal().string();
+    if (const auto p = m.get("period")) s.checkpoint_period = p->positive();
+  }
+  if (const auto v = d.get("log_level"))
+    s.log_level = v->choice({"trace", "debug", "info", "warn", "error", "critical", "off"});
+}
+
+// ---------------------------------------------------------------- faults
+
+void parse_thresholds(const Map& m, FaultThresholds& th) {
+  m.allow({"sigma", "relative", "hold", "clear_fraction", "clear_time"}, "thresholds");
+  if (const auto v = m.get("sigma")) th.sigma_threshold = v->positive();
+  if (const auto v = m.get("relative")) th.relative_threshold = v->positive();
+  if (const auto v = m.get("hold")) th.hold_time = v->at_least(0.0);
+  if (const auto v = m.get("clear_fraction")) {
+    th.clear_fraction = v->number();
+    if (!(th.clear_fraction > 0.0 && th.clear_fraction < 1.0)) v->fail("must be in (0, 1)");
+  }
+  if (const auto v = m.get("clear_time")) th.clear_time = v->at_least(0.0);
+}
+
+void parse_faults(const Map& f, Config& config) {
+  f.allow({"learn_window", "wn", "zeta", "gain", "baselines"}, "faults");
+  FaultSettings& s = config.faults;
+  if (const auto v = f.get("learn_window")) s.learn_window = v->positive();
+  const char* names[kQuantities] = {"wn", "zeta", "gain"};
+  for (int q = 0; q < kQuantities; ++q)
+    if (const auto v = f.get(names[q])) parse_thresholds(Map(*v), s.thresholds[static_cast<std::size_t>(q)]);
+  if (const auto b = f.get("baselines")) {
+    const Map m(*b);
+    Keys modes;
+    for (const auto& sub : config.model.submodels)
+      if (sub.is_mode()) modes.push_back(sub.name);
+    m.allow(modes, "faults.baselines (the model's modes)");
+    for (std::size_t i = 0; i < config.model.submodels.size(); ++i)
+      if (const auto v = m.get(config.model.submodels[i].name)) {
+        const Map mode(*v);
+        mode.allow({"wn", "frequency_hz", "zeta", "gain"}, "a baseline");
+        s.baselines[i] = parse_modal(mode);
+      }
+  }
+}
+
 // ---------------------------------------------------------------- document
 
 void parse_document(const Map& top, Config& config, const std::filesystem::path& dir) {
-  top.allow({"sample_rate_hz", "model", "controller", "plant", "simulation", "estimator", "lcm"}, "");
+  top.allow({"sample_rate_hz", "model", "controller", "plant", "simulation", "estimator", "lcm", "daemon",
+             "faults"},
+            "");
   config.sample_time = 1.0 / top.require("sample_rate_hz").positive();
   parse_model(Map(top.require("model")), config);
   if (const auto c = top.get("controller")) config.controller = parse_controller(Map(*c));
@@ -706,6 +783,10 @@ void parse_document(const Map& top, Config& config, const std::filesystem::path&
   if (const auto s = top.get("simulation")) config.experiment = parse_simulation(Map(*s), config, dir);
   if (const auto e = top.get("estimator")) parse_estimator(Map(*e), config.sample_time, config.estimator);
   if (const auto l = top.get("lcm")) parse_lcm(Map(*l), config.lcm);
+  const bool gap_factor_given = top.get("estimator") && Map(*top.get("estimator")).has("gap_factor");
+  if (const auto d = top.get("daemon")) parse_daemon(Map(*d), config, dir, gap_factor_given);
+  config.faults.baselines.assign(config.model.submodels.size(), std::nullopt);
+  if (const auto f = top.get("faults")) parse_faults(Map(*f), config);
 }
 
 // The estimator settings that the other sections determine (the `estimator:`
@@ -953,6 +1034,47 @@ void write_lcm(YamlWriter& w, const LcmSettings& l) {
   w.key(2, "heartbeat", quoted(l.heartbeat_channel));
 }
 
+void write_daemon(YamlWriter& w, const DaemonSettings& d) {
+  w.line(0, "daemon:");
+  w.number(1, "loop_rate_hz", d.loop_rate_hz);
+  w.number(1, "publish_period", d.publish_period);
+  w.number(1, "heartbeat_period", d.heartbeat_period);
+  w.number(1, "stale_time", d.stale_time);
+  w.key(1, "sample_ring", std::to_string(d.sample_ring));
+  w.key(1, "snapshot_ring", std::to_string(d.snapshot_ring));
+  if (!d.checkpoint_path.empty()) {
+    w.line(1, "checkpoint:");
+    w.key(2, "path", quoted(d.checkpoint_path));  // absolute: valid wherever the YAML is written
+    w.number(2, "period", d.checkpoint_period);
+  }
+  w.key(1, "log_level", d.log_level);
+}
+
+void write_faults(YamlWriter& w, const FaultSettings& f, const AdditiveModel& model) {
+  w.line(0, "faults:");
+  w.number(1, "learn_window", f.learn_window);
+  const char* names[kQuantities] = {"wn", "zeta", "gain"};
+  for (int q = 0; q < kQuantities; ++q) {
+    const FaultThresholds& th = f.thresholds[static_cast<std::size_t>(q)];
+    w.line(1, std::string(names[q]) + ":");
+    w.number(2, "sigma", th.sigma_threshold);
+    w.number(2, "relative", th.relative_threshold);
+    w.number(2, "hold", th.hold_time);
+    w.number(2, "clear_fraction", th.clear_fraction);
+    w.number(2, "clear_time", th.clear_time);
+  }
+  bool any = false;
+  for (std::size_t i = 0; i < f.baselines.size() && i < model.submodels.size(); ++i) {
+    if (!f.baselines[i]) continue;
+    if (!any) w.line(1, "baselines:");
+    any = true;
+    w.line(2, quoted(model.submodels[i].name) + ":");
+    w.number(3, "wn", f.baselines[i]->wn);
+    w.number(3, "zeta", f.baselines[i]->zeta);
+    w.number(3, "gain", f.baselines[i]->gain);
+  }
+}
+
 void write_simulation(YamlWriter& w, const ExperimentSpec& e) {
   w.line(0, "simulation:");
   w.number(1, "duration", e.duration);
@@ -975,6 +1097,8 @@ std::string config_to_yaml(const Config& config, const AdditiveModel& model) {
   if (config.experiment) write_simulation(w, *config.experiment);
   write_estimator(w, config.estimator, config.sample_time);
   write_lcm(w, config.lcm);
+  write_daemon(w, config.daemon);
+  write_faults(w, config.faults, config.model);
   return w.str();
 }
 

@@ -1,0 +1,115 @@
+#pragma once
+// modalwatchd's engine (DESIGN.md, "Data flow in the daemon"): three threads
+// joined by two lock-free SPSC rings.
+//
+//   LCM subscriber ──SampleRecord──► SpscRing ──► estimation loop ──Snapshot──► SpscRing ──► publisher
+//   (lcm_handle, decode,                          (fixed rate, input policy,                (estimates_t,
+//    validate, never blocks)                       RecursiveEstimator::step,                 fault_status_t,
+//                                                  FaultDetector per publish period)         heartbeat_t, logs)
+//
+// A fourth, control-side thread writes the periodic checkpoint: it pauses the
+// estimation loop (joins it; the input ring buffers meanwhile), copies the
+// state, restarts the loop and writes the file; reload() pauses it the same way.
+//
+// The estimation loop neither locks, allocates nor makes a system call after
+// start-up, apart from its absolute-time sleep (clock_nanosleep on
+// CLOCK_MONOTONIC) and, under systemd with WatchdogSec, sd_notify(WATCHDOG=1).
+// Everything it reports goes through a fixed-size Snapshot; the publisher turns
+// snapshots into messages and log lines.
+//
+// Usage (modalwatchd's main does this; tests drive the same class in process):
+//   Daemon d(config);             // opens LCM (or uses the caller's lcm_t), restores a checkpoint
+//   d.start();
+//   ... d.reload(new_config) on SIGHUP ...
+//   d.stop();                     // drains both rings, joins the threads
+//   d.write_checkpoint();         // final state (no-op without daemon.checkpoint)
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "modalwatch/config.hpp"
+
+extern "C" {
+typedef struct _lcm_t lcm_t;
+}
+
+namespace modalwatch {
+
+// Counters since start (each monotonic). Safe to read from any thread.
+struct DaemonCounters {
+  std::uint64_t samples_received = 0;      // samples decoded from valid packets
+  std::uint64_t samples_dropped = 0;       // input ring full
+  std::uint64_t decode_errors = 0;         // packets rejected by the decoder
+  std::uint64_t samples_nonfinite = 0;     // NaN/Inf in u, y or r
+  std::uint64_t samples_duplicate = 0;     // seq equal to the last accepted one
+  std::uint64_t samples_out_of_order = 0;  // seq below the last accepted one
+  std::uint64_t samples_processed = 0;     // passed to the estimator
+  std::uint64_t gaps = 0;                  // utime gaps that reset the prefilter states
+  std::uint64_t resets = 0;                // estimator returns to its last good state
+  std::uint64_t overruns = 0;              // loop ticks that ended after the next was due
+  std::uint64_t snapshots = 0;             // snapshots handed to the publisher
+  std::uint64_t snapshots_dropped = 0;     // snapshot ring full (publisher behind)
+  std::uint64_t estimates_published = 0;
+  std::uint64_t fault_status_published = 0;
+  std::uint64_t heartbeats_published = 0;
+  std::uint64_t flag_changes = 0;
+  std::uint64_t checkpoints_written = 0;
+  std::uint64_t checkpoint_failures = 0;
+};
+
+// Test hook, called on the estimation thread: warmed_up() at the start of the
+// first tick after the estimator's warm-up is over and at least one snapshot
+// went out; exiting() after the loop's last tick (the final drain included),
+// each time the loop thread ends (stop, and the pauses of reload and checkpoints).
+class LoopProbe {
+ public:
+  virtual ~LoopProbe() = default;
+  virtual void warmed_up() = 0;
+  virtual void exiting() = 0;
+};
+
+class Daemon {
+ public:
+  // Opens config.lcm.url, or uses `lcm` (not owned; it must outlive the Daemon
+  // and nobody else may call lcm_handle on it) so an in-process test can share
+  // one memq:// instance. Restores daemon.checkpoint when it exists and matches
+  // the config. Throws InputError for an LCM URL that cannot be opened or a
+  // model the daemon cannot carry (more than kMaxModes submodels).
+  explicit Daemon(const Config& config, lcm_t* lcm = nullptr, LoopProbe* probe = nullptr);
+  ~Daemon();  // stop()s
+  Daemon(const Daemon&) = delete;
+  Daemon& operator=(const Daemon&) = delete;
+
+  static constexpr int kMaxModes = 16;
+
+  void start();
+  // Stops taking input, lets the estimation loop drain the input ring and the
+  // publisher drain the snapshot ring, joins the threads. Idempotent.
+  void stop();
+
+  // SIGHUP: applies `next` (already validated by load_config) where it can.
+  // Applied: daemon rates, stale time, checkpoint path and period, log level,
+  // fault thresholds, learn window and configured baselines (learned ones are
+  // kept). Not applied (logged; a restart applies them): LCM URL and channels,
+  // ring sizes, and the model/estimator; when the model or estimator differ
+  // the running estimator continues unchanged. Returns a one-line summary.
+  // Call from the control thread only, after start().
+  std::string reload(const Config& next);
+
+  // Writes daemon.checkpoint from the final state; call after stop() only
+  // (while running, the checkpointer thread writes the periodic ones; throws
+  // std::logic_error otherwise). Skipped (true) during the warm-up and without
+  // a checkpoint path; false (and an error log) on failure, e.g. a full disk.
+  bool write_checkpoint();
+
+  DaemonCounters counters() const;
+  bool restored_from_checkpoint() const;  // this instance resumed from a checkpoint
+  bool warming_up() const;                // the estimator is still in its warm-up window
+  const Config& config() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace modalwatch

@@ -1,0 +1,187 @@
+// modalwatch_daemon_bench: drives a running modalwatchd over LCM for
+// scripts/daemon_bench.sh (records are published by `modalwatch replay`).
+//
+//   latency  --config C --data D.csv --rate R --seconds S
+//            one sample_t per packet at R Hz (cycling the record); sample k has
+//            utime = start + k / R on the wall clock (CLOCK_REALTIME) and is sent
+//            at that time, so a late sender counts as latency too; listens to the
+//            estimates and prints p50/p99/max of (arrival time - utime of the
+//            newest sample included) and the daemon's drop counters.
+//   rate     --config C --data D.csv --rate R --seconds S [--batch N]
+//            batches at R samples/s of wall time, the samples on the config's
+//            sample grid (replay R / sample_rate_hz times faster than real
+//            time); prints sent, received, dropped and processed.
+#include <lcm/lcm.h>
+#include <time.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include <modalwatch/estimates_t.hpp>
+#include <modalwatch/fault_status_t.hpp>
+
+#include "modalwatch/config.hpp"
+#include "modalwatch/csv.hpp"
+#include "modalwatch/error.hpp"
+#include "modalwatch/messages.hpp"
+
+namespace {
+
+using namespace modalwatch;
+
+std::int64_t realtime_us() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000 + ts.tv_nsec / 1000;
+}
+
+struct Listener {
+  std::mutex mutex;
+  std::vector<std::pair<std::int64_t, double>> latency_us;  // (utime, latency)
+  modalwatch::fault_status_t last_status;
+  bool have_status = false;
+  long long estimates = 0;
+  long long processed = 0;  // samples_processed of the newest estimates
+};
+
+void on_estimates(const lcm_recv_buf_t* rbuf, const char*, void* user) {
+  const std::int64_t now = realtime_us();
+  auto& l = *static_cast<Listener*>(user);
+  modalwatch::estimates_t msg;
+  if (msg.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) < 0) return;
+  std::lock_guard<std::mutex> lock(l.mutex);
+  l.latency_us.emplace_back(msg.utime, static_cast<double>(now - msg.utime));
+  ++l.estimates;
+  l.processed = msg.samples_processed;
+}
+
+void on_status(const lcm_recv_buf_t* rbuf, const char*, void* user) {
+  auto& l = *static_cast<Listener*>(user);
+  modalwatch::fault_status_t msg;
+  if (msg.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) < 0) return;
+  std::lock_guard<std::mutex> lock(l.mutex);
+  l.last_status = msg;
+  l.have_status = true;
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return NAN;
+  std::sort(v.begin(), v.end());
+  const auto i = static_cast<std::size_t>(std::min<double>(static_cast<double>(v.size() - 1), p * static_cast<double>(v.size())));
+  return v[i];
+}
+
+// Sleeps until `seconds` after t0.
+void sleep_until(std::chrono::steady_clock::time_point t0, double seconds) {
+  std::this_thread::sleep_until(t0 + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                         std::chrono::duration<double>(seconds)));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"modalwatch_daemon_bench: benchmark driver for modalwatchd"};
+  app.require_subcommand(1);
+  std::string config_path, data_path;
+  double rate = 4096.0, seconds = 10.0, skip = 6.0;
+  int batch = 64;
+  for (const char* name : {"latency", "rate"}) {
+    auto* sub = app.add_subcommand(name, name);
+    sub->add_option("--config,-c", config_path)->required();
+    sub->add_option("--data,-d", data_path)->required();
+    sub->add_option("--rate", rate);
+    sub->add_option("--seconds", seconds);
+    sub->add_option("--batch", batch)->check(CLI::Range(1, 8192));
+    sub->add_option("--skip", skip, "latency: ignore estimates of the first SKIP s (warm-up fit)");
+  }
+  CLI11_PARSE(app, argc, argv);
+  const std::string mode = app.get_subcommands().front()->get_name();
+  try {
+    const Config config = load_config(config_path);
+    RecordReadOptions opts;
+    opts.sample_time = config.sample_time;
+    const Record rec = read_record(data_path, {}, opts);
+    lcm_t* lcm = lcm_create(config.lcm.url.c_str());
+    if (!lcm) throw InputError(config_path, "cannot open LCM provider " + config.lcm.url);
+    Listener listener;
+    std::atomic<bool> stop{false};
+    std::thread handler;
+    lcm_subscribe(lcm, config.lcm.estimates_channel.c_str(), &on_estimates, &listener);
+    lcm_subscribe(lcm, config.lcm.fault_status_channel.c_str(), &on_status, &listener);
+    handler = std::thread([&] {
+      while (!stop) lcm_handle_timeout(lcm, 20);
+    });
+    const Eigen::Index n = rec.size();
+    const auto t0 = std::chrono::steady_clock::now();
+    {
+      const long long total = std::llround(rate * seconds);
+      const double period = 1.0 / rate;                                         // wall clock
+      const double grid = mode == "latency" ? period : config.sample_time;     // utime
+      const int per_packet = mode == "latency" ? 1 : batch;
+      const std::int64_t start_us = realtime_us() + 10'000;
+      const auto t_start = t0 + std::chrono::milliseconds(10);
+      std::vector<SampleRecord> buf(static_cast<std::size_t>(per_packet));
+      for (long long k = 0; k < total; k += per_packet) {
+        const int m = static_cast<int>(std::min<long long>(per_packet, total - k));
+        sleep_until(t_start, static_cast<double>(k + m - 1) * period);
+        for (int i = 0; i < m; ++i) {
+          const Eigen::Index j = (k + i) % n;
+          auto& s = buf[static_cast<std::size_t>(i)];
+          s.seq = k + i;
+          s.utime = start_us + std::llround(static_cast<double>(k + i) * grid * 1e6);
+          s.u = rec.u(j);
+          s.y = rec.y(j);
+          s.r = rec.has_reference() ? rec.r(j) : 0.0;
+        }
+        const auto bytes = m == 1 && mode == "latency" ? encode_sample(buf[0])
+                                                       : encode_batch(std::span<const SampleRecord>(buf.data(), m), grid);
+        if (m == 1 && mode == "latency")
+          lcm_publish(lcm, config.lcm.samples_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
+        else
+          lcm_publish(lcm, config.lcm.batches_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
+      }
+      const double sent_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      // The daemon works through its backlog (sample time: a publish period of
+      // samples must arrive before the next estimate), then the last status messages.
+      std::this_thread::sleep_for(std::chrono::milliseconds(mode == "latency" ? 1500 : 4000));
+      stop = true;
+      handler.join();
+      std::lock_guard<std::mutex> lock(listener.mutex);
+      std::printf("%s: %lld samples in %.2f s (%.0f samples/s offered, %d per packet)\n", mode.c_str(), total, sent_s,
+                  static_cast<double>(total) / sent_s, per_packet);
+      if (listener.have_status) {
+        const auto& s = listener.last_status;
+        std::printf("  daemon: sent %lld, received %lld, dropped %lld (ring full), processed %lld, duplicate %lld, out of "
+                    "order %lld, gaps %lld\n",
+                    total, static_cast<long long>(s.samples_received), static_cast<long long>(s.samples_dropped),
+                    listener.processed, static_cast<long long>(s.samples_duplicate),
+                    static_cast<long long>(s.samples_out_of_order), static_cast<long long>(s.gaps));
+      } else {
+        std::printf("  daemon: no fault status received\n");
+      }
+      if (mode == "latency") {
+        // Without the warm-up window and its fit, which runs on the estimation thread.
+        std::vector<double> lat;
+        for (const auto& [utime, l] : listener.latency_us)
+          if (utime >= start_us + std::llround(skip * 1e6)) lat.push_back(l);
+        std::printf("  latency sample utime -> estimate received (us), after the first %.0f s: p50 %.0f, p99 %.0f, max %.0f "
+                    "over %zu estimates\n",
+                    skip, percentile(lat, 0.5), percentile(lat, 0.99), percentile(lat, 1.0), lat.size());
+      }
+    }
+    lcm_destroy(lcm);
+    return 0;
+  } catch (const InputError& e) {
+    std::fprintf(stderr, "modalwatch_daemon_bench: %s\n", e.what());
+    return 2;
+  }
+}
