@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <iterator>
 #include <random>
 #include <thread>
 
@@ -182,7 +183,7 @@ TEST_F(LcmLog, CorruptLogsAreInputErrorsNamingTheByteOffset) {
   }
 }
 
-TEST_F(LcmLog, FitAndTrackReadLogsExactlyAsTheyReadCsv) {
+TEST_F(LcmLog, FitTrackAndDiagnoseReadLogsExactlyAsTheyReadCsv) {
   const Record csv = csv_record(path("run.csv"));
   write_log(path("run.lcm"), csv, "MODALWATCH_SAMPLES", 1);
   const auto fit_csv = run_cli("fit -c " + kConfig + " -d " + path("run.csv"));
@@ -209,6 +210,20 @@ TEST_F(LcmLog, FitAndTrackReadLogsExactlyAsTheyReadCsv) {
   ASSERT_EQ(a.data.rows(), b.data.rows());
   // Same samples, same estimates; only t carries the 1 us utime rounding.
   EXPECT_EQ(a.data.rightCols(a.data.cols() - 1), b.data.rightCols(b.data.cols() - 1));
+
+  // diagnose reads logs too: the same steps (summary.json) from either record.
+  const std::string diag = "diagnose -c " + kConfig + " --split 0.7 --effects offset --max-steps 1";
+  const auto d_csv = run_cli(diag + " -d " + path("run.csv") + " -r " + path("d_csv"));
+  const auto d_lcm = run_cli(diag + " -d " + path("run.lcm") + " --channel MODALWATCH_SAMPLES -r " + path("d_lcm"));
+  ASSERT_EQ(d_csv.code, 0) << d_csv.output;
+  ASSERT_EQ(d_lcm.code, 0) << d_lcm.output;
+  const auto slurp = [](const std::string& p) {
+    std::ifstream in(p);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  const std::string summary = slurp(path("d_csv/summary.json"));
+  EXPECT_NE(summary.find("\"validation_rms\""), std::string::npos) << summary;
+  EXPECT_EQ(slurp(path("d_lcm/summary.json")), summary);
 }
 
 // ------------------------------------------------------------------ replay

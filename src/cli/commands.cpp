@@ -76,7 +76,7 @@ int simulate(const SimulateArgs& args) {
 int fit(const FitArgs& args) {
   return guarded("fit", [&] {
     const Config config = load_config(args.config);
-    const Record full = load_record({args.data, args.channel, config.closed_loop});
+    const Record full = load_record({args.data, args.channel, config.closed_loop, {}});
     const Record data = window(full, args);
     const int nb = config.model.n_beta();
     if (data.size() < 2 * nb + 2)

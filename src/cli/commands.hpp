@@ -46,7 +46,8 @@ struct ReplayArgs {
 
 struct DiagnoseArgs {
   std::string config;
-  std::string data;
+  std::string data;                    // CSV or LCM log
+  std::string channel;                 // LCM logs: the channel to read
   std::string validate;                // validation record (optional)
   std::optional<double> split;         // estimation fraction of --data (default 0.7)
   std::string estimate_samples;        // "A:B" rows of --data

@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "commands.hpp"
+#include "records.hpp"
 #include "guarded.hpp"
 
 #include "modalwatch/config.hpp"
@@ -258,12 +259,13 @@ int diagnose(const DiagnoseArgs& args) {
     RecordColumns columns;
     columns.t = args.t_column;
     columns.y = args.y_column;
-    const Record full = read_record(args.data, columns);
+    const Record full = load_record({args.data, args.channel, config.closed_loop, columns});
     Record est, val;
     Eigen::Index lead_in = 0;
     if (!args.validate.empty()) {
       est = samples(full, args.estimate_samples, "--estimate-samples", args.data);
-      val = samples(read_record(args.validate, columns), args.validate_samples, "--validate-samples", args.validate);
+      val = samples(load_record({args.validate, args.channel, config.closed_loop, columns}), args.validate_samples,
+                    "--validate-samples", args.validate);
     } else if (!args.estimate_samples.empty() || !args.validate_samples.empty()) {
       if (args.estimate_samples.empty() || args.validate_samples.empty())
         throw InputError("--estimate-samples", "give both --estimate-samples and --validate-samples");

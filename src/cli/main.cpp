@@ -55,8 +55,9 @@ int main(int argc, char** argv) {
   DiagnoseArgs diag;
   auto* diagnose_cmd = app.add_subcommand("diagnose", "Residual analysis and model augmentation: writes a report");
   diagnose_cmd->add_option("--config,-c", diag.config, "YAML with the model: section")->required();
-  diagnose_cmd->add_option("--data,-d", diag.data, "record CSV with columns t,u,y[,r]")->required();
-  diagnose_cmd->add_option("--validate", diag.validate, "validation record CSV");
+  diagnose_cmd->add_option("--data,-d", diag.data, "record: CSV with columns t,u,y[,r], or an LCM log")->required();
+  diagnose_cmd->add_option("--validate", diag.validate, "validation record (CSV or LCM log)");
+  diagnose_cmd->add_option("--channel", diag.channel, "LCM log input: channel with the samples");
   diagnose_cmd->add_option("--split", diag.split, "estimation fraction of --data, the rest validates (0.7)");
   diagnose_cmd->add_option("--estimate-samples", diag.estimate_samples, "FIRST:END rows of --data to estimate on");
   diagnose_cmd->add_option("--validate-samples", diag.validate_samples, "FIRST:END rows to validate on");

@@ -12,8 +12,12 @@ Record load_record(const RecordSource& source, const RecordReadOptions& options)
   if (!is_lcm_log(source.path)) {
     if (!source.channel.empty())
       throw InputError("--channel", "applies to LCM logs only; " + source.path + " is not one (no LCM sync word)");
-    return read_record(source.path, {}, options);
+    return read_record(source.path, source.columns, options);
   }
+  const RecordColumns csv_default;
+  if (source.columns.t != csv_default.t || source.columns.u != csv_default.u || source.columns.y != csv_default.y ||
+      source.columns.r != csv_default.r)
+    throw InputError(source.path, "LCM log: column options apply to CSV records only (an LCM log has u, y, r)");
   LcmLogOptions lo;
   lo.channel = source.channel;
   lo.closed_loop = source.closed_loop;

@@ -12,6 +12,7 @@ struct RecordSource {
   std::string path;
   std::string channel;       // LCM logs: only this channel (empty: any channel with samples)
   bool closed_loop = false;  // LCM logs: keep r (a CSV has it as a column)
+  RecordColumns columns;     // CSV: the column names (an LCM log has fixed fields)
 };
 
 // The same checks for both formats: time increases; with !allow_gaps evenly

@@ -53,7 +53,7 @@ int replay(const ReplayArgs& args) {
     read_options.allow_nonfinite = true;
     read_options.allow_gaps = true;
     read_options.sample_time = config.sample_time;
-    const Record rec = load_record({args.data, args.channel, config.closed_loop}, read_options);
+    const Record rec = load_record({args.data, args.channel, config.closed_loop, {}}, read_options);
     if (config.closed_loop && !rec.has_reference())
       throw InputError(args.data, "closed loop (model.loop) needs a column 'r'");
     if (args.batch < 1) throw InputError("--batch", "must be >= 1");

@@ -326,7 +326,7 @@ int track(const TrackArgs& args) {
     read_options.allow_nonfinite = true;
     read_options.allow_gaps = true;
     read_options.sample_time = config.sample_time;
-    const Record data = load_record({args.data, args.channel, config.closed_loop}, read_options);
+    const Record data = load_record({args.data, args.channel, config.closed_loop, {}}, read_options);
     check_sample_time(args.data, data, config.sample_time);
     if (config.closed_loop && !data.has_reference())
       throw InputError(args.data, "closed loop (model.loop) needs a column 'r'");
