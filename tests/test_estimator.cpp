@@ -282,6 +282,34 @@ TEST(RecursiveEstimator, BadSamplesAreCountedAndNeverBecomeNaN) {
   (void)T;
 }
 
+// A gap restarts the prefilters from rest, so the model output needs a few time
+// constants of the slowest mode to catch up with the data. That transient is not
+// a divergence: gaps alone must never send the estimator back to its last good
+// state (the daemon sees one at every restart and every lost sample).
+TEST(RecursiveEstimator, GapsDoNotLookLikeDivergence) {
+  const Config c = load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/flexible-beam.yaml");
+  ExperimentSpec e = *c.experiment;
+  e.duration = 40.0;
+  // The plant's own noise level (snr_db 30), without its drift.
+  PlantSpec plant = *c.plant;
+  for (auto& m : plant.modes) m.wn = m.zeta = m.gain = Trajectory{};
+  const Record r = simulate(plant, e).record;
+  RecursiveEstimator est(c.model, c.estimator);
+  double shift = 0.0;
+  int gaps = 0;
+  for (Eigen::Index k = 0; k < r.size(); ++k) {
+    if (k > 0 && k % 20000 == 0 && r.t(k) > 10.0) shift += 0.5, ++gaps;  // 0.5 s lost every ~5 s
+    est.step(Sample{r.t(k) + shift, r.u(k), r.y(k), r.r(k)});
+  }
+  const EstimatorStatus& st = est.status();
+  EXPECT_EQ(st.gaps, static_cast<std::uint64_t>(gaps));
+  EXPECT_GE(gaps, 5);
+  EXPECT_EQ(st.resets, 0u) << "last reason: " << st.last_reset_reason;
+  const AdditiveModel truth = plant_model_at(plant, 0.0);
+  for (int i = 0; i < 2; ++i)
+    EXPECT_NEAR(est.mode(i).value.wn / modal_parameters(truth.submodels[i]).wn, 1.0, 0.01) << "mode " << i + 1;
+}
+
 TEST(RecursiveEstimator, RejectsInconsistentSettings) {
   const Config c = paper_config();
   EXPECT_THROW(RecursiveEstimator(c.model, settings_for(c, {0.999, 1.5, 0.999}, 0)), std::invalid_argument);
@@ -452,15 +480,21 @@ TEST(RecursiveEstimator, StateAndRestoreResumeWithoutWarmupAsAfterAGap) {
   EXPECT_TRUE(resumed.step(sample(half, true)) & kGap);
   gapped.step(sample(half, true));
   smooth.step(sample(half, false));
-  for (Eigen::Index k = half + 1; k < half + 100; ++k) {
+  // No warm-up: the filters run and, once their output has caught up with the
+  // data, theta updates. Here that takes the slowest closed-loop pole of the
+  // instrument's loop (0.9956 per sample: 11 s) more than the plant's modes.
+  Eigen::Index first_update = -1;
+  for (Eigen::Index k = half + 1; k < half + 1000; ++k) {
     EXPECT_FALSE(resumed.step(sample(k, true)) & kWarmingUp);
+    if (first_update < 0 && resumed.status().updates > updates_at_restore) first_update = k - half;
     gapped.step(sample(k, true));
     smooth.step(sample(k, false));
   }
-  EXPECT_GT(resumed.status().updates, updates_at_restore + 50) << "updates within 100 samples of the restart";
+  std::printf("theta updates resume %lld samples after the restart\n", static_cast<long long>(first_update));
+  ASSERT_GT(first_update, 0) << "no update within 1000 samples (50 s) of the restart";
 
   double max_gap_effect[3] = {0, 0, 0}, end_gap_effect[3] = {0, 0, 0}, max_gap_relative[3] = {0, 0, 0};
-  for (Eigen::Index k = half + 100; k < r.size(); ++k) {
+  for (Eigen::Index k = half + 1000; k < r.size(); ++k) {
     smooth.step(sample(k, false));
     gapped.step(sample(k, true));
     resumed.step(sample(k, true));

@@ -150,6 +150,7 @@ struct RecursiveEstimator::Impl {
   double e_short_alpha = 0.0;
   double e_var_good = 0.0;   // e_var when the last good state was saved
   std::uint64_t rearm = 0;   // samples until the divergence detector is armed again
+  std::uint64_t settling = 0;  // after a filter restart: samples left to catch up (no update meanwhile)
   int outlier_run = 0;       // consecutive samples replaced as outliers
   double pow_short = 0.0, pow_ref = 0.0, pow_alpha = 0.0, pow_ref_alpha = 0.0;
   std::uint64_t pow_count = 0;
@@ -158,6 +159,7 @@ struct RecursiveEstimator::Impl {
              double y_var);
   void rediscretise(Block& b);
   void reset_filters();
+  void restart_filters();
   void save_good();
   void restore_good(const char* reason);
   unsigned advance(const Sample& s, bool allow_update);
@@ -241,6 +243,23 @@ void RecursiveEstimator::Impl::reset_filters() {
   controller.reset();
 }
 
+// After a gap (or a reset) the filters restart from rest, and the model output
+// needs a few time constants of the slowest mode to catch up with the data. That
+// transient is neither a divergence nor information about theta: as in the
+// warm-up (section 4.7), the filters run without updating theta until the output
+// error is back near the noise level (at most kSettleWindows residual windows,
+// after which updates resume so that a plant that changed during the gap can
+// still be followed); the divergence detector is not consulted meanwhile.
+void RecursiveEstimator::Impl::restart_filters() {
+  constexpr double kSettleWindows = 4.0;
+  reset_filters();
+  // Unsettled until the short-term error, started at the divergence level, has
+  // come down to near the noise level on the restarted filters' own output.
+  e_short = cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
+  settling = static_cast<std::uint64_t>(kSettleWindows / (1.0 - e_alpha));
+  outlier_run = 0;
+}
+
 void RecursiveEstimator::Impl::save_good() {
   for (auto& b : blocks) {
     b.good_theta = b.theta;
@@ -256,11 +275,10 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
     b.P = b.good_P;
     rediscretise(b);
   }
-  reset_filters();
-  e_var = e_short = e_var_good;
+  e_var = e_var_good;
   e_count = 0;  // outlier statistics restart with the filters
-  outlier_run = 0;
-  // The filters restart from rest: give them one residual window before judging again.
+  restart_filters();
+  // Give the restored state one residual window before judging it again.
   rearm = static_cast<std::uint64_t>(1.0 / (1.0 - e_alpha));
   ++status.resets;
   status.last_reset_reason = reason;
@@ -394,9 +412,16 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   // Divergence: the output error an order of magnitude above what it was when
   // the last good state was saved (DESIGN.md point 4). Plant changes that the
   // estimator can follow raise it far less.
-  if (rearm > 0) {
+  constexpr double kSettledRatio = 3.0;  // output error RMS within 3x its last good value
+  const bool diverging =
+      allow_update && e_var_good > 0.0 && e_short > cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
+  if (settling > 0) {
+    const bool settled = !(e_short > kSettledRatio * kSettledRatio * e_var_good);
+    settling = settled ? 0 : settling - 1;
+    if (!settled) update = false;
+  } else if (rearm > 0) {
     --rearm;
-  } else if (allow_update && e_var_good > 0.0 && e_short > cfg.divergence_ratio * cfg.divergence_ratio * e_var_good) {
+  } else if (diverging) {
     restore_good(kResetDiverged);
     return flags | kReset;
   }
@@ -655,7 +680,7 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
       ++m.status.gaps;
       flags |= kGap;
       if (m.status.warming_up) m.buffered = 0;
-      else m.reset_filters();
+      else m.restart_filters();
     }
   }
   m.t_prev = s.t;
