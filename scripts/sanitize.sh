@@ -41,7 +41,8 @@ SKIP_TSAN=${SKIP_TSAN:-0}
 # Every report is fatal, so ctest sees a failing test.
 export ASAN_OPTIONS=${ASAN_OPTIONS:-detect_leaks=1:halt_on_error=1:check_initialization_order=1}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
-export TSAN_OPTIONS=${TSAN_OPTIONS:-halt_on_error=1:second_deadlock_stack=1}
+# tests/tsan.supp: liblcm's GLib (futex) mutexes are invisible to TSan.
+export TSAN_OPTIONS=${TSAN_OPTIONS:-halt_on_error=1:second_deadlock_stack=1:suppressions=$PWD/tests/tsan.supp}
 
 # TSan needs a fixed memory layout; on kernels with large mmap randomisation
 # (vm.mmap_rnd_bits > 28) it dies with "unexpected memory mapping" unless ASLR is

@@ -324,7 +324,7 @@ struct Daemon::Impl {
   bool stop_checkpointer = false;  // under wake_mutex
   void checkpointer_main();
   std::optional<Checkpoint> capture();  // estimation thread stopped
-  bool write(const Checkpoint& ck, bool final_one);
+  bool write(const std::string& path, const Checkpoint& ck, bool final_one);
   void start_estimation();
   void stop_estimation_thread();
 
@@ -784,8 +784,9 @@ std::optional<Checkpoint> Daemon::Impl::capture() {
   return ck;
 }
 
-bool Daemon::Impl::write(const Checkpoint& ck, bool final_one) {
-  const std::string path = config.daemon.checkpoint_path;
+// `path` is passed in, read under the control lock: a SIGHUP reload may change
+// config while the checkpointer writes.
+bool Daemon::Impl::write(const std::string& path, const Checkpoint& ck, bool final_one) {
   try {
     modalwatch::write_checkpoint(path, ck);
     bump(counters.checkpoints_written);
@@ -817,14 +818,16 @@ void Daemon::Impl::checkpointer_main() {
       if (wake_checkpointer.wait_for(lock, std::chrono::duration<double>(period), [this] { return stop_checkpointer; })) return;
     }
     std::optional<Checkpoint> ck;
+    std::string path;
     {
       std::lock_guard<std::mutex> lock(control);
       if (!running || config.daemon.checkpoint_path.empty()) continue;
+      path = config.daemon.checkpoint_path;
       stop_estimation_thread();
       ck = capture();
       start_estimation();
     }
-    if (ck) write(*ck, false);
+    if (ck) write(path, *ck, false);
   }
 }
 
@@ -1006,7 +1009,7 @@ bool Daemon::write_checkpoint() {
     spdlog::info("checkpoint skipped: the estimator is still warming up (no estimate worth keeping)");
     return true;
   }
-  return m.write(*ck, true);
+  return m.write(m.config.daemon.checkpoint_path, *ck, true);
 }
 
 DaemonCounters Daemon::counters() const { return impl_->counters.load(); }
