@@ -30,8 +30,9 @@ targets=()
 for f in $FUZZERS; do [ -f "tests/fuzz/$f.cpp" ] && targets+=("$f"); done
 [ ${#targets[@]} -gt 0 ] || { echo "fuzz.sh: no harness among: $FUZZERS"; exit 1; }
 
+mkdir -p "$DIR"
 CXX=clang++ cmake -S . -B "$DIR" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMODALWATCH_FUZZ=ON \
-  -DMODALWATCH_BENCHMARKS=OFF >"$DIR.configure.log" 2>&1 || { tail -30 "$DIR.configure.log"; exit 1; }
+  -DMODALWATCH_BENCHMARKS=OFF >"$DIR/configure.log" 2>&1 || { tail -30 "$DIR/configure.log"; exit 1; }
 build_args=(--target make_seeds)
 for t in "${targets[@]}"; do build_args+=(--target "$t"); done
 cmake --build "$DIR" -j"$JOBS" "${build_args[@]}" >"$DIR/build.log" 2>&1 || { tail -40 "$DIR/build.log"; exit 1; }
