@@ -4,107 +4,16 @@
 // mixed in (NaN, duplicates, reordering, a gap); a LoopProbe starts counting on
 // the estimation thread once the warm-up is over and stops when the loop exits.
 //
-// Counting as in test_allocation.cpp: every global operator new/delete is
-// replaced, and (outside sanitizer builds) malloc & co. are interposed, since
-// Eigen allocates with malloc. Counts are per thread (thread_local flag), so
-// the subscriber and publisher threads, which may allocate, do not count.
+// Counting as in test_allocation.cpp (tests/allocation_counter.cpp): per
+// thread, so the subscriber and publisher threads, which may allocate, do not count.
 #include <atomic>
 #include <cstdlib>
-#include <new>
+#include <string>
 
+#include "allocation_counter.hpp"
 #include "daemon_support.hpp"
 
 #include "modalwatch/daemon.hpp"
-
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__) || defined(__SANITIZE_MEMORY__)
-#define MODALWATCH_INTERPOSE_MALLOC 0
-#else
-#define MODALWATCH_INTERPOSE_MALLOC 1
-#endif
-
-namespace {
-thread_local bool t_counting = false;
-thread_local std::uint64_t t_allocations = 0;
-inline void note() {
-  if (t_counting) ++t_allocations;
-}
-}  // namespace
-
-#if MODALWATCH_INTERPOSE_MALLOC
-extern "C" {
-void* __libc_malloc(std::size_t);
-void* __libc_calloc(std::size_t, std::size_t);
-void* __libc_realloc(void*, std::size_t);
-void* __libc_memalign(std::size_t, std::size_t);
-void __libc_free(void*);
-void* malloc(std::size_t size) noexcept {
-  note();
-  return __libc_malloc(size);
-}
-void* calloc(std::size_t n, std::size_t size) noexcept {
-  note();
-  return __libc_calloc(n, size);
-}
-void* realloc(void* p, std::size_t size) noexcept {
-  note();
-  return __libc_realloc(p, size);
-}
-void free(void* p) noexcept { __libc_free(p); }
-void* aligned_alloc(std::size_t alignment, std::size_t size) noexcept {
-  note();
-  return __libc_memalign(alignment, size);
-}
-int posix_memalign(void** out, std::size_t alignment, std::size_t size) noexcept {
-  note();
-  void* p = __libc_memalign(alignment, size);
-  if (!p) return 12;
-  *out = p;
-  return 0;
-}
-}
-#define RAW_MALLOC __libc_malloc
-#define RAW_FREE __libc_free
-#define RAW_MEMALIGN __libc_memalign
-#else
-[[gnu::noinline]] void raw_free(void* p) noexcept { std::free(p); }
-#define RAW_MALLOC std::malloc
-#define RAW_FREE raw_free
-#define RAW_MEMALIGN(a, s) std::aligned_alloc((a), ((s) + (a) - 1) / (a) * (a))
-#endif
-
-void* operator new(std::size_t n) {
-  note();
-  if (void* p = RAW_MALLOC(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) {
-  note();
-  if (void* p = RAW_MALLOC(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  note();
-  return RAW_MALLOC(n ? n : 1);
-}
-void* operator new[](std::size_t n, const std::nothrow_t&) noexcept {
-  note();
-  return RAW_MALLOC(n ? n : 1);
-}
-void* operator new(std::size_t n, std::align_val_t a) {
-  note();
-  const auto al = std::max(static_cast<std::size_t>(a), sizeof(void*));
-  if (void* p = RAW_MEMALIGN(al, n ? n : al)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n, std::align_val_t a) { return operator new(n, a); }
-void operator delete(void* p) noexcept { RAW_FREE(p); }
-void operator delete[](void* p) noexcept { RAW_FREE(p); }
-void operator delete(void* p, std::size_t) noexcept { RAW_FREE(p); }
-void operator delete[](void* p, std::size_t) noexcept { RAW_FREE(p); }
-void operator delete(void* p, std::align_val_t) noexcept { RAW_FREE(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { RAW_FREE(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { RAW_FREE(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { RAW_FREE(p); }
 
 using namespace modalwatch;
 using namespace modalwatch::test_support;
@@ -114,16 +23,18 @@ namespace {
 class CountingProbe : public LoopProbe {
  public:
   void warmed_up() override {
-    t_allocations = 0;
-    t_counting = true;
+    AllocationCounter::start();
     started = true;
   }
+  // On the estimation thread; read by the test after the daemon's threads are joined.
   void exiting() override {
-    t_counting = false;
-    allocations = t_allocations;
+    const std::uint64_t n = AllocationCounter::stop().allocations;
+    if (n > 0) trace = first_allocation_trace();
+    allocations = n;
   }
   std::atomic<bool> started{false};
   std::atomic<std::uint64_t> allocations{~0ull};
+  std::string trace;
 };
 
 }  // namespace
@@ -179,5 +90,6 @@ TEST(DaemonAllocation, NoneOnTheEstimationThreadAfterStartUp) {
     EXPECT_GT(k.samples_processed, std::uint64_t(end) - 10);
   }
   lcm_destroy(lcm);
-  EXPECT_EQ(probe.allocations.load(), 0u) << "heap allocations on the estimation thread after start-up";
+  EXPECT_EQ(probe.allocations.load(), 0u) << "heap allocations on the estimation thread after start-up\n"
+                                          << probe.trace;
 }
