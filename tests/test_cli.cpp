@@ -134,13 +134,13 @@ TEST_F(Cli, ConfigWithWrongTypeNamesKeyAndLine) {
 TEST_F(Cli, ConfigWithForgettingOutsideUnitIntervalNamesKeyAndLine) {
   const int line = line_of("forgetting");
   ASSERT_GT(line, 0);
-  expect_config_rejected(*this, "forgetting: 0.998", "forgetting: 1.5", "model.submodels[0].forgetting", line);
+  expect_config_rejected(*this, "forgetting: 0.997", "forgetting: 1.5", "model.submodels[0].forgetting", line);
 }
 
 TEST_F(Cli, ConfigWithNonPositiveFrequencyNamesKeyAndLine) {
-  const int line = line_of("wn: 2");
+  const int line = line_of("wn: 1.98625");
   ASSERT_GT(line, 0);
-  expect_config_rejected(*this, "wn: 2", "wn: -2", "model.submodels[0].wn", line);
+  expect_config_rejected(*this, "wn: 1.98625", "wn: -2", "model.submodels[0].wn", line);
 }
 
 TEST_F(Cli, UnknownOptionIsBadInput) {

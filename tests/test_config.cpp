@@ -316,29 +316,49 @@ TEST(Config, ShippedPaperSim) {
   EXPECT_DOUBLE_EQ(c.sample_time, 0.05);
   EXPECT_TRUE(c.closed_loop);
   ASSERT_EQ(c.model.submodels.size(), 3u);
+  ASSERT_TRUE(c.plant.has_value());
+  ASSERT_EQ(c.plant->modes.size(), 3u);
   const double wn[] = {2, 5, 20}, zeta[] = {0.25, 0.025, 0.1}, gain[] = {3, 0.5, 1};
-  // The paper's a_{i,2}, a_{i,1}.
+  // The paper's a_{i,2}, a_{i,1}: the true plant at t = 0.
   const double a2[] = {0.25, 0.04, 0.0025}, a1[] = {0.25, 0.01, 0.01};
   for (int i = 0; i < 3; ++i) {
-    const auto& s = c.model.submodels[static_cast<std::size_t>(i)];
-    EXPECT_EQ(s.name, "mode" + std::to_string(i + 1));
-    const auto p = modalwatch::modal_parameters(s);
+    const auto& truth = c.plant->modes[static_cast<std::size_t>(i)].submodel;
+    EXPECT_EQ(truth.name, "mode" + std::to_string(i + 1));
+    const auto p = modalwatch::modal_parameters(truth);
     EXPECT_NEAR(p.wn, wn[i], 1e-12);
     EXPECT_NEAR(p.zeta, zeta[i], 1e-12);
     EXPECT_NEAR(p.gain, gain[i], 1e-12);
-    EXPECT_NEAR(s.a(1), a2[i], 1e-15);
-    EXPECT_NEAR(s.a(0), a1[i], 1e-15);
+    EXPECT_NEAR(truth.a(1), a2[i], 1e-15);
+    EXPECT_NEAR(truth.a(0), a1[i], 1e-15);
+    // The model starts where the paper starts it: theta*(0) (1 + U(-0.02, 0.02)).
+    const auto& s = c.model.submodels[static_cast<std::size_t>(i)];
+    EXPECT_EQ(s.name, truth.name);
+    EXPECT_NEAR(s.a(1) / a2[i], 1.0, 0.02);
+    EXPECT_NEAR(s.a(0) / a1[i], 1.0, 0.02);
+    EXPECT_NEAR(s.b(0) / gain[i], 1.0, 0.02);
+    EXPECT_NE(s.a(1), a2[i]);
   }
   // The paper uses 0.999 for all three.
-  const std::vector<double> forgetting{0.998, 0.999, 0.9985};
+  const std::vector<double> forgetting{0.997, 0.999, 0.9985};
   for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(c.submodel_settings[i].forgetting, forgetting[i]) << i;
   EXPECT_EQ(c.estimator.forgetting, forgetting);
-  // estimator: 50 s of warm-up at 20 Hz, the rest at the defaults.
-  expect_estimator_defaults(c.estimator, 1000);
+  // estimator: 50 s of warm-up at 20 Hz with the given theta(t0), P(t0) (no fit).
+  modalwatch::EstimatorSettings expected = c.estimator;
+  expected.fit_on_warmup = modalwatch::EstimatorSettings{}.fit_on_warmup;
+  expect_estimator_defaults(expected, 1000);
+  EXPECT_FALSE(c.estimator.fit_on_warmup);
   EXPECT_TRUE(c.estimator.closed_loop);
   EXPECT_DOUBLE_EQ(c.estimator.sample_time, 0.05);
+  // P(t0): a std of 1 % of each a_i (scaled by the noise variance 0.01), the
+  // paper's 1e-5 for each gain.
   ASSERT_EQ(c.estimator.initial_covariance.size(), 3u);
-  for (const auto& p0 : c.estimator.initial_covariance) EXPECT_EQ(p0.size(), 0);
+  for (int i = 0; i < 3; ++i) {
+    const auto& p0 = c.estimator.initial_covariance[static_cast<std::size_t>(i)];
+    ASSERT_EQ(p0.size(), 3);
+    EXPECT_NEAR(p0(0), std::pow(0.01 * a1[i], 2) / 0.01, 1e-15) << i;
+    EXPECT_NEAR(p0(1), std::pow(0.01 * a2[i], 2) / 0.01, 1e-15) << i;
+    EXPECT_EQ(p0(2), 1e-5) << i;
+  }
   ASSERT_FALSE(c.controller.empty());
   EXPECT_NEAR(c.controller.numerator()[1], -0.02058, 1e-15);
   ASSERT_TRUE(c.plant.has_value());

@@ -34,6 +34,22 @@ EstimatorSettings settings_for(const Config& c, std::vector<double> forgetting, 
   return s;
 }
 
+// The default initialisation (section 4.7): theta(t0), P(t0) from the offline fit
+// on the warm-up window. config/paper-sim.yaml gives them instead, as the paper does.
+EstimatorSettings with_warmup_fit(EstimatorSettings s) {
+  s.fit_on_warmup = true;
+  s.initial_covariance.clear();
+  return s;
+}
+
+// The true plant at t = 0 (config/paper-sim.yaml's model is the paper's start,
+// 2 % off it).
+AdditiveModel true_model(const Config& c) {
+  AdditiveModel m;
+  for (const auto& mode : c.plant->modes) m.submodels.push_back(mode.submodel);
+  return m;
+}
+
 PlantSpec time_invariant(PlantSpec p, double noise_variance) {
   for (auto& m : p.modes) m.wn.points.clear(), m.zeta.points.clear(), m.gain.points.clear();
   p.noise_variance = noise_variance;
@@ -97,10 +113,10 @@ TEST(RecursiveEstimator, NoiseFreeDataKeepTheTrueParametersExactlyInClosedLoop) 
   ExperimentSpec e = *c.experiment;
   e.duration = 200.0;
   const auto sim = simulate(time_invariant(*c.plant, 0.0), e);
-  RecursiveEstimator est(c.model, settings_for(c, {0.999, 0.999, 0.999}, 0));
+  RecursiveEstimator est(true_model(c), settings_for(c, {0.999, 0.999, 0.999}, 0));
   run(est, sim.record);
   for (int i = 0; i < 3; ++i) {
-    const auto truth = modal_parameters(c.model.submodels[i]);
+    const auto truth = modal_parameters(c.plant->modes[i].submodel);
     EXPECT_NEAR(est.mode(i).value.wn / truth.wn, 1.0, 1e-9);
     EXPECT_NEAR(est.mode(i).value.zeta / truth.zeta, 1.0, 1e-8);
     EXPECT_NEAR(est.mode(i).value.gain / truth.gain, 1.0, 1e-9);
@@ -115,18 +131,19 @@ TEST(RecursiveEstimator, NoiseFreeDataTakeAWrongStartToTheTruthInOpenLoop) {
   e.excitation = prbs(1.0);
   e.duration = 1000.0;
   const auto sim = simulate(time_invariant(*c.plant, 0.0), e);
-  AdditiveModel start = c.model;
+  AdditiveModel start = true_model(c);
   for (auto& s : start.submodels) {
     auto p = modal_parameters(s);
     p.wn *= 1.05;
     s = make_mode(s.name, p);
   }
   EstimatorSettings st = settings_for(c, {1.0, 1.0, 1.0}, 0);
+  st.initial_covariance.clear();  // relative to the parameters: the start is 5 % off
   st.closed_loop = false;
   RecursiveEstimator est(start, st);
   run(est, sim.record);
   for (int i = 0; i < 3; ++i)
-    EXPECT_NEAR(est.mode(i).value.wn / modal_parameters(c.model.submodels[i]).wn, 1.0, 1e-4) << "mode " << i + 1;
+    EXPECT_NEAR(est.mode(i).value.wn / modal_parameters(c.plant->modes[i].submodel).wn, 1.0, 1e-4) << "mode " << i + 1;
 }
 
 // ------------------------------------------------------------------ acceptance 4
@@ -144,7 +161,7 @@ TEST(RecursiveEstimator, WithLambdaOneConvergesToTheOfflineAdditiveSrivcEstimate
     o.controller = c.controller;
     const FitResult offline = fit_srivc(sim.record, c.model, o);
     ASSERT_TRUE(offline.converged);
-    EstimatorSettings st = settings_for(c, {1.0, 1.0, 1.0}, 1000);
+    EstimatorSettings st = with_warmup_fit(settings_for(c, {1.0, 1.0, 1.0}, 1000));
     st.closed_loop = closed;
     RecursiveEstimator est(c.model, st);
     run(est, sim.record);
@@ -173,17 +190,28 @@ TEST(RecursiveEstimator, TracksTheSeedExample) {
   print_table("shipped defaults (config/paper-sim.yaml):", tb);
   EXPECT_EQ(paper.status().resets, 0u);
   EXPECT_EQ(best.status().resets, 0u);
-  // The issue's thresholds, exactly, on the criteria this record can support:
-  // mode 2 (a setpoint sine on its resonance) meets all of frequency median < 0.5 %
-  // and p95 < 3 %; modes 1 and 2 keep the damping p95 < 20 %.
+  // The issue's thresholds, exactly. With theta(t0), P(t0) as the paper gives them
+  // (config/paper-sim.yaml) these hold for every one of ten draws of the 2 % start
+  // (scripts/seed_example.sh): all of mode 2; mode 1's frequency p95 (lambda 0.997
+  // follows its 0.1 %/s ramp); every damping median and p95.
+  EXPECT_LT(tb.percentile(tb.wn[0], 0.95), 3.0);
   EXPECT_LT(tb.percentile(tb.wn[1], 0.5), 0.5);
   EXPECT_LT(tb.percentile(tb.wn[1], 0.95), 3.0);
-  EXPECT_LT(tb.percentile(tb.zeta[0], 0.95), 20.0);
-  EXPECT_LT(tb.percentile(tb.zeta[1], 0.95), 20.0);
-  // Not met, and reported with numbers in the issue note rather than asserted with
-  // wider tolerances: mode 1's frequency p95 (lag of a 25-50 s memory on its 0.1 %/s
-  // ramp) and mode 3 (one setpoint sine near it: wn, zeta and gain are not separable,
-  // see RecursiveEstimator.WithLambdaOne... and AdditiveSrivc tests).
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_LT(tb.percentile(tb.zeta[i], 0.5), 5.0) << "mode " << i + 1;
+    EXPECT_LT(tb.percentile(tb.zeta[i], 0.95), 20.0) << "mode " << i + 1;
+  }
+  // Not met, and reported in the issue note rather than asserted with wider
+  // tolerances:
+  // - mode 3's frequency median (1.25 %; p95 2.96-3.30 % over the draws). The
+  //   record carries too little about it: the 17.5 rad/s line of y is 0.055 against
+  //   a noise std of 0.1, and a 1 % change of wn3 moves it by 5 %, so 1,300 samples
+  //   of memory know wn3 to about 1.5 % (the estimator's own std: 1.7 %).
+  // - mode 1's frequency median: 0.43-0.50 % over the draws, 0.501 % on the shipped
+  //   one, whose gain is 1 % off and held there by P(t0).
+  // The paper's lambda = 0.999: mode 1's p95 is 8 % (lag of a 50 s memory).
+  EXPECT_LT(tp.percentile(tp.wn[1], 0.5), 0.5);
+  EXPECT_LT(tp.percentile(tp.wn[1], 0.95), 3.0);
 }
 
 TEST(RecursiveEstimator, AdditiveModelIsAtLeastAsAccurateAsTheUnfactoredSixthOrderOne) {
@@ -193,7 +221,7 @@ TEST(RecursiveEstimator, AdditiveModelIsAtLeastAsAccurateAsTheUnfactoredSixthOrd
   const Config c = paper_config();
   const auto sim = simulate(*c.plant, *c.experiment);
   Eigen::VectorXd A, B;
-  test_support::expand(c.model, A, B);
+  test_support::expand(true_model(c), A, B);
   Submodel k1;
   k1.name = "unfactored";
   k1.n = 6;
@@ -207,7 +235,9 @@ TEST(RecursiveEstimator, AdditiveModelIsAtLeastAsAccurateAsTheUnfactoredSixthOrd
     ExperimentSpec e = *c.experiment;
     e.duration = 200.0;
     const auto clean = simulate(time_invariant(*c.plant, 0.0), e);
-    RecursiveEstimator exact(unfactored, settings_for(c, {0.999}, 0));
+    EstimatorSettings st = settings_for(c, {0.999}, 0);
+    st.initial_covariance.clear();
+    RecursiveEstimator exact(unfactored, st);
     run(exact, clean.record);
     const auto modes = resonances(exact.submodel(0));
     ASSERT_EQ(modes.size(), 3u);
@@ -215,8 +245,10 @@ TEST(RecursiveEstimator, AdditiveModelIsAtLeastAsAccurateAsTheUnfactoredSixthOrd
     EXPECT_NEAR(modes[2].wn, 20.0, 1e-7);
     EXPECT_LT(exact.residual_rms(), 1e-10);
   }
-  RecursiveEstimator additive(c.model, settings_for(c, {0.999, 0.999, 0.999}, 1000));
-  RecursiveEstimator single(unfactored, settings_for(c, {0.999}, 1000));
+  // Both started alike: the warm-up fit from the same start (the true plant), the
+  // same forgetting.
+  RecursiveEstimator additive(true_model(c), with_warmup_fit(settings_for(c, {0.999, 0.999, 0.999}, 1000)));
+  RecursiveEstimator single(unfactored, with_warmup_fit(settings_for(c, {0.999}, 1000)));
   std::vector<double> err_add[3], err_k1[3];
   const Record& r = sim.record;
   for (Eigen::Index k = 0; k < r.size(); ++k) {
@@ -278,7 +310,7 @@ TEST(RecursiveEstimator, BadSamplesAreCountedAndNeverBecomeNaN) {
   EXPECT_GT(st.low_excitation_samples, 0.8 * 60.0 / T);
   // And it still tracks: the plant did not change.
   for (int i = 0; i < 3; ++i)
-    EXPECT_NEAR(est.mode(i).value.wn / modal_parameters(c.model.submodels[i]).wn, 1.0, 0.03) << "mode " << i + 1;
+    EXPECT_NEAR(est.mode(i).value.wn / modal_parameters(c.plant->modes[i].submodel).wn, 1.0, 0.03) << "mode " << i + 1;
   (void)T;
 }
 
@@ -596,7 +628,7 @@ TEST(RecursiveEstimator, AfterRestoreTheFirstSampleIsAGapEvenOnARestartedClock) 
   EXPECT_EQ(resumed.status().rejected_out_of_order, saved.status.rejected_out_of_order + 1);
   EXPECT_GT(resumed.status().updates, saved.status.updates + static_cast<std::uint64_t>(r.size() - half) / 2);
   for (int i = 0; i < 3; ++i)
-    EXPECT_NEAR(resumed.mode(i).value.wn / modal_parameters(c.model.submodels[i]).wn, 1.0, 0.03) << "mode " << i + 1;
+    EXPECT_NEAR(resumed.mode(i).value.wn / modal_parameters(c.plant->modes[i].submodel).wn, 1.0, 0.03) << "mode " << i + 1;
 }
 
 }  // namespace
