@@ -284,41 +284,52 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
   status.last_reset_reason = reason;
 }
 
-// eqs. (23)-(25) for one block from theta-bar(t_{k-1}), P-bar(t_{k-1}); the
-// filtered regressor phi and instrument psi are already in b.
-bool RecursiveEstimator::Impl::update_block(Block& b, double y_f) {
-  // Plain loops: n_theta is 3 for a mode, where Eigen's dynamic kernels cost more
-  // than the arithmetic.
-  const int nt = b.nt;
+// eqs. (23)-(25) on raw column-major storage (P is nt x nt, leading dimension nt):
+// K = P psi / (lambda + phi^T P psi), theta += K (y_f - phi^T theta),
+// P = (P - K phi^T P) / lambda. N > 0 fixes the size at compile time so that the
+// loops unroll (N = 3: a mode, the common case); N = 0 takes nt at run time.
+template <int N>
+bool iv_update(int nt_runtime, double* P, double* theta, const double* phi, const double* psi, double lambda,
+               double y_f) {
+  const int nt = N > 0 ? N : nt_runtime;
   double Ppsi[kMaxTheta], phiP[kMaxTheta];
-  double denom = b.lambda, eps = y_f;
+  double denom = lambda, eps = y_f;
   for (int i = 0; i < nt; ++i) {
     double v = 0.0, w = 0.0;
     for (int j = 0; j < nt; ++j) {
-      v += b.P(i, j) * b.psi(j);
-      w += b.P(j, i) * b.phi(j);
+      v += P[i + j * nt] * psi[j];
+      w += P[j + i * nt] * phi[j];
     }
     Ppsi[i] = v;
     phiP[i] = w;
-    denom += b.phi(i) * v;
-    eps -= b.phi(i) * b.theta(i);
+    denom += phi[i] * v;
+    eps -= phi[i] * theta[i];
   }
   if (!std::isfinite(denom) || std::abs(denom) < 1e-300) return false;
-  // eq. (23) K = P psi / denom; eq. (24) theta = theta + K eps;
-  // eq. (25) P = (P - K phi^T P) / lambda, kept symmetric.
-  ThetaVec theta = b.theta;
-  const double inv_lambda = 1.0 / b.lambda;
+  const double inv_lambda = 1.0 / lambda;
   for (int i = 0; i < nt; ++i) {
     const double k = Ppsi[i] / denom;
-    theta(i) += k * eps;
-    for (int j = 0; j < nt; ++j) b.P(i, j) = (b.P(i, j) - k * phiP[j]) * inv_lambda;
+    theta[i] += k * eps;
+    for (int j = 0; j < nt; ++j) P[i + j * nt] = (P[i + j * nt] - k * phiP[j]) * inv_lambda;
   }
+  // Kept symmetric against round-off.
+  for (int i = 0; i < nt; ++i)
+    for (int j = i + 1; j < nt; ++j) P[i + j * nt] = P[j + i * nt] = 0.5 * (P[i + j * nt] + P[j + i * nt]);
+  return true;
+}
+
+// One block's update from theta-bar(t_{k-1}), P-bar(t_{k-1}); the filtered
+// regressor phi and instrument psi are already in b.
+bool RecursiveEstimator::Impl::update_block(Block& b, double y_f) {
+  const int nt = b.nt;
+  ThetaVec theta = b.theta;
+  const bool ok = nt == 3 ? iv_update<3>(nt, b.P.data(), theta.data(), b.phi.data(), b.psi.data(), b.lambda, y_f)
+                          : iv_update<0>(nt, b.P.data(), theta.data(), b.phi.data(), b.psi.data(), b.lambda, y_f);
+  if (!ok) return false;
   if (b.n > 0 && project(theta.head(b.n), b.n)) ++status.projections;
   if (b.n > 0 && theta(b.n - 1) == 0.0) return false;
   b.theta = theta;
-  // Guards: symmetry, random walk (CONTSID's Kalman-filter adaptation), bounded trace.
-  for (int i = 0; i < nt; ++i)
-    for (int j = i + 1; j < nt; ++j) b.P(i, j) = b.P(j, i) = 0.5 * (b.P(i, j) + b.P(j, i));
+  // Guards: random walk (CONTSID's Kalman-filter adaptation), bounded trace.
   // Q is a parameter covariance; P carries theta^2 per output^2 (cov = sigma^2 P).
   if (cfg.random_walk > 0.0 && e_var > 0.0)
     for (int j = 0; j < b.nt; ++j) b.P(j, j) += std::pow(cfg.random_walk * b.theta(j), 2) / e_var;
