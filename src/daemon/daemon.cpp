@@ -480,7 +480,7 @@ Daemon::Impl::Impl(const Config& cfg, lcm_t* shared, LoopProbe* p)
                                           std::to_string(config.daemon.realtime_priority) + " not permitted (" +
                                           std::strerror(e) + "); under systemd set LimitRTPRIO=" +
                                           std::to_string(config.daemon.realtime_priority) +
-                                          " (systemd/README.md), or grant CAP_SYS_NICE");
+                                          " (README.md, \"Running under systemd\"), or grant CAP_SYS_NICE");
     pthread_setschedparam(pthread_self(), policy, &old);  // the control thread stays as it was
   }
   start_ns = mono_ns();
@@ -1102,8 +1102,12 @@ void Daemon::start() {
       c.daemon.checkpoint_path.empty() ? std::string("off")
                                        : c.daemon.checkpoint_path + " every " +
                                              std::to_string(c.daemon.checkpoint_period) + " s",
-      m.plan.restored ? "no warm-up" : "warm-up " + std::to_string(c.estimator.warmup_samples) + " samples",
-      m.watchdog_usec ? ", systemd watchdog " + std::to_string(m.watchdog_usec / 1000) + " ms" : std::string());
+      m.plan.restored ? "no warm-up"
+                      : "warm-up " + std::to_string(c.estimator.warmup_samples) + " samples (fit off the loop, " +
+                            std::to_string(m.backlog.size()) + " samples held at most)",
+      (m.watchdog_usec ? ", systemd watchdog " + std::to_string(m.watchdog_usec / 1000) + " ms" : std::string()) +
+          (c.daemon.realtime_priority > 0 ? ", SCHED_FIFO " + std::to_string(c.daemon.realtime_priority) + " + mlockall"
+                                          : std::string()));
   {
     std::lock_guard<std::mutex> lock(m.control);
     // Before the loop runs: after that only it and the fitter touch the estimator.
