@@ -189,9 +189,10 @@ TEST_F(DaemonInProcess, FlagsTheDriftingModeOnlyAndMatchesTrack) {
 }
 
 // The warm-up fit runs on the fitter thread, not the estimation loop: a fit
-// longer than WatchdogSec (here 0.2 s; the probe's hook holds the fitter for
-// 1 s before the real fit) keeps the WATCHDOG=1 pings coming, and the input
-// that arrives meanwhile is held and then estimated, none of it dropped.
+// longer than WatchdogSec (here 1 s; the probe's hook holds the fitter for 3 s
+// before the real fit) keeps the WATCHDOG=1 pings coming, and the input that
+// arrives meanwhile is held and then estimated, none of it dropped. (WatchdogSec
+// is not shorter so that the check holds under TSan on a loaded machine too.)
 TEST_F(DaemonInProcess, WarmupFitLongerThanTheWatchdogKeepsPingingAndDropsNothing) {
   using Clock = std::chrono::steady_clock;
   // systemd's stand-in, as in DaemonProcess.NotifiesSystemd...: an abstract datagram socket.
@@ -219,7 +220,7 @@ TEST_F(DaemonInProcess, WarmupFitLongerThanTheWatchdogKeepsPingingAndDropsNothin
     }
   });
   ::setenv("NOTIFY_SOCKET", ("@" + name).c_str(), 1);
-  ::setenv("WATCHDOG_USEC", "200000", 1);
+  ::setenv("WATCHDOG_USEC", "1000000", 1);
   ::unsetenv("WATCHDOG_PID");
 
   struct SlowFit : LoopProbe {
@@ -227,7 +228,7 @@ TEST_F(DaemonInProcess, WarmupFitLongerThanTheWatchdogKeepsPingingAndDropsNothin
     void exiting() override {}
     void warmup_fit_running() override {
       fit_start = Clock::now();
-      std::this_thread::sleep_for(std::chrono::milliseconds(1000));
+      std::this_thread::sleep_for(std::chrono::milliseconds(3000));
       fits.fetch_add(1);
     }
     std::atomic<int> fits{0};
@@ -266,9 +267,9 @@ TEST_F(DaemonInProcess, WarmupFitLongerThanTheWatchdogKeepsPingingAndDropsNothin
   EXPECT_GT(k.samples_held, 4096u) << "no input arrived during the fit: the test does not test the backlog";
   EXPECT_EQ(k.snapshots_dropped, 0u);
   // The pings from the one before the fit's start until the loop had worked off
-  // the held input (warmed_up): at least one per half WatchdogSec (0.1 s), never
-  // a gap of a whole WatchdogSec, which systemd punishes.
-  const auto fit_end = probe.fit_start + std::chrono::milliseconds(1000);
+  // the held input (warmed_up): one per half WatchdogSec (0.5 s), never a gap of
+  // a whole WatchdogSec, which systemd punishes.
+  const auto fit_end = probe.fit_start + std::chrono::milliseconds(3000);
   ASSERT_GT(probe.warmed, fit_end);
   std::vector<double> span;  // s since the fit's start
   for (std::size_t i = 0; i < pings.size(); ++i) {
@@ -276,12 +277,12 @@ TEST_F(DaemonInProcess, WarmupFitLongerThanTheWatchdogKeepsPingingAndDropsNothin
     if (last_before || (pings[i] >= probe.fit_start && pings[i] <= probe.warmed))
       span.push_back(std::chrono::duration<double>(pings[i] - probe.fit_start).count());
   }
-  ASSERT_GE(span.size(), 10u) << "WATCHDOG=1 pings around a fit of more than 1 s";
+  ASSERT_GE(span.size(), 6u) << "WATCHDOG=1 pings around a fit of more than 3 s";
   EXPECT_LE(span.front(), 0.0);
   span.push_back(std::chrono::duration<double>(probe.warmed - probe.fit_start).count());
   double worst_gap = 0.0;
   for (std::size_t i = 1; i < span.size(); ++i) worst_gap = std::max(worst_gap, span[i] - span[i - 1]);
-  EXPECT_LT(worst_gap, 0.2) << "a WatchdogSec without WATCHDOG=1 during the warm-up fit";
+  EXPECT_LT(worst_gap, 1.0) << "a WatchdogSec without WATCHDOG=1 during the warm-up fit";
   // One estimate per 0.1 s of sample time in (0, 20) s, the held input included:
   // 199, each 0.1 s (to the sample) after the one before.
   ASSERT_EQ(rx.estimates.size(), 199u);
