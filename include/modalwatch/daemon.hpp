@@ -18,7 +18,9 @@
 // start-up, apart from its absolute-time sleep (clock_nanosleep on
 // CLOCK_MONOTONIC) and, under systemd with WatchdogSec, sd_notify(WATCHDOG=1).
 // Everything it reports goes through a fixed-size Snapshot; the publisher turns
-// snapshots into messages and log lines.
+// snapshots into messages and log lines. The publisher follows the loop's tick
+// grid (an atomic the loop stores at the end of each tick), so that it picks a
+// snapshot up in the tick it was made even when the tick ran long.
 //
 // Usage (modalwatchd's main does this; tests drive the same class in process):
 //   Daemon d(config);             // opens LCM (or uses the caller's lcm_t), restores a checkpoint
