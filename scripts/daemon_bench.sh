@@ -1,17 +1,24 @@
 #!/usr/bin/env bash
 # modalwatchd figures (not a test): at 4096 Hz input with K = 2 (the flexible
 # beam of config/flexible-beam-drift.yaml), dropped samples, the latency from a
-# sample's utime to the arrival of the estimate that includes it (p50/p99), the
-# daemon's CPU use; then the highest sustained batch input rate without drops.
+# sample's utime to the delivery of the estimate that includes it (p50/p99;
+# see tests/bench/daemon_bench.cpp for how delivery is timed and how the
+# sender's own lateness is told apart), the daemon's CPU use; then the highest
+# sustained batch input rate without drops.
 # Runs over udpm on loopback (ttl=0) on a port of its own.
 # Latency is measured with an estimate every 10 ms of sample time (publish_period
-# 0.01) so that there are enough of them, after the 5 s warm-up (its fit runs on
-# the estimation thread and stalls it once), at two loop rates.
-#   scripts/daemon_bench.sh            LOOPS="2000 10000" SECONDS_PER_RUN=30 BUILD_DIR=build
+# 0.01) so that there are enough of them, after the 5 s warm-up and the catch-up
+# on the input held during its fit (SKIP_SECONDS, 10: check the fit's duration
+# in the "warm-up over" line), at two loop rates.
+# RT_PRIORITY=N (needs CAP_SYS_NICE or an RLIMIT_RTPRIO of N) runs the daemon with
+# daemon.realtime_priority N and the bench's sender and listener at SCHED_FIFO N-1.
+#   scripts/daemon_bench.sh            LOOPS="2000 10000" SECONDS_PER_RUN=30 BUILD_DIR=build RT_PRIORITY=0
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build="${BUILD_DIR:-build}"
 loops="${LOOPS:-2000 10000}"
+rt="${RT_PRIORITY:-0}"
+skip="${SKIP_SECONDS:-10}"  # the warm-up (5 s), its fit and the catch-up on the input held meanwhile
 run_s="${SECONDS_PER_RUN:-30}"
 work="$(mktemp -d)"
 trap 'kill "${daemon:-}" 2>/dev/null || true; rm -rf "$work"' EXIT
@@ -25,6 +32,11 @@ grep -q "239.255.76.67:${port}" "$work/base.yaml"
 config_for() {  # loop rate, publish period
   sed -e "s#loop_rate_hz: 2000 #loop_rate_hz: $1 #" -e "s#publish_period: 0.1 #publish_period: $2 #" \
     "$work/base.yaml" > "$work/bench.yaml"
+  if [ "$rt" -gt 0 ]; then sed -i -e "s#^daemon:#daemon:\n  realtime_priority: $rt#" "$work/bench.yaml"; fi
+}
+bench() {
+  if [ "$rt" -gt 0 ]; then chrt -f $((rt - 1)) "$build/tests/bench/modalwatch_daemon_bench" "$@"
+  else "$build/tests/bench/modalwatch_daemon_bench" "$@"; fi
 }
 
 cpu_ticks() { awk '{print $14 + $15}' "/proc/$1/stat"; }
@@ -40,18 +52,20 @@ stop_daemon() {
   daemon=""
 }
 
-echo "== machine: $(nproc) cores, load average $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "== machine: $(nproc) cores, load average $(cut -d' ' -f1-3 /proc/loadavg); realtime priority ${rt} (0: off)"
 hz=$(getconf CLK_TCK)
 for loop_hz in $loops; do
   echo "== 4096 Hz, one sample_t per packet, ${run_s} s, loop ${loop_hz} Hz, an estimate every 10 ms"
   config_for "$loop_hz" 0.01
   start_daemon
   c0=$(cpu_ticks "$daemon"); t0=$(date +%s.%N)
-  "$build/tests/bench/modalwatch_daemon_bench" latency --config "$work/bench.yaml" --data "$work/record.csv" --rate 4096 \
-    --seconds "$run_s" --skip 6
+  bench latency --config "$work/bench.yaml" --data "$work/record.csv" --rate 4096 \
+    --seconds "$run_s" --skip "$skip"
   c1=$(cpu_ticks "$daemon"); t1=$(date +%s.%N)
   awk -v c="$((c1 - c0))" -v hz="$hz" -v a="$t0" -v b="$t1" \
     'BEGIN { printf "  daemon CPU: %.1f %% of one core (user+system over %.1f s, warm-up fit included)\n", 100 * c / hz / (b - a), b - a }'
+  echo "  load average now: $(cut -d' ' -f1-3 /proc/loadavg)"
+  grep -o "warm-up over.*" "$work/daemon.log" | sed 's/^/  daemon: /' || true
   stop_daemon
 done
 config_for 2000 0.1
@@ -59,7 +73,7 @@ config_for 2000 0.1
 echo "== highest sustained batch rate without drops (batches of 256 samples, 3 s per rate)"
 for rate in 50000 100000 150000 200000 300000 400000; do
   start_daemon
-  line=$("$build/tests/bench/modalwatch_daemon_bench" rate --config "$work/bench.yaml" --data "$work/record.csv" \
+  line=$(bench rate --config "$work/bench.yaml" --data "$work/record.csv" \
            --rate "$rate" --seconds 3 --batch 256 | grep "daemon:")
   stop_daemon
   echo "  $rate samples/s: $line"

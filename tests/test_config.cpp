@@ -1125,6 +1125,8 @@ TEST(Config, DaemonAndFaultDefaults) {
   EXPECT_DOUBLE_EQ(c.daemon.loop_rate_hz, 1000.0);
   EXPECT_DOUBLE_EQ(c.daemon.publish_period, 0.1);
   EXPECT_EQ(c.daemon.sample_ring, 65536);
+  EXPECT_DOUBLE_EQ(c.daemon.warmup_backlog, 30.0);
+  EXPECT_EQ(c.daemon.realtime_priority, 0);
   EXPECT_TRUE(c.daemon.checkpoint_path.empty());
   EXPECT_EQ(c.daemon.log_level, "info");
   EXPECT_DOUBLE_EQ(c.faults.learn_window, 30.0);
@@ -1143,14 +1145,16 @@ TEST(Config, DaemonAndFaultSectionsAndRoundTrip) {
       "  stale_time: 3\n"                                   // 20
       "  sample_ring: 1024\n"                               // 21
       "  snapshot_ring: 16\n"                               // 22
-      "  checkpoint: {path: state/x.ckpt, period: 7}\n"     // 23
-      "  log_level: debug\n"                                // 24
-      "faults:\n"                                           // 25
-      "  learn_window: 12\n"                                // 26
-      "  wn: {sigma: 3, relative: 0.02, hold: 1.5}\n"       // 27
-      "  zeta: {clear_fraction: 0.25, clear_time: 4}\n"     // 28
-      "  baselines:\n"                                      // 29
-      "    m2: {frequency_hz: 1.5, zeta: 0.2, gain: 2}\n";  // 30
+      "  warmup_backlog: 12.5\n"                            // 23
+      "  realtime_priority: 40\n"                           // 24
+      "  checkpoint: {path: state/x.ckpt, period: 7}\n"     // 25
+      "  log_level: debug\n"                                // 26
+      "faults:\n"                                           // 27
+      "  learn_window: 12\n"                                // 28
+      "  wn: {sigma: 3, relative: 0.02, hold: 1.5}\n"       // 29
+      "  zeta: {clear_fraction: 0.25, clear_time: 4}\n"     // 30
+      "  baselines:\n"                                      // 31
+      "    m2: {frequency_hz: 1.5, zeta: 0.2, gain: 2}\n";  // 32
   const Config c = parse_config(kBase + extra, "/cfg/test.yaml");
   EXPECT_DOUBLE_EQ(c.daemon.loop_rate_hz, 2000.0);
   EXPECT_DOUBLE_EQ(c.daemon.publish_period, 0.5);
@@ -1159,6 +1163,8 @@ TEST(Config, DaemonAndFaultSectionsAndRoundTrip) {
   EXPECT_DOUBLE_EQ(c.daemon.stale_time, 3.0);
   EXPECT_EQ(c.daemon.sample_ring, 1024);
   EXPECT_EQ(c.daemon.snapshot_ring, 16);
+  EXPECT_DOUBLE_EQ(c.daemon.warmup_backlog, 12.5);
+  EXPECT_EQ(c.daemon.realtime_priority, 40);
   EXPECT_EQ(c.daemon.checkpoint_path, "/cfg/state/x.ckpt");
   EXPECT_DOUBLE_EQ(c.daemon.checkpoint_period, 7.0);
   EXPECT_EQ(c.daemon.log_level, "debug");
@@ -1182,6 +1188,8 @@ TEST(Config, DaemonAndFaultSectionsAndRoundTrip) {
   EXPECT_DOUBLE_EQ(back.daemon.stale_time, c.daemon.stale_time);
   EXPECT_EQ(back.daemon.sample_ring, c.daemon.sample_ring);
   EXPECT_EQ(back.daemon.snapshot_ring, c.daemon.snapshot_ring);
+  EXPECT_DOUBLE_EQ(back.daemon.warmup_backlog, c.daemon.warmup_backlog);
+  EXPECT_EQ(back.daemon.realtime_priority, c.daemon.realtime_priority);
   EXPECT_EQ(back.daemon.checkpoint_path, c.daemon.checkpoint_path);
   EXPECT_DOUBLE_EQ(back.daemon.checkpoint_period, c.daemon.checkpoint_period);
   EXPECT_EQ(back.daemon.log_level, c.daemon.log_level);
@@ -1202,7 +1210,8 @@ TEST(Config, DaemonAndFaultSectionsAndRoundTrip) {
 TEST(ConfigErrors, DaemonAndFaults) {
   EXPECT_EQ(parse_error(kBase + "daemon:\n  loop_rate: 5\n"),
             "test.yaml:16: key 'daemon.loop_rate': unknown key for daemon (allowed: loop_rate_hz, publish_period, "
-            "heartbeat_period, gap_time, stale_time, sample_ring, snapshot_ring, checkpoint, log_level)");
+            "heartbeat_period, gap_time, stale_time, sample_ring, snapshot_ring, warmup_backlog, realtime_priority, "
+            "checkpoint, log_level)");
   EXPECT_EQ(parse_error(kBase + "daemon:\n  loop_rate_hz: 0\n"),
             "test.yaml:16: key 'daemon.loop_rate_hz': must be > 0 (got 0)");
   EXPECT_EQ(parse_error(kBase + "daemon:\n  publish_period: 0.01\n"),
@@ -1213,6 +1222,15 @@ TEST(ConfigErrors, DaemonAndFaults) {
             "test.yaml:18: key 'daemon.gap_time': give daemon.gap_time or estimator.gap_factor, not both");
   EXPECT_EQ(parse_error(kBase + "daemon:\n  sample_ring: 8\n"),
             "test.yaml:16: key 'daemon.sample_ring': must be in 16..16777216 (got 8)");
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  warmup_backlog: 0\n"),
+            "test.yaml:16: key 'daemon.warmup_backlog': must be > 0 (got 0)");
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  warmup_backlog: 1e6\n"),  // 2e7 samples at 20 Hz
+            "test.yaml:16: key 'daemon.warmup_backlog': must hold at most 16777216 samples (838860 s at this "
+            "sample rate) (got 1e6)");
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  realtime_priority: 100\n"),
+            "test.yaml:16: key 'daemon.realtime_priority': must be in 0..99 (got 100)");
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  realtime_priority: high\n"),
+            "test.yaml:16: key 'daemon.realtime_priority': expected an integer (got high)");
   EXPECT_EQ(parse_error(kBase + "daemon:\n  checkpoint: {period: 5}\n"),
             "test.yaml:16: key 'daemon.checkpoint.path': missing required key");
   EXPECT_EQ(parse_error(kBase + "daemon:\n  log_level: verbose\n"),

@@ -188,6 +188,110 @@ TEST_F(DaemonInProcess, FlagsTheDriftingModeOnlyAndMatchesTrack) {
   EXPECT_NEAR(fin.modes[kSuspension].hz, 6.0, 0.1);
 }
 
+// The warm-up fit runs on the fitter thread, not the estimation loop: a fit
+// longer than WatchdogSec (here 1 s; the probe's hook holds the fitter for 3 s
+// before the real fit) keeps the WATCHDOG=1 pings coming, and the input that
+// arrives meanwhile is held and then estimated, none of it dropped. (WatchdogSec
+// is not shorter so that the check holds under TSan on a loaded machine too.)
+TEST_F(DaemonInProcess, WarmupFitLongerThanTheWatchdogKeepsPingingAndDropsNothing) {
+  using Clock = std::chrono::steady_clock;
+  // systemd's stand-in, as in DaemonProcess.NotifiesSystemd...: an abstract datagram socket.
+  const int sock = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  ASSERT_GE(sock, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  const std::string name = "modalwatch-fit-notify-" + std::to_string(::getpid());
+  std::memcpy(addr.sun_path + 1, name.data(), name.size());
+  const auto len = static_cast<socklen_t>(offsetof(sockaddr_un, sun_path) + 1 + name.size());
+  ASSERT_EQ(::bind(sock, reinterpret_cast<sockaddr*>(&addr), len), 0);
+  timeval tv{0, 50'000};
+  ::setsockopt(sock, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  std::mutex mutex;
+  std::vector<Clock::time_point> pings;
+  std::atomic<bool> done{false};
+  std::thread reader([&] {
+    char buf[256];
+    while (!done) {
+      const ssize_t n = ::recv(sock, buf, sizeof buf, 0);
+      if (n > 0 && std::string(buf, static_cast<std::size_t>(n)).find("WATCHDOG=1") != std::string::npos) {
+        std::lock_guard<std::mutex> lock(mutex);
+        pings.push_back(Clock::now());
+      }
+    }
+  });
+  ::setenv("NOTIFY_SOCKET", ("@" + name).c_str(), 1);
+  ::setenv("WATCHDOG_USEC", "1000000", 1);
+  ::unsetenv("WATCHDOG_PID");
+
+  struct SlowFit : LoopProbe {
+    void warmed_up() override { warmed = Clock::now(); }
+    void exiting() override {}
+    void warmup_fit_running() override {
+      fit_start = Clock::now();
+      std::this_thread::sleep_for(std::chrono::milliseconds(3000));
+      fits.fetch_add(1);
+    }
+    std::atomic<int> fits{0};
+    Clock::time_point fit_start, warmed;  // read after the threads are joined
+  } probe;
+
+  const Eigen::Index n = samples_at(20.0);
+  Config c = load_config(kDriftConfig);
+  lcm_t* lcm = lcm_create("memq://");
+  ASSERT_NE(lcm, nullptr);
+  Received rx;
+  rx.subscribe(lcm, c.lcm);
+  DaemonCounters k;
+  {
+    Daemon d(c, lcm, &probe);
+    d.start();
+    std::uint64_t published = 0;
+    // Up to 4 s of input ahead of the daemon: about 3 s of it arrives during the fit.
+    publish_paced(lcm, c, d, 0, n, published, 0, 0, 16384);
+    ASSERT_TRUE(wait_for([&] { return all_handled(d) && d.counters().samples_received == std::uint64_t(n); }, 30.0));
+    d.stop();
+    k = d.counters();
+  }
+  done = true;
+  reader.join();
+  ::close(sock);
+  ::unsetenv("NOTIFY_SOCKET");
+  ::unsetenv("WATCHDOG_USEC");
+  dispatch_rest(lcm);
+  lcm_destroy(lcm);
+
+  EXPECT_EQ(probe.fits.load(), 1);
+  EXPECT_EQ(k.samples_processed, std::uint64_t(n));
+  EXPECT_EQ(k.samples_dropped, 0u);
+  EXPECT_EQ(k.held_dropped, 0u);
+  EXPECT_GT(k.samples_held, 4096u) << "no input arrived during the fit: the test does not test the backlog";
+  EXPECT_EQ(k.snapshots_dropped, 0u);
+  // The pings from the one before the fit's start until the loop had worked off
+  // the held input (warmed_up): one per half WatchdogSec (0.5 s), never a gap of
+  // a whole WatchdogSec, which systemd punishes.
+  const auto fit_end = probe.fit_start + std::chrono::milliseconds(3000);
+  ASSERT_GT(probe.warmed, fit_end);
+  std::vector<double> span;  // s since the fit's start
+  for (std::size_t i = 0; i < pings.size(); ++i) {
+    const bool last_before = pings[i] < probe.fit_start && i + 1 < pings.size() && pings[i + 1] >= probe.fit_start;
+    if (last_before || (pings[i] >= probe.fit_start && pings[i] <= probe.warmed))
+      span.push_back(std::chrono::duration<double>(pings[i] - probe.fit_start).count());
+  }
+  ASSERT_GE(span.size(), 6u) << "WATCHDOG=1 pings around a fit of more than 3 s";
+  EXPECT_LE(span.front(), 0.0);
+  span.push_back(std::chrono::duration<double>(probe.warmed - probe.fit_start).count());
+  double worst_gap = 0.0;
+  for (std::size_t i = 1; i < span.size(); ++i) worst_gap = std::max(worst_gap, span[i] - span[i - 1]);
+  EXPECT_LT(worst_gap, 1.0) << "a WatchdogSec without WATCHDOG=1 during the warm-up fit";
+  // One estimate per 0.1 s of sample time in (0, 20) s, the held input included:
+  // 199, each 0.1 s (to the sample) after the one before.
+  ASSERT_EQ(rx.estimates.size(), 199u);
+  for (std::size_t i = 1; i < rx.estimates.size(); ++i)
+    EXPECT_NEAR(static_cast<double>(rx.estimates[i].utime - rx.estimates[i - 1].utime), 100'000.0, 250.0) << i;
+  EXPECT_NEAR(rx.estimates.back().modes[kFlex].hz, 90.0, 0.5);
+  EXPECT_NEAR(rx.estimates.back().modes[kSuspension].hz, 6.0, 0.1);
+}
+
 // Acceptance 2: garbage, NaN, duplicates, reordering, silence and a burst.
 TEST_F(DaemonInProcess, SurvivesBadInputAndCountsIt) {
   const DriftData& data = drift_data();

@@ -7,6 +7,8 @@
 #include <cstdio>
 #include <numbers>
 #include <random>
+#include <stdexcept>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -631,6 +633,113 @@ TEST(RecursiveEstimator, AfterRestoreTheFirstSampleIsAGapEvenOnARestartedClock) 
   EXPECT_GT(resumed.status().updates, saved.status.updates + static_cast<std::uint64_t>(r.size() - half) / 2);
   for (int i = 0; i < 3; ++i)
     EXPECT_NEAR(resumed.mode(i).value.wn / modal_parameters(c.plant->modes[i].submodel).wn, 1.0, 0.03) << "mode " << i + 1;
+}
+
+
+// The daemon runs the warm-up fit on another thread (defer_warmup_fit) while
+// samples keep arriving; `modalwatch track` runs it inside step(). Both must
+// give the same estimates, bit for bit, on every sample after the warm-up.
+TEST(RecursiveEstimator, WarmupFitOnAnotherThreadGivesTheSynchronousEstimatesBitForBit) {
+  const Config c = paper_config();
+  const auto sim = simulate(*c.plant, *c.experiment);
+  const Record& r = sim.record;
+  std::vector<double> shipped;
+  for (const auto& s : c.submodel_settings) shipped.push_back(s.forgetting);
+  const EstimatorSettings sync_settings = settings_for(c, shipped, c.estimator.warmup_samples);
+  EstimatorSettings split_settings = sync_settings;
+  split_settings.defer_warmup_fit = true;
+  ASSERT_GT(sync_settings.warmup_samples, 0);
+  const int K = static_cast<int>(c.model.submodels.size());
+  const Eigen::Index n = std::min<Eigen::Index>(r.size(), 3 * sync_settings.warmup_samples);
+  auto sample = [&](Eigen::Index k) { return Sample{r.t(k), r.u(k), r.y(k), r.r(k)}; };
+  // Per sample: wn, zeta, gain and their std of every mode, and the residual RMS.
+  auto row = [K](const RecursiveEstimator& e) {
+    std::vector<double> v;
+    for (int i = 0; i < K; ++i) {
+      const ModeEstimate m = e.mode(i);
+      v.insert(v.end(), {m.value.wn, m.value.zeta, m.value.gain, m.std.wn, m.std.zeta, m.std.gain});
+    }
+    v.push_back(e.residual_rms());
+    return v;
+  };
+
+  RecursiveEstimator sync(c.model, sync_settings);
+  std::vector<std::vector<double>> expected;
+  for (Eigen::Index k = 0; k < n; ++k) {
+    sync.step(sample(k));
+    expected.push_back(row(sync));
+  }
+  ASSERT_FALSE(sync.status().warming_up);
+  ASSERT_TRUE(sync.status().warmup_fit_used);
+
+  RecursiveEstimator split(c.model, split_settings);
+  std::vector<std::vector<double>> got;
+  Eigen::Index k = 0;
+  for (; k < n; ++k) {
+    const unsigned flags = split.step(sample(k));
+    got.push_back(row(split));
+    if (flags & kWarmupFitPending) break;
+  }
+  ASSERT_EQ(k + 1, sync_settings.warmup_samples);
+  ASSERT_TRUE(split.warmup_fit_pending());
+  ASSERT_TRUE(split.status().warming_up);
+  const EstimatorStatus before = split.status();
+  // While pending, step() takes nothing.
+  EXPECT_EQ(split.step(sample(k + 1)), unsigned{kWarmupFitPending});
+  EXPECT_EQ(split.status().samples, before.samples);
+
+  WarmupFit job = split.take_warmup_fit();
+  EXPECT_THROW(split.take_warmup_fit(), std::logic_error);
+  EXPECT_EQ(job.samples(), sync_settings.warmup_samples);
+  EXPECT_FALSE(job.done());
+  std::thread fitter([&job] { job.run(); });
+  fitter.join();
+  EXPECT_TRUE(job.done());
+  split.apply_warmup_fit(std::move(job));
+  EXPECT_FALSE(split.warmup_fit_pending());
+  EXPECT_FALSE(split.status().warming_up);
+  EXPECT_TRUE(split.status().warmup_fit_used);
+  // The samples that arrived meanwhile, then the rest. The row of the sample
+  // that completed the window is the one after the fit in the synchronous run.
+  got.back() = row(split);
+  for (++k; k < n; ++k) {
+    EXPECT_EQ(split.step(sample(k)) & kWarmupFitPending, 0u);
+    got.push_back(row(split));
+  }
+  ASSERT_EQ(got.size(), expected.size());
+  for (std::size_t j = 0; j < got.size(); ++j) ASSERT_EQ(got[j], expected[j]) << "sample " << j;
+  EXPECT_EQ(split.status().samples, sync.status().samples);
+  EXPECT_EQ(split.status().updates, sync.status().updates);
+  for (int i = 0; i < K; ++i) EXPECT_EQ(split.submodel(i).theta(), sync.submodel(i).theta());
+}
+
+// A job is applied once, to its own estimator, after it has run; restore()
+// drops a pending fit.
+TEST(RecursiveEstimator, WarmupFitJobMisuseIsRejected) {
+  const Config c = paper_config();
+  const auto sim = simulate(*c.plant, *c.experiment);
+  const Record& r = sim.record;
+  EstimatorSettings st = settings_for(c, {}, 200);
+  st.defer_warmup_fit = true;
+  RecursiveEstimator est(c.model, st);
+  EXPECT_THROW(est.take_warmup_fit(), std::logic_error);  // nothing pending
+  const EstimatorState fresh = est.state();
+  for (Eigen::Index k = 0; k < 200; ++k) est.step({r.t(k), r.u(k), r.y(k), r.r(k)});
+  ASSERT_TRUE(est.warmup_fit_pending());
+  WarmupFit job = est.take_warmup_fit();
+  EXPECT_THROW(est.apply_warmup_fit(std::move(job)), std::logic_error);  // not run
+  job.run();
+  est.restore(fresh);  // drops the pending fit: the job is stale
+  EXPECT_FALSE(est.warmup_fit_pending());
+  EXPECT_THROW(est.apply_warmup_fit(std::move(job)), std::logic_error);
+  // The warm-up starts again, with a window of its own.
+  unsigned flags = 0;
+  for (Eigen::Index k = 200; k < 400 && !(flags & kWarmupFitPending); ++k) flags = est.step({r.t(k), r.u(k), r.y(k), r.r(k)});
+  ASSERT_TRUE(est.warmup_fit_pending());
+  WarmupFit again = est.take_warmup_fit();
+  again.run();
+  est.apply_warmup_fit(std::move(again));
+  EXPECT_FALSE(est.status().warming_up);
 }
 
 }  // namespace

@@ -40,6 +40,8 @@ struct DaemonSettings {
   double stale_time = 1.0;         // s (wall clock) without a sample: HEALTH_STALE_INPUT
   int sample_ring = 65536;         // samples between the LCM thread and the estimation loop
   int snapshot_ring = 256;         // snapshots between the estimation loop and the publisher
+  double warmup_backlog = 30.0;    // s of input held while the warm-up fit runs (off the loop)
+  int realtime_priority = 0;       // SCHED_FIFO priority of the latency-path threads, + mlockall; 0: off
   std::string checkpoint_path;     // empty: no checkpoint (relative paths: to the config file)
   double checkpoint_period = 60.0; // s (wall clock) between periodic checkpoints
   std::string log_level = "info";  // spdlog level name

@@ -10,12 +10,17 @@
 // A fourth, control-side thread writes the periodic checkpoint: it pauses the
 // estimation loop (joins it; the input ring buffers meanwhile), copies the
 // state, restarts the loop and writes the file; reload() pauses it the same way.
+// A fifth, the fitter, runs the estimator's warm-up fit (seconds, allocating)
+// so that the loop keeps its tick, the watchdog and the status meanwhile; the
+// loop holds the input in a backlog (daemon.warmup_backlog) and then works it off.
 //
 // The estimation loop neither locks, allocates nor makes a system call after
 // start-up, apart from its absolute-time sleep (clock_nanosleep on
 // CLOCK_MONOTONIC) and, under systemd with WatchdogSec, sd_notify(WATCHDOG=1).
 // Everything it reports goes through a fixed-size Snapshot; the publisher turns
-// snapshots into messages and log lines.
+// snapshots into messages and log lines. The publisher follows the loop's tick
+// grid (an atomic the loop stores at the end of each tick), so that it picks a
+// snapshot up in the tick it was made even when the tick ran long.
 //
 // Usage (modalwatchd's main does this; tests drive the same class in process):
 //   Daemon d(config);             // opens LCM (or uses the caller's lcm_t), restores a checkpoint
@@ -38,7 +43,7 @@ namespace modalwatch {
 // Counters since start (each monotonic). Safe to read from any thread.
 struct DaemonCounters {
   std::uint64_t samples_received = 0;      // samples decoded from valid packets
-  std::uint64_t samples_dropped = 0;       // input ring full
+  std::uint64_t samples_dropped = 0;       // input ring full, or the warm-up backlog (held_dropped)
   std::uint64_t decode_errors = 0;         // packets rejected by the decoder
   std::uint64_t samples_nonfinite = 0;     // NaN/Inf in u, y or r
   std::uint64_t samples_duplicate = 0;     // seq equal to the last accepted one
@@ -47,6 +52,8 @@ struct DaemonCounters {
   std::uint64_t gaps = 0;                  // utime gaps that reset the prefilter states
   std::uint64_t resets = 0;                // estimator returns to its last good state
   std::uint64_t overruns = 0;              // loop ticks that ended after the next was due
+  std::uint64_t samples_held = 0;          // held in the backlog while the warm-up fit ran
+  std::uint64_t held_dropped = 0;          // backlog full (daemon.warmup_backlog), also in samples_dropped
   std::uint64_t snapshots = 0;             // snapshots handed to the publisher
   std::uint64_t snapshots_dropped = 0;     // snapshot ring full (publisher behind)
   std::uint64_t estimates_published = 0;
@@ -58,14 +65,16 @@ struct DaemonCounters {
 };
 
 // Test hook, called on the estimation thread: warmed_up() at the start of the
-// first tick after the estimator's warm-up is over and at least one snapshot
-// went out; exiting() after the loop's last tick (the final drain included),
+// first tick after the estimator's warm-up is over (its fit applied and the
+// input held meanwhile worked off) and at least one snapshot went out; exiting() after the loop's last tick (the final drain included),
 // each time the loop thread ends (stop, and the pauses of reload and checkpoints).
 class LoopProbe {
  public:
   virtual ~LoopProbe() = default;
   virtual void warmed_up() = 0;
   virtual void exiting() = 0;
+  // On the fitter thread, before the warm-up fit runs (a test makes the fit slow here).
+  virtual void warmup_fit_running() {}
 };
 
 class Daemon {

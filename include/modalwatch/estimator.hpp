@@ -12,6 +12,16 @@
 // step() once warm-up is over. Everything a caller needs to know about bad
 // input (NaN samples, gaps, outliers, low excitation, resets) is counted in
 // status().
+//
+// The warm-up fit (section 4.7) is the one long computation: by default step()
+// runs it when the warm-up window is full. With defer_warmup_fit a caller that
+// must keep a deadline (modalwatchd's estimation loop) runs it elsewhere:
+//   if (est.step(s) & kWarmupFitPending) {
+//     WarmupFit job = est.take_warmup_fit();  // no copy, no allocation
+//     job.run();                              // any thread; allocates, may take seconds
+//     est.apply_warmup_fit(std::move(job));   // theta(t0), P(t0); filters over the window
+//   }                                         // then step() the samples held meanwhile
+// which gives the estimates of the synchronous path bit for bit.
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -42,6 +52,8 @@ struct EstimatorSettings {
   int warmup_samples = 0;
   bool fit_on_warmup = true;
   int warmup_iterations = 50;
+  // Not a config key: the caller runs the warm-up fit (see the top of this file).
+  bool defer_warmup_fit = false;
   // P(t0) when not from the warm-up fit: given per submodel (diagonal, physical
   // units of theta_i^2 per output unit^2), or relative: diag((rho theta_j)^2)/var(y).
   std::vector<Eigen::VectorXd> initial_covariance;
@@ -89,6 +101,9 @@ enum StepFlags : unsigned {
   kLowExcitation = 1u << 5,
   kReset = 1u << 6,
   kWarmingUp = 1u << 7,
+  // defer_warmup_fit: the warm-up window is complete and its fit pending. Until
+  // apply_warmup_fit(), step() takes no sample (it returns this flag alone).
+  kWarmupFitPending = 1u << 8,
 };
 
 struct ModeEstimate {
@@ -134,6 +149,42 @@ struct EstimatorState {
                                              // estimator's own reasons, or "")
 };
 
+// The offline additive SRIVC on the warm-up window and the initial state it
+// gives (section 4.7), as a job that can run on any thread. It holds the window
+// (handed over from the estimator without a copy) and what it needs from the
+// settings, never a reference into the estimator.
+class WarmupFit {
+ public:
+  WarmupFit();  // empty
+  ~WarmupFit();
+  WarmupFit(WarmupFit&&) noexcept;
+  WarmupFit& operator=(WarmupFit&&) noexcept;
+
+  bool empty() const noexcept { return !context_; }
+  bool done() const noexcept { return done_; }
+  int samples() const noexcept { return n_; }  // in the window
+  // The fit and theta(t0), P(t0) from it (allocates). A fit that fails or gives
+  // an unusable model leaves the configured model, as the synchronous path does
+  // (status().warmup_fit_used says which). Only allocation failure is left:
+  // apply_warmup_fit() then restarts the warm-up.
+  void run() noexcept;
+
+ private:
+  friend class RecursiveEstimator;
+  struct Context;
+  std::shared_ptr<const Context> context_;
+  std::uint64_t generation_ = 0;
+  Eigen::VectorXd t_, u_, y_, r_;
+  int n_ = 0;
+  bool done_ = false, failed_ = false;
+  // The result: theta(t0) (physical units), its covariance per submodel when
+  // the fit was used, the fit's noise variance, the window's output variance.
+  AdditiveModel model_;
+  std::vector<Eigen::MatrixXd> covariance_;
+  double sigma2_ = 0.0, y_var_ = 0.0;
+  bool fit_used_ = false;
+};
+
 class RecursiveEstimator {
  public:
   // Throws std::invalid_argument on an inconsistent configuration.
@@ -144,6 +195,18 @@ class RecursiveEstimator {
 
   // One sample. No allocation, no exceptions after warm-up.
   unsigned step(const Sample& sample) noexcept;
+
+  // defer_warmup_fit (see the top of this file). take_warmup_fit(): the job for
+  // the pending fit, with the window moved into it (no allocation); throws
+  // std::logic_error when no fit is pending or it was taken already.
+  // apply_warmup_fit(): the estimate from the finished job, then the filters run
+  // over the window (allocates); the estimator is then warmed up and step()
+  // takes samples again. Throws std::logic_error for a job that is not this
+  // estimator's pending one or not run; on allocation failure the warm-up
+  // restarts with an empty window (and the exception propagates).
+  bool warmup_fit_pending() const noexcept;
+  WarmupFit take_warmup_fit();
+  void apply_warmup_fit(WarmupFit&& job);
 
   int submodels() const;
   // Current estimate of submodel i in physical units (allocates: call outside the hot path
@@ -167,7 +230,8 @@ class RecursiveEstimator {
   // usual. Throws
   // std::invalid_argument when the state does not fit this estimator's structure
   // (submodel count, n, m, rigid poles, matrix sizes) or holds non-finite or
-  // invalid numbers; the estimator is unchanged then.
+  // invalid numbers; the estimator is unchanged then. A pending warm-up fit is
+  // dropped (a job taken before can no longer be applied).
   void restore(const EstimatorState& state);
 
  private:

@@ -698,7 +698,7 @@ void parse_lcm(const Map& m, LcmSettings& lcm) {
 
 void parse_daemon(const Map& d, Config& config, const std::filesystem::path& dir, bool gap_factor_given) {
   d.allow({"loop_rate_hz", "publish_period", "heartbeat_period", "gap_time", "stale_time", "sample_ring",
-           "snapshot_ring", "checkpoint", "log_level"},
+           "snapshot_ring", "warmup_backlog", "realtime_priority", "checkpoint", "log_level"},
           "daemon");
   DaemonSettings& s = config.daemon;
   if (const auto v = d.get("loop_rate_hz")) {
@@ -720,6 +720,13 @@ void parse_daemon(const Map& d, Config& config, const std::filesystem::path& dir
   constexpr long long kRingMax = 1LL << 24;
   if (const auto v = d.get("sample_ring")) s.sample_ring = static_cast<int>(v->integer(16, kRingMax));
   if (const auto v = d.get("snapshot_ring")) s.snapshot_ring = static_cast<int>(v->integer(2, 65536));
+  if (const auto v = d.get("warmup_backlog")) {
+    s.warmup_backlog = v->positive();
+    if (s.warmup_backlog / config.sample_time > static_cast<double>(kRingMax))
+      v->fail("must hold at most " + std::to_string(kRingMax) + " samples (" +
+              format_number(std::floor(static_cast<double>(kRingMax) * config.sample_time)) + " s at this sample rate)");
+  }
+  if (const auto v = d.get("realtime_priority")) s.realtime_priority = static_cast<int>(v->integer(0, 99));
   if (const auto c = d.get("checkpoint")) {
     const Map m(*c);
     m.allow({"path", "period"}, "daemon.checkpoint");
@@ -1042,6 +1049,8 @@ void write_daemon(YamlWriter& w, const DaemonSettings& d) {
   w.number(1, "stale_time", d.stale_time);
   w.key(1, "sample_ring", std::to_string(d.sample_ring));
   w.key(1, "snapshot_ring", std::to_string(d.snapshot_ring));
+  w.number(1, "warmup_backlog", d.warmup_backlog);
+  if (d.realtime_priority > 0) w.key(1, "realtime_priority", std::to_string(d.realtime_priority));
   if (!d.checkpoint_path.empty()) {
     w.line(1, "checkpoint:");
     w.key(2, "path", quoted(d.checkpoint_path));  // absolute: valid wherever the YAML is written

@@ -18,12 +18,25 @@
 // - Gaps. The estimator detects them itself (estimator.gap_factor, which
 //   daemon.gap_time sets), so track and the daemon apply one rule; the daemon
 //   counts the StepFlags::kGap it reports.
-// - The warm-up fit (estimator.warmup) runs inside step() on the estimation
-//   thread and allocates; the input ring holds what arrives meanwhile.
+// - The warm-up fit (section 4.7; estimator.warmup) takes seconds on a long
+//   window and allocates, so it does not run on the estimation thread: the
+//   estimator is built with defer_warmup_fit, and when step() reports the
+//   window complete (kWarmupFitPending) the loop hands the WarmupFit job to the
+//   fitter thread, which runs it and applies it to the estimator. Meanwhile the
+//   estimator belongs to the fitter: the loop keeps ticking (watchdog, fault
+//   status from the status it cached) and moves the input from the ring into a
+//   backlog preallocated for daemon.warmup_backlog seconds of input (overflow:
+//   counted as dropped, logged). Once the fitter has applied the fit (atomic
+//   fit_phase, release/acquire), the loop works the backlog off through the
+//   usual input policy, within half of each tick, then continues live. The
+//   estimates equal those of `modalwatch track`, which runs the same fit inline.
 #include "modalwatch/daemon.hpp"
 
 #include <lcm/lcm.h>
+#include <pthread.h>
+#include <sched.h>
 #include <spdlog/spdlog.h>
+#include <sys/mman.h>
 #include <sys/prctl.h>
 #include <systemd/sd-daemon.h>
 #include <time.h>
@@ -31,6 +44,7 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <limits>
@@ -64,8 +78,10 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr int kMaxBatch = 8192;
 // The publisher checks its ring once per loop tick, shortly after the loop has
 // woken (the estimation thread cannot wake it without a system call), and at
-// least this often.
+// least this often; when the loop has not finished its tick by then, it looks
+// again every kPublisherPollNs until it has.
 constexpr std::int64_t kPublisherMaxSleepNs = 10'000'000;
+constexpr std::int64_t kPublisherPollNs = 20'000;
 constexpr double kRateLogPeriod = 10.0;  // s
 
 using Fault = modalwatch::fault_status_t;
@@ -88,6 +104,38 @@ timespec to_timespec(std::int64_t ns) {
   ts.tv_nsec = static_cast<long>(ns % 1'000'000'000);
   return ts;
 }
+
+// daemon.realtime_priority: SCHED_FIFO for the calling thread (one of those on
+// the latency path); the Daemon's constructor has checked that it is permitted.
+void make_realtime(int priority) noexcept {
+  if (priority <= 0) return;
+  sched_param p{};
+  p.sched_priority = priority;
+  pthread_setschedparam(pthread_self(), SCHED_FIFO, &p);
+}
+
+// The calling thread at SCHED_FIFO `priority` for the scope (nothing for 0), then
+// back to its policy: LCM (udpm) starts its receive thread, which is on the
+// input's latency path too, at the first subscription, and that thread
+// inherits the policy of the thread that subscribes.
+class ScopedRealtime {
+ public:
+  explicit ScopedRealtime(int priority) noexcept : on_(priority > 0) {
+    if (!on_) return;
+    pthread_getschedparam(pthread_self(), &policy_, &param_);
+    make_realtime(priority);
+  }
+  ~ScopedRealtime() {
+    if (on_) pthread_setschedparam(pthread_self(), policy_, &param_);
+  }
+  ScopedRealtime(const ScopedRealtime&) = delete;
+  ScopedRealtime& operator=(const ScopedRealtime&) = delete;
+
+ private:
+  bool on_;
+  int policy_ = SCHED_OTHER;
+  sched_param param_{};
+};
 
 void sleep_until(std::int64_t ns) noexcept {
   const timespec ts = to_timespec(ns);
@@ -132,6 +180,7 @@ static_assert(std::is_trivially_copyable_v<Snapshot>);
 struct AtomicCounters {
   std::atomic<std::uint64_t> samples_received{0}, samples_dropped{0}, decode_errors{0}, samples_nonfinite{0},
       samples_duplicate{0}, samples_out_of_order{0}, samples_processed{0}, gaps{0}, resets{0}, overruns{0},
+      samples_held{0}, held_dropped{0},
       snapshots{0}, snapshots_dropped{0}, estimates_published{0}, fault_status_published{0},
       heartbeats_published{0}, flag_changes{0}, checkpoints_written{0}, checkpoint_failures{0};
 
@@ -148,6 +197,8 @@ struct AtomicCounters {
     c.gaps = gaps.load(r);
     c.resets = resets.load(r);
     c.overruns = overruns.load(r);
+    c.samples_held = samples_held.load(r);
+    c.held_dropped = held_dropped.load(r);
     c.snapshots = snapshots.load(r);
     c.snapshots_dropped = snapshots_dropped.load(r);
     c.estimates_published = estimates_published.load(r);
@@ -196,6 +247,7 @@ struct Start {
 
 Start plan_start(const Config& config, std::uint64_t fingerprint) {
   Start st{config.model, config.estimator, false, std::nullopt};
+  st.settings.defer_warmup_fit = true;  // the fitter thread runs it (see the top of this file)
   const std::string& path = config.daemon.checkpoint_path;
   if (path.empty()) return st;
   if (!std::filesystem::exists(path)) {
@@ -250,6 +302,7 @@ struct Daemon::Impl {
   lcm_subscription_t* sub_batches = nullptr;
   std::vector<SampleRecord> decode_buffer;
   bool closed_loop = false;  // a copy: reload() rewrites `config` while this thread runs
+  int realtime_priority = 0;  // daemon.realtime_priority, for every thread (not reloaded)
   std::atomic<int> last_decode_error{0};
 
   // ---- input ring: subscriber -> estimation loop
@@ -259,6 +312,9 @@ struct Daemon::Impl {
   std::thread estimation;
   std::atomic<bool> stop_estimation{false};
   std::int64_t tick_origin_ns = 0, tick_period_ns = 0;  // set before the threads start
+  // The grid index of the tick the loop sleeps until: every tick before it is
+  // done (its snapshots pushed). Read by the publisher; max while no loop runs.
+  std::atomic<std::int64_t> loop_next_tick{std::numeric_limits<std::int64_t>::max()};
   RecursiveEstimator estimator;
   std::optional<FaultDetector> detector;
   std::vector<ModalParameters> det_value, det_std;
@@ -276,6 +332,20 @@ struct Daemon::Impl {
   std::uint64_t dropped_at_snapshot = 0, decode_errors_at_snapshot = 0;
   bool probe_fired = false;
   Snapshot scratch;  // built here, copied into the ring
+  // While the fitter owns the estimator (fit_in_flight), the loop reports this
+  // status and holds the input in `backlog`, a FIFO preallocated at start-up.
+  bool fit_in_flight = false;
+  EstimatorStatus status_before_fit;
+  std::vector<SampleRecord> backlog;
+  std::size_t backlog_head = 0, backlog_size = 0;
+
+  // ---- the warm-up fit: estimation loop -> fitter thread and back
+  enum FitPhase : int { fit_idle = 0, fit_requested = 1, fit_applied = 2 };
+  std::atomic<int> fit_phase{fit_idle};  // releases fit_job and the estimator to the other side
+  WarmupFit fit_job;
+  std::thread fitter;
+  std::atomic<bool> stop_fitter{false};
+  std::atomic<std::int64_t> fit_duration_ns{0};  // for the log
 
   // ---- output ring: estimation loop -> publisher
   SpscRing<Snapshot> snapshots;
@@ -288,6 +358,7 @@ struct Daemon::Impl {
   DaemonCounters rate_base;
   std::int64_t rate_base_ns = 0;
   bool logged_warmup_over = false, logged_stale = false;
+  std::uint64_t logged_held_dropped = 0;
   std::array<bool, kMaxModes> logged_baseline{};
 
   // ---- shared
@@ -306,7 +377,10 @@ struct Daemon::Impl {
   void estimation_main() noexcept;
   void drain(std::int64_t now) noexcept;
   void process(const SampleRecord& s) noexcept;
+  void hold(const SampleRecord& s) noexcept;
+  void catch_up(std::int64_t deadline_ns) noexcept;
   void push_snapshot(int kind, std::int64_t now, bool update_detector) noexcept;
+  void fitter_main();
 
   // publisher
   void publisher_main();
@@ -367,12 +441,18 @@ Daemon::Impl::Impl(const Config& cfg, lcm_t* shared, LoopProbe* p)
     spdlog::info("restored checkpoint {}: last sample utime {} us, seq {}; no warm-up", config.daemon.checkpoint_path,
                  last_utime, last_seq);
   }
+  if (estimator.status().warming_up) {
+    // Touched here (value-initialised), so that holding input never page-faults on the loop.
+    const double held = std::ceil(config.daemon.warmup_backlog / config.sample_time);
+    backlog.resize(static_cast<std::size_t>(std::max(1.0, held)));
+  }
   detector.emplace(detector_settings(config, restored_baselines));
   det_value.resize(static_cast<std::size_t>(K));
   det_std.resize(static_cast<std::size_t>(K));
   det_changes.reserve(static_cast<std::size_t>(3 * K));
   decode_buffer.resize(kMaxBatch);
   closed_loop = config.closed_loop;
+  realtime_priority = config.daemon.realtime_priority;
   encode_buffer.reserve(4096);
   if (shared) {
     lcm = shared;
@@ -383,6 +463,25 @@ Daemon::Impl::Impl(const Config& cfg, lcm_t* shared, LoopProbe* p)
                                           "' (a udpm:// URL needs a multicast route, e.g. "
                                           "'ip route add 224.0.0.0/4 dev lo')");
     owns_lcm = true;
+  }
+  if (config.daemon.realtime_priority > 0) {
+    // Here, where it can fail loudly, rather than in the threads.
+    const std::string key = "key 'daemon.realtime_priority': ";
+    if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
+      throw InputError(config.source, key + "mlockall failed (" + std::strerror(errno) +
+                                          "); under systemd set LimitMEMLOCK=infinity");
+    int policy = 0;
+    sched_param old{};
+    pthread_getschedparam(pthread_self(), &policy, &old);
+    sched_param fifo{};
+    fifo.sched_priority = config.daemon.realtime_priority;
+    if (const int e = pthread_setschedparam(pthread_self(), SCHED_FIFO, &fifo); e != 0)
+      throw InputError(config.source, key + "SCHED_FIFO at priority " +
+                                          std::to_string(config.daemon.realtime_priority) + " not permitted (" +
+                                          std::strerror(e) + "); under systemd set LimitRTPRIO=" +
+                                          std::to_string(config.daemon.realtime_priority) +
+                                          " (README.md, \"Running under systemd\"), or grant CAP_SYS_NICE");
+    pthread_setschedparam(pthread_self(), policy, &old);  // the control thread stays as it was
   }
   start_ns = mono_ns();
 }
@@ -421,6 +520,7 @@ void Daemon::Impl::on_packet(const lcm_recv_buf_t* rbuf, bool batch) noexcept {
 }
 
 void Daemon::Impl::subscriber_main() {
+  make_realtime(realtime_priority);
   while (!stop_subscriber.load(std::memory_order_acquire)) {
     if (lcm_handle_timeout(lcm, 20) < 0) {
       spdlog::error("lcm_handle failed; retrying in 100 ms");
@@ -435,16 +535,25 @@ void Daemon::Impl::estimation_main() noexcept {
   // Linux delays a sleeping thread's wake-up by up to its timer slack (50 us by
   // default) to batch timers: too much for a 0.1..1 ms tick. Set at start-up.
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
+  make_realtime(realtime_priority);
   const std::int64_t period_ns = tick_period_ns;
   std::int64_t tick = 0;  // ticks at tick_origin_ns + k period_ns, a grid the publisher follows too
   for (;;) {
     const bool stopping = stop_estimation.load(std::memory_order_acquire);
-    if (probe && !probe_fired && !estimator.status().warming_up &&
+    // Final stop (not a pause for a checkpoint or reload): a running warm-up fit
+    // is waited for, ticking as usual, and the backlog is worked off in full.
+    const bool final_stop = stopping && state.load(std::memory_order_relaxed) == static_cast<int>(RunState::stopping);
+    if (fit_in_flight && fit_phase.load(std::memory_order_acquire) == fit_applied) {
+      fit_in_flight = false;  // the estimator is ours again
+      fit_phase.store(fit_idle, std::memory_order_relaxed);
+    }
+    if (probe && !probe_fired && !fit_in_flight && backlog_size == 0 && !estimator.status().warming_up &&
         counters.snapshots.load(std::memory_order_relaxed) > 0) {
       probe->warmed_up();
       probe_fired = true;
     }
     std::int64_t now = mono_ns();
+    catch_up(final_stop ? std::numeric_limits<std::int64_t>::max() : now + period_ns / 2);
     drain(now);
     // Without input, the fault status still goes out (with the stale flag).
     if (now - last_snapshot_ns >= static_cast<std::int64_t>(config.daemon.publish_period * 1e9))
@@ -453,8 +562,9 @@ void Daemon::Impl::estimation_main() noexcept {
       sd_notify(0, "WATCHDOG=1");
       last_watchdog_ns = now;
     }
-    if (stopping) {
+    if (stopping && !(final_stop && fit_in_flight)) {
       drain(mono_ns());
+      if (final_stop) catch_up(std::numeric_limits<std::int64_t>::max());
       push_snapshot(Snapshot::final_state, mono_ns(), false);
       break;
     }
@@ -464,8 +574,10 @@ void Daemon::Impl::estimation_main() noexcept {
       bump(counters.overruns);
       tick = (now - tick_origin_ns) / period_ns + 1;  // the next tick on the grid
     }
+    loop_next_tick.store(tick, std::memory_order_release);
     sleep_until(tick_origin_ns + tick * period_ns);
   }
+  loop_next_tick.store(std::numeric_limits<std::int64_t>::max(), std::memory_order_release);
   if (probe) probe->exiting();
 }
 
@@ -475,11 +587,35 @@ void Daemon::Impl::drain(std::int64_t now) noexcept {
   while (n < limit) {
     const SampleRecord* s = samples.front();
     if (!s) break;
-    process(*s);
+    if (fit_in_flight || backlog_size > 0) hold(*s);  // behind the backlog, in order
+    else process(*s);
     samples.pop();
     ++n;
   }
   if (n > 0) last_sample_ns = now;
+}
+
+// A sample that arrives while the warm-up fit runs or the backlog is worked off.
+void Daemon::Impl::hold(const SampleRecord& s) noexcept {
+  if (backlog_size == backlog.size()) {  // daemon.warmup_backlog too small for this fit
+    bump(counters.held_dropped);
+    bump(counters.samples_dropped);
+    return;
+  }
+  backlog[(backlog_head + backlog_size) % backlog.size()] = s;
+  ++backlog_size;
+  bump(counters.samples_held);
+}
+
+// The held samples, oldest first, until `deadline_ns` (checked per sample: a
+// step is a few microseconds), so that a catch-up does not cost the loop its tick.
+void Daemon::Impl::catch_up(std::int64_t deadline_ns) noexcept {
+  while (!fit_in_flight && backlog_size > 0) {
+    process(backlog[backlog_head]);
+    backlog_head = (backlog_head + 1) % backlog.size();
+    --backlog_size;
+    if (mono_ns() >= deadline_ns) break;
+  }
 }
 
 void Daemon::Impl::process(const SampleRecord& s) noexcept {
@@ -506,6 +642,14 @@ void Daemon::Impl::process(const SampleRecord& s) noexcept {
   // here would leave a hole of 2 T that resets the prefilters as a gap.
   const unsigned flags = estimator.step(Sample{t, s.u, s.y, s.r});
   bump(finite(s) ? counters.samples_processed : counters.samples_nonfinite);
+  if (flags & kWarmupFitPending) {
+    // The window is complete: the fitter takes the job and, until it has applied
+    // it, the estimator (take_warmup_fit moves the window: no allocation here).
+    status_before_fit = estimator.status();
+    fit_job = estimator.take_warmup_fit();
+    fit_in_flight = true;
+    fit_phase.store(fit_requested, std::memory_order_release);
+  }
   if (flags & kGap) {
     bump(counters.gaps);
     pending_health |= Fault::HEALTH_INPUT_GAP;
@@ -524,7 +668,9 @@ void Daemon::Impl::process(const SampleRecord& s) noexcept {
 void Daemon::Impl::push_snapshot(int kind, std::int64_t now, bool update_detector) noexcept {
   Snapshot& snap = scratch;
   const int K = static_cast<int>(det_value.size());
-  const EstimatorStatus& st = estimator.status();
+  // During the warm-up fit the estimator is the fitter's: the cached status and
+  // the last values stand in (flags are suppressed while warming up anyway).
+  const EstimatorStatus& st = fit_in_flight ? status_before_fit : estimator.status();
   snap.kind = kind;
   snap.n_modes = K;
   snap.utime = have_ref_time ? last_utime : 0;
@@ -533,14 +679,14 @@ void Daemon::Impl::push_snapshot(int kind, std::int64_t now, bool update_detecto
   snap.warming_up = st.warming_up;
   snap.low_excitation = st.low_excitation;
   warming_up.store(st.warming_up, std::memory_order_relaxed);
-  for (int i = 0; i < K; ++i) {
+  for (int i = 0; i < K && !fit_in_flight; ++i) {
     const ModeEstimate m = estimator.mode(i);
     det_value[static_cast<std::size_t>(i)] = m.value;
     det_std[static_cast<std::size_t>(i)] = m.std;
     snap.value[static_cast<std::size_t>(i)] = m.value;
     snap.std_dev[static_cast<std::size_t>(i)] = m.std;
   }
-  snap.residual_rms = estimator.residual_rms();
+  if (!fit_in_flight) snap.residual_rms = estimator.residual_rms();
   const bool valid = !st.warming_up && !st.low_excitation;
   snap.n_changes = 0;
   if (update_detector) {
@@ -595,10 +741,38 @@ void Daemon::Impl::push_snapshot(int kind, std::int64_t now, bool update_detecto
   last_snapshot_ns = now;
 }
 
+// ---------------------------------------------------------------- fitter
+
+// The warm-up fit off the estimation thread (see the top of this file). Polls:
+// waking it would cost the estimation loop a system call; 2 ms is nothing
+// against a fit that takes seconds.
+void Daemon::Impl::fitter_main() {
+  while (!stop_fitter.load(std::memory_order_acquire)) {
+    if (fit_phase.load(std::memory_order_acquire) != fit_requested) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      continue;
+    }
+    const std::int64_t t0 = mono_ns();
+    spdlog::info("warm-up window complete ({} samples): fitting on the fitter thread; input is held meanwhile",
+                 fit_job.samples());
+    if (probe) probe->warmup_fit_running();
+    fit_job.run();
+    try {
+      estimator.apply_warmup_fit(std::move(fit_job));
+    } catch (const std::exception& e) {
+      spdlog::error("the warm-up fit could not be applied ({}): the warm-up starts again", e.what());
+    }
+    fit_job = WarmupFit();  // the fit's buffers are freed here, not on the loop
+    fit_duration_ns.store(mono_ns() - t0, std::memory_order_relaxed);
+    fit_phase.store(fit_applied, std::memory_order_release);
+  }
+}
+
 // ---------------------------------------------------------------- publisher
 
 void Daemon::Impl::publisher_main() {
   prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);  // as in estimation_main
+  make_realtime(realtime_priority);
   for (;;) {
     const bool stopping = stop_publisher.load(std::memory_order_acquire);
     while (const Snapshot* s = snapshots.front()) {
@@ -621,6 +795,15 @@ void Daemon::Impl::publisher_main() {
     std::int64_t wake = tick_origin_ns + ((t - after - tick_origin_ns) / tick_period_ns + 1) * tick_period_ns + after;
     wake = std::min(wake, t + kPublisherMaxSleepNs);
     sleep_until(wake);
+    // A tick that takes longer than `after` (many samples at once, a detector
+    // update, a preempted loop) would otherwise leave its snapshot for a whole
+    // tick: look again in short steps until the loop has finished the tick.
+    const std::int64_t k = (mono_ns() - tick_origin_ns) / tick_period_ns;
+    const std::int64_t give_up = tick_origin_ns + (k + 1) * tick_period_ns;
+    for (std::int64_t now2 = mono_ns(); loop_next_tick.load(std::memory_order_acquire) <= k && now2 < give_up &&
+                                        !stop_publisher.load(std::memory_order_relaxed);
+         now2 = mono_ns())
+      sleep_until(std::min(now2 + std::min(after, kPublisherPollNs), give_up));
   }
 }
 
@@ -728,7 +911,15 @@ void Daemon::Impl::log_snapshot(const Snapshot& s) {
     if (plan.restored)
       spdlog::info("estimating from the restored checkpoint (no warm-up)");
     else
-      spdlog::info("warm-up over after {} samples; estimating", s.counters.samples_processed);
+      spdlog::info("warm-up over after {} samples; estimating (the fit took {:.2f} s; {} samples held meanwhile)",
+                   s.counters.samples_processed,
+                   static_cast<double>(fit_duration_ns.load(std::memory_order_relaxed)) * 1e-9,
+                   s.counters.samples_held);
+  }
+  if (s.counters.held_dropped != logged_held_dropped) {
+    logged_held_dropped = s.counters.held_dropped;
+    spdlog::warn("{} samples dropped while the warm-up fit ran: daemon.warmup_backlog ({} s) is too short for it",
+                 s.counters.held_dropped, config.daemon.warmup_backlog);
   }
   for (int i = 0; i < s.n_modes; ++i) {
     const auto k = static_cast<std::size_t>(i);
@@ -770,7 +961,10 @@ void Daemon::Impl::log_rates(std::int64_t now) {
 // The state to resume from. The estimation thread must be stopped: its
 // variables and the estimator are read here (and, with the io branch's
 // EstimatorState, state() allocates, which the estimation thread must not).
+// While a warm-up fit is out (only the stopped loop could have started one)
+// the estimator is the fitter's, and there is nothing worth keeping yet.
 std::optional<Checkpoint> Daemon::Impl::capture() {
+  if (fit_phase.load(std::memory_order_acquire) != fit_idle) return std::nullopt;
   if (!have_seq || estimator.status().warming_up) return std::nullopt;
   Checkpoint ck;
   ck.config_fingerprint = fingerprint;
@@ -845,8 +1039,11 @@ void Daemon::Impl::start_threads(bool with_subscriber) {
   start_estimation();
   if (with_subscriber) {
     stop_subscriber.store(false);
-    sub_samples = lcm_subscribe(lcm, config.lcm.samples_channel.c_str(), &Impl::on_sample_packet, this);
-    sub_batches = lcm_subscribe(lcm, config.lcm.batches_channel.c_str(), &Impl::on_batch_packet, this);
+    {
+      const ScopedRealtime rt(realtime_priority);  // for LCM's receive thread, started here
+      sub_samples = lcm_subscribe(lcm, config.lcm.samples_channel.c_str(), &Impl::on_sample_packet, this);
+      sub_batches = lcm_subscribe(lcm, config.lcm.batches_channel.c_str(), &Impl::on_batch_packet, this);
+    }
     if (!sub_samples || !sub_batches) throw std::runtime_error("lcm_subscribe failed");
     // LCM's default of 30 queued packets per subscription drops bursts before we see them.
     lcm_subscription_set_queue_capacity(sub_samples, 100000);
@@ -905,10 +1102,19 @@ void Daemon::start() {
       c.daemon.checkpoint_path.empty() ? std::string("off")
                                        : c.daemon.checkpoint_path + " every " +
                                              std::to_string(c.daemon.checkpoint_period) + " s",
-      m.plan.restored ? "no warm-up" : "warm-up " + std::to_string(c.estimator.warmup_samples) + " samples",
-      m.watchdog_usec ? ", systemd watchdog " + std::to_string(m.watchdog_usec / 1000) + " ms" : std::string());
+      m.plan.restored ? "no warm-up"
+                      : "warm-up " + std::to_string(c.estimator.warmup_samples) + " samples (fit off the loop, " +
+                            std::to_string(m.backlog.size()) + " samples held at most)",
+      (m.watchdog_usec ? ", systemd watchdog " + std::to_string(m.watchdog_usec / 1000) + " ms" : std::string()) +
+          (c.daemon.realtime_priority > 0 ? ", SCHED_FIFO " + std::to_string(c.daemon.realtime_priority) + " + mlockall"
+                                          : std::string()));
   {
     std::lock_guard<std::mutex> lock(m.control);
+    // Before the loop runs: after that only it and the fitter touch the estimator.
+    if (m.estimator.status().warming_up && !m.fitter.joinable()) {
+      m.stop_fitter.store(false);
+      m.fitter = std::thread([&m] { m.fitter_main(); });
+    }
     m.start_threads(true);
   }
   {
@@ -930,7 +1136,11 @@ void Daemon::stop() {
   m.wake_checkpointer.notify_all();
   if (m.checkpointer.joinable()) m.checkpointer.join();
   std::lock_guard<std::mutex> lock(m.control);
-  m.stop_threads(true);
+  m.stop_threads(true);  // the loop waits for a running warm-up fit and works off the backlog
+  if (m.fitter.joinable()) {
+    m.stop_fitter.store(true, std::memory_order_release);
+    m.fitter.join();
+  }
   m.running = false;
   const DaemonCounters c = m.counters.load();
   spdlog::info("stopped: {} samples received, {} processed, {} dropped, {} decode errors, {} flag changes",
@@ -957,8 +1167,10 @@ std::string Daemon::reload(const Config& next) {
       next.lcm.fault_status_channel != m.config.lcm.fault_status_channel ||
       next.lcm.heartbeat_channel != m.config.lcm.heartbeat_channel)
     kept.emplace_back("LCM URL/channels");
-  if (next.daemon.sample_ring != m.config.daemon.sample_ring || next.daemon.snapshot_ring != m.config.daemon.snapshot_ring)
+  if (next.daemon.sample_ring != m.config.daemon.sample_ring || next.daemon.snapshot_ring != m.config.daemon.snapshot_ring ||
+      next.daemon.warmup_backlog != m.config.daemon.warmup_backlog)
     kept.emplace_back("ring sizes");
+  if (next.daemon.realtime_priority != m.config.daemon.realtime_priority) kept.emplace_back("realtime priority");
 
   std::lock_guard<std::mutex> control_lock(m.control);
   m.state.store(static_cast<int>(RunState::reloading));

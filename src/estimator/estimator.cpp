@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <memory>
+#include <new>
 #include <numbers>
 #include <stdexcept>
 #include <string>
@@ -124,17 +126,31 @@ const std::vector<const char*>& reset_reasons() {
   return reasons;
 }
 
+struct WarmupFit::Context {
+  AdditiveModel initial;
+  EstimatorSettings cfg;
+};
+
+WarmupFit::WarmupFit() = default;
+WarmupFit::~WarmupFit() = default;
+WarmupFit::WarmupFit(WarmupFit&&) noexcept = default;
+WarmupFit& WarmupFit::operator=(WarmupFit&&) noexcept = default;
+
 struct RecursiveEstimator::Impl {
   EstimatorSettings cfg;
   AdditiveModel initial;
+  std::shared_ptr<const WarmupFit::Context> fit_context;  // immutable, shared with the jobs
   std::vector<Block> blocks;
   std::vector<Prefilter> snapshot;  // filters at t_{k-1}, for refinements
   DiscreteTransferFunction controller;
   EstimatorStatus status;
 
-  // Warm-up window, preallocated.
+  // Warm-up window, preallocated; a WarmupFit job holds it while it runs.
   Eigen::VectorXd wt, wu, wy, wr;
   int buffered = 0;
+  bool fit_pending = false;      // window full, its fit not applied yet (defer_warmup_fit)
+  bool fit_taken = false;        // ... and the window is out in a job
+  std::uint64_t fit_generation = 0;  // tells a stale job (restore() since) from the pending one
 
   double t_prev = 0.0;
   bool have_prev = false;
@@ -164,7 +180,7 @@ struct RecursiveEstimator::Impl {
   void restore_good(const char* reason);
   unsigned advance(const Sample& s, bool allow_update);
   bool update_block(Block& b, double y_f);
-  void finish_warmup();
+  void finish_warmup(const WarmupFit& fit);
 };
 
 void RecursiveEstimator::Impl::rediscretise(Block& b) {
@@ -533,17 +549,25 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   return flags;
 }
 
-void RecursiveEstimator::Impl::finish_warmup() {
-  const int N = buffered;
+// The offline part of the initialisation (section 4.7): the fit on the window
+// and theta(t0), P(t0) from it. No estimator state is touched here, so that it
+// can run on another thread (WarmupFit).
+void WarmupFit::run() noexcept {
+  if (!context_ || done_) return;
+  const AdditiveModel& initial = context_->initial;
+  const EstimatorSettings& cfg = context_->cfg;
+  try {
+  const int N = n_;
   Record window;
-  window.t = wt.head(N);
-  window.u = wu.head(N);
-  window.y = wy.head(N);
-  if (cfg.closed_loop) window.r = wr.head(N);
+  window.t = t_.head(N);
+  window.u = u_.head(N);
+  window.y = y_.head(N);
+  if (cfg.closed_loop) window.r = r_.head(N);
   const double y_var = (window.y.array() - window.y.mean()).square().mean();
   AdditiveModel model = initial;
   std::vector<Eigen::MatrixXd> cov;
   double sigma2 = 0.0;
+  bool fit_used = false;
   if (cfg.fit_on_warmup) {
     try {
       SrivcOptions o;
@@ -582,13 +606,30 @@ void RecursiveEstimator::Impl::finish_warmup() {
           model.submodels[i] = s;
           cov.push_back(0.5 * (C0 + C0.transpose()));
         }
-        status.warmup_fit_used = true;
+        fit_used = true;
       }
     } catch (const std::exception&) {
       // Fall back to the configured model: reported through warmup_fit_used.
     }
   }
-  build(model, cov.empty() ? nullptr : &cov, sigma2, y_var);
+  model_ = std::move(model);
+  covariance_ = std::move(cov);
+  sigma2_ = sigma2;
+  y_var_ = y_var;
+  fit_used_ = fit_used;
+  } catch (...) {
+    failed_ = true;  // allocation: apply_warmup_fit() restarts the warm-up
+  }
+  done_ = true;
+}
+
+// The estimator's part: build from the fit's result, then run the filters over
+// the window without updating (section 4.7).
+void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
+  const int N = buffered;
+  const double sigma2 = fit.sigma2_;
+  if (fit.fit_used_) status.warmup_fit_used = true;
+  build(fit.model_, fit.covariance_.empty() ? nullptr : &fit.covariance_, sigma2, fit.y_var_);
   if (sigma2 > 0.0) {
     e_var = e_short = e_var_good = sigma2;
     e_count = 1000;
@@ -642,6 +683,7 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
   m.pow_ref_alpha = 1.0 - 1.0 / std::max(20.0 * pw, 2.0);
 
   if (settings.warmup_samples > 0) {
+    m.fit_context = std::make_shared<const WarmupFit::Context>(WarmupFit::Context{initial, m.cfg});
     m.wt.resize(settings.warmup_samples);
     m.wu.resize(settings.warmup_samples);
     m.wy.resize(settings.warmup_samples);
@@ -659,6 +701,7 @@ RecursiveEstimator& RecursiveEstimator::operator=(RecursiveEstimator&&) noexcept
 
 unsigned RecursiveEstimator::step(const Sample& s) noexcept {
   Impl& m = *impl_;
+  if (m.fit_pending) return kWarmupFitPending;  // the caller holds the sample until apply_warmup_fit()
   if (!std::isfinite(s.t)) {
     ++m.status.rejected_nonfinite;
     return kRejectedNonFinite;
@@ -707,16 +750,60 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
     m.wy(m.buffered) = s.y;
     m.wr(m.buffered) = s.r;
     if (++m.buffered == m.cfg.warmup_samples) {
+      m.fit_pending = true;
+      if (m.cfg.defer_warmup_fit) return flags | kWarmingUp | kWarmupFitPending;
       try {
-        m.finish_warmup();
+        WarmupFit job = take_warmup_fit();
+        job.run();
+        apply_warmup_fit(std::move(job));
       } catch (...) {
-        // Allocation failure while building: stay in warm-up and try again later.
+        // Allocation failure: apply_warmup_fit() restarted the warm-up (or take failed before).
+        m.fit_pending = m.fit_taken = false;
         m.buffered = 0;
       }
     }
     return flags | kWarmingUp;
   }
   return flags | m.advance(sample, !bad_values);
+}
+
+bool RecursiveEstimator::warmup_fit_pending() const noexcept { return impl_->fit_pending; }
+
+WarmupFit RecursiveEstimator::take_warmup_fit() {
+  Impl& m = *impl_;
+  if (!m.fit_pending || m.fit_taken)
+    throw std::logic_error("RecursiveEstimator::take_warmup_fit: no warm-up fit pending");
+  WarmupFit job;
+  job.context_ = m.fit_context;
+  job.generation_ = m.fit_generation;
+  job.n_ = m.buffered;
+  job.t_.swap(m.wt);  // Eigen swaps the buffers: no copy, no allocation
+  job.u_.swap(m.wu);
+  job.y_.swap(m.wy);
+  job.r_.swap(m.wr);
+  m.fit_taken = true;
+  return job;
+}
+
+void RecursiveEstimator::apply_warmup_fit(WarmupFit&& job) {
+  Impl& m = *impl_;
+  if (!m.fit_pending || !m.fit_taken || job.empty() || job.generation_ != m.fit_generation)
+    throw std::logic_error("RecursiveEstimator::apply_warmup_fit: not this estimator's pending warm-up fit");
+  if (!job.done_) throw std::logic_error("RecursiveEstimator::apply_warmup_fit: the job has not run");
+  m.wt.swap(job.t_);
+  m.wu.swap(job.u_);
+  m.wy.swap(job.y_);
+  m.wr.swap(job.r_);
+  m.fit_pending = m.fit_taken = false;
+  try {
+    if (job.failed_) throw std::bad_alloc();
+    m.finish_warmup(job);
+  } catch (...) {
+    m.blocks.clear();
+    m.status.warming_up = true;
+    m.buffered = 0;  // start the warm-up again
+    throw;
+  }
 }
 
 int RecursiveEstimator::submodels() const { return static_cast<int>(impl_->initial.submodels.size()); }
@@ -858,6 +945,14 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
   // Built in a copy and moved in at the end: a throw below (derived numbers out
   // of range, allocation) leaves this estimator as it was.
   Impl next = m;
+  if (next.fit_taken) {  // the window is out in a job: a new one
+    next.wt.resize(next.cfg.warmup_samples);
+    next.wu.resize(next.cfg.warmup_samples);
+    next.wy.resize(next.cfg.warmup_samples);
+    next.wr.resize(next.cfg.warmup_samples);
+  }
+  next.fit_pending = next.fit_taken = false;
+  ++next.fit_generation;
   if (st.warmed_up) {
     next.build(st.model, nullptr, 0.0, 1.0);  // structure, prefilters at rest; theta, P below
     for (std::size_t i = 0; i < K; ++i) {

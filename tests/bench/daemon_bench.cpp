@@ -4,14 +4,20 @@
 //   latency  --config C --data D.csv --rate R --seconds S
 //            one sample_t per packet at R Hz (cycling the record); sample k has
 //            utime = start + k / R on the wall clock (CLOCK_REALTIME) and is sent
-//            at that time, so a late sender counts as latency too; listens to the
-//            estimates and prints p50/p99/max of (arrival time - utime of the
-//            newest sample included) and the daemon's drop counters.
+//            at that time; listens to the estimates and prints p50/p99/max of
+//            (delivery time - utime of the newest sample included), split into
+//            the sender's lateness (its send time - utime) and the rest, and the
+//            daemon's drop counters. The delivery time is LCM's receive stamp
+//            (the kernel's SO_TIMESTAMP of the datagram, else LCM's receive
+//            thread's clock), not when this process got round to running its
+//            handler thread (printed apart: it is this bench's own scheduling).
+//            --trace F writes one line per estimate.
 //   rate     --config C --data D.csv --rate R --seconds S [--batch N]
 //            batches at R samples/s of wall time, the samples on the config's
 //            sample grid (replay R / sample_rate_hz times faster than real
 //            time); prints sent, received, dropped and processed.
 #include <lcm/lcm.h>
+#include <sys/prctl.h>
 #include <time.h>
 
 #include <algorithm>
@@ -46,7 +52,12 @@ std::int64_t realtime_us() {
 
 struct Listener {
   std::mutex mutex;
-  std::vector<std::pair<std::int64_t, double>> latency_us;  // (utime, latency)
+  struct Arrival {
+    std::int64_t utime;     // of the estimate: its newest sample
+    std::int64_t stamp;     // LCM's receive stamp (see the top of the file)
+    std::int64_t handled;   // when this handler ran
+  };
+  std::vector<Arrival> arrivals;
   modalwatch::fault_status_t last_status;
   bool have_status = false;
   long long estimates = 0;
@@ -59,7 +70,7 @@ void on_estimates(const lcm_recv_buf_t* rbuf, const char*, void* user) {
   modalwatch::estimates_t msg;
   if (msg.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) < 0) return;
   std::lock_guard<std::mutex> lock(l.mutex);
-  l.latency_us.emplace_back(msg.utime, static_cast<double>(now - msg.utime));
+  l.arrivals.push_back({msg.utime, rbuf->recv_utime, now});
   ++l.estimates;
   l.processed = msg.samples_processed;
 }
@@ -80,10 +91,18 @@ double percentile(std::vector<double> v, double p) {
   return v[i];
 }
 
-// Sleeps until `seconds` after t0.
-void sleep_until(std::chrono::steady_clock::time_point t0, double seconds) {
-  std::this_thread::sleep_until(t0 + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                         std::chrono::duration<double>(seconds)));
+// Sleeps until the wall-clock time `us` (absolute, CLOCK_REALTIME: the clock utime is on).
+void sleep_until_us(std::int64_t us) {
+  timespec ts{};
+  ts.tv_sec = static_cast<time_t>(us / 1'000'000);
+  ts.tv_nsec = static_cast<long>(us % 1'000'000) * 1000;
+  while (clock_nanosleep(CLOCK_REALTIME, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+void print_stats(const char* what, std::vector<double> v) {
+  std::printf("    %-44s p50 %6.0f  p99 %6.0f  max %6.0f\n", what, percentile(v, 0.5), percentile(v, 0.99),
+              percentile(v, 1.0));
 }
 
 }  // namespace
@@ -92,6 +111,7 @@ int main(int argc, char** argv) {
   CLI::App app{"modalwatch_daemon_bench: benchmark driver for modalwatchd"};
   app.require_subcommand(1);
   std::string config_path, data_path;
+  std::string trace_path;
   double rate = 4096.0, seconds = 10.0, skip = 6.0;
   int batch = 64;
   for (const char* name : {"latency", "rate"}) {
@@ -102,6 +122,7 @@ int main(int argc, char** argv) {
     sub->add_option("--seconds", seconds);
     sub->add_option("--batch", batch)->check(CLI::Range(1, 8192));
     sub->add_option("--skip", skip, "latency: ignore estimates of the first SKIP s (warm-up fit)");
+    sub->add_option("--trace", trace_path, "latency: one CSV line per estimate (utime, send time, arrival; us)");
   }
   CLI11_PARSE(app, argc, argv);
   const std::string mode = app.get_subcommands().front()->get_name();
@@ -122,17 +143,20 @@ int main(int argc, char** argv) {
     });
     const Eigen::Index n = rec.size();
     const auto t0 = std::chrono::steady_clock::now();
+    // Linux delays a sleeper's wake-up by up to its timer slack (50 us by
+    // default): a sender late by that much would count as the daemon's latency.
+    prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
     {
       const long long total = std::llround(rate * seconds);
       const double period = 1.0 / rate;                                         // wall clock
       const double grid = mode == "latency" ? period : config.sample_time;     // utime
       const int per_packet = mode == "latency" ? 1 : batch;
       const std::int64_t start_us = realtime_us() + 10'000;
-      const auto t_start = t0 + std::chrono::milliseconds(10);
       std::vector<SampleRecord> buf(static_cast<std::size_t>(per_packet));
+      std::vector<std::int64_t> sent_us(static_cast<std::size_t>(total), 0);  // wall clock after lcm_publish
       for (long long k = 0; k < total; k += per_packet) {
         const int m = static_cast<int>(std::min<long long>(per_packet, total - k));
-        sleep_until(t_start, static_cast<double>(k + m - 1) * period);
+        sleep_until_us(start_us + std::llround(static_cast<double>(k + m - 1) * period * 1e6));
         for (int i = 0; i < m; ++i) {
           const Eigen::Index j = (k + i) % n;
           auto& s = buf[static_cast<std::size_t>(i)];
@@ -148,6 +172,7 @@ int main(int argc, char** argv) {
           lcm_publish(lcm, config.lcm.samples_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
         else
           lcm_publish(lcm, config.lcm.batches_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
+        sent_us[static_cast<std::size_t>(k + m - 1)] = realtime_us();
       }
       const double sent_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       // The daemon works through its backlog (sample time: a publish period of
@@ -169,13 +194,35 @@ int main(int argc, char** argv) {
         std::printf("  daemon: no fault status received\n");
       }
       if (mode == "latency") {
-        // Without the warm-up window and its fit, which runs on the estimation thread.
-        std::vector<double> lat;
-        for (const auto& [utime, l] : listener.latency_us)
-          if (utime >= start_us + std::llround(skip * 1e6)) lat.push_back(l);
-        std::printf("  latency sample utime -> estimate received (us), after the first %.0f s: p50 %.0f, p99 %.0f, max %.0f "
-                    "over %zu estimates\n",
-                    skip, percentile(lat, 0.5), percentile(lat, 0.99), percentile(lat, 1.0), lat.size());
+        // Without the warm-up window, its fit and the catch-up on the input held meanwhile.
+        // The newest sample of an estimate is found from its utime (utime = start + k / R).
+        // Delivery is LCM's receive stamp (see the top of the file); on loopback it
+        // follows the daemon's lcm_publish by tens of microseconds.
+        std::vector<double> delivered, late_sender, after_send, bench_receive, handled;
+        std::FILE* trace = trace_path.empty() ? nullptr : std::fopen(trace_path.c_str(), "w");
+        if (trace) std::fprintf(trace, "utime,seq,sent,stamp,handled\n");
+        for (const auto& a : listener.arrivals) {
+          if (a.utime < start_us + std::llround(skip * 1e6)) continue;
+          const long long k = std::llround(static_cast<double>(a.utime - start_us) * 1e-6 / grid);
+          if (k < 0 || k >= total || sent_us[static_cast<std::size_t>(k)] == 0) continue;
+          const std::int64_t sent = sent_us[static_cast<std::size_t>(k)];
+          delivered.push_back(static_cast<double>(a.stamp - a.utime));
+          late_sender.push_back(static_cast<double>(sent - a.utime));
+          after_send.push_back(static_cast<double>(a.stamp - sent));
+          bench_receive.push_back(static_cast<double>(a.handled - a.stamp));
+          handled.push_back(static_cast<double>(a.handled - a.utime));
+          if (trace)
+            std::fprintf(trace, "%lld,%lld,%lld,%lld,%lld\n", static_cast<long long>(a.utime), k,
+                         static_cast<long long>(sent), static_cast<long long>(a.stamp),
+                         static_cast<long long>(a.handled));
+        }
+        if (trace) std::fclose(trace);
+        std::printf("  latency (us) over %zu estimates after the first %.0f s:\n", delivered.size(), skip);
+        print_stats("sample utime -> estimate delivered", delivered);
+        print_stats("  the sender's lateness (sent - utime)", late_sender);
+        print_stats("  sample sent -> estimate delivered", after_send);
+        print_stats("(delivered -> this bench's handler)", bench_receive);
+        print_stats("(sample utime -> this bench's handler)", handled);
       }
     }
     lcm_destroy(lcm);
