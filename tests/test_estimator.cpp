@@ -645,7 +645,8 @@ TEST(RecursiveEstimator, WarmupFitOnAnotherThreadGivesTheSynchronousEstimatesBit
   const Record& r = sim.record;
   std::vector<double> shipped;
   for (const auto& s : c.submodel_settings) shipped.push_back(s.forgetting);
-  const EstimatorSettings sync_settings = settings_for(c, shipped, c.estimator.warmup_samples);
+  // The warm-up fit on (config/paper-sim.yaml gives theta(t0), P(t0) instead).
+  const EstimatorSettings sync_settings = with_warmup_fit(settings_for(c, shipped, c.estimator.warmup_samples));
   EstimatorSettings split_settings = sync_settings;
   split_settings.defer_warmup_fit = true;
   ASSERT_GT(sync_settings.warmup_samples, 0);
