@@ -2,7 +2,8 @@
 # Sanitizer runs (issue 6): the test suite under ASan+UBSan, the threaded tests
 # under TSan. Prints a summary; exits non-zero if any step fails.
 #
-#   scripts/sanitize.sh                 # both (the ASan build takes ~8 min on 2 cores)
+#   scripts/sanitize.sh                 # both (ASan build: 830 s of compile CPU at -O1 -g1,
+#                                       #  15 min at -j2 on a loaded 2-core machine; tests 4 min)
 #   SKIP_ASAN=1 scripts/sanitize.sh     # TSan only (~2 min)
 #   ASAN_TARGETS="test_messages test_csv" ASAN_TESTS="Messages|Csv" scripts/sanitize.sh
 #                                       # ASan+UBSan on some suites only (.ci/run)
