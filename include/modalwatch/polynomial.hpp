@@ -1,12 +1,19 @@
 #pragma once
 // Polynomials in p with real coefficients, stored in ascending powers:
 // c(0) + c(1) p + ... + c(n) p^n.
+#include <optional>
+
 #include <Eigen/Core>
 
 namespace modalwatch {
 
 // Roots of c (leading coefficient c(n) != 0), via the companion matrix.
 Eigen::VectorXcd roots(const Eigen::VectorXd& ascending);
+
+// Eigenvalues of a real square matrix, or nullopt when the QR iteration does
+// not converge. Eigen's EigenSolver is instantiated in polynomial.cpp alone:
+// each instantiation costs 25-35 s of CPU to compile (95 s under ASan at -O2).
+std::optional<Eigen::VectorXcd> eigenvalues(const Eigen::MatrixXd& A);
 
 // Real polynomial with the given roots (conjugate pairs must be complete),
 // scaled so that its constant coefficient is `constant` (anti-monic for 1).

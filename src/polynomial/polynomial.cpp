@@ -39,6 +39,12 @@ Eigen::VectorXcd roots(const Eigen::VectorXd& ascending) {
   return solver.eigenvalues();
 }
 
+std::optional<Eigen::VectorXcd> eigenvalues(const Eigen::MatrixXd& A) {
+  const Eigen::EigenSolver<Eigen::MatrixXd> solver(A, false);
+  if (solver.info() != Eigen::Success) return std::nullopt;
+  return solver.eigenvalues();
+}
+
 Eigen::VectorXd polynomial_from_roots(const Eigen::VectorXcd& r, double constant) {
   // Build prod (1 - p/s_k): constant coefficient is 1 by construction, which
   // keeps anti-monic polynomials well scaled whatever the root magnitudes.

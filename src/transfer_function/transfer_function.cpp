@@ -2,9 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 
-#include <Eigen/Eigenvalues>
+#include "modalwatch/polynomial.hpp"
 
 namespace modalwatch {
 namespace {
@@ -125,9 +126,9 @@ double closed_loop_spectral_radius(const DiscreteTransferFunction& controller,
   A.bottomLeftCorner(nc, np) = k.B * e_x;
   A.bottomRightCorner(nc, nc) = k.A + k.B * e_z;
   if (A.size() == 0) return 0.0;
-  const Eigen::EigenSolver<Eigen::MatrixXd> eig(A, false);
-  if (eig.info() != Eigen::Success) throw std::runtime_error("closed_loop_spectral_radius: eigenvalues failed");
-  return eig.eigenvalues().cwiseAbs().maxCoeff();
+  const std::optional<Eigen::VectorXcd> lambda = eigenvalues(A);
+  if (!lambda) throw std::runtime_error("closed_loop_spectral_radius: eigenvalues failed");
+  return lambda->cwiseAbs().maxCoeff();
 }
 
 }  // namespace modalwatch
