@@ -185,9 +185,7 @@ TEST(RecursiveEstimator, TracksTheSeedExample) {
   RecursiveEstimator paper(c.model, settings_for(c, {0.999, 0.999, 0.999}, 1000));
   const Tracking tp = track(paper, sim, 50.0);
   print_table("lambda = 0.999 (the paper's):", tp);
-  std::vector<double> shipped;
-  for (const auto& s : c.submodel_settings) shipped.push_back(s.forgetting);
-  RecursiveEstimator best(c.model, settings_for(c, shipped, c.estimator.warmup_samples));
+  RecursiveEstimator best(c.model, c.estimator);  // the shipped forgetting and warm-up
   const Tracking tb = track(best, sim, 50.0);
   print_table("shipped defaults (config/paper-sim.yaml):", tb);
   EXPECT_EQ(paper.status().resets, 0u);
@@ -480,9 +478,7 @@ TEST(RecursiveEstimator, StateAndRestoreResumeWithoutWarmupAsAfterAGap) {
   const Config c = paper_config();
   const auto sim = simulate(*c.plant, *c.experiment);
   const Record& r = sim.record;
-  std::vector<double> shipped;
-  for (const auto& s : c.submodel_settings) shipped.push_back(s.forgetting);
-  const EstimatorSettings st = settings_for(c, shipped, c.estimator.warmup_samples);
+  const EstimatorSettings st = c.estimator;  // the shipped forgetting and warm-up
   const Eigen::Index half = r.size() / 2;
   const double restart_time = 2.0;  // s, how long the daemon was down
   auto sample = [&](Eigen::Index k, bool gap) {
@@ -643,10 +639,8 @@ TEST(RecursiveEstimator, WarmupFitOnAnotherThreadGivesTheSynchronousEstimatesBit
   const Config c = paper_config();
   const auto sim = simulate(*c.plant, *c.experiment);
   const Record& r = sim.record;
-  std::vector<double> shipped;
-  for (const auto& s : c.submodel_settings) shipped.push_back(s.forgetting);
   // The warm-up fit on (config/paper-sim.yaml gives theta(t0), P(t0) instead).
-  const EstimatorSettings sync_settings = with_warmup_fit(settings_for(c, shipped, c.estimator.warmup_samples));
+  const EstimatorSettings sync_settings = with_warmup_fit(c.estimator);
   EstimatorSettings split_settings = sync_settings;
   split_settings.defer_warmup_fit = true;
   ASSERT_GT(sync_settings.warmup_samples, 0);
