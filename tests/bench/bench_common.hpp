@@ -22,6 +22,10 @@ inline Config paper_subset(int K) {
   c.model.submodels.resize(static_cast<std::size_t>(K));
   c.submodel_settings.resize(static_cast<std::size_t>(K));
   c.plant->modes.resize(static_cast<std::size_t>(K));
+  // load_config fills the estimator's per-submodel lists: one entry per submodel.
+  c.estimator.forgetting.resize(static_cast<std::size_t>(K));
+  if (c.estimator.initial_covariance.size() > static_cast<std::size_t>(K))
+    c.estimator.initial_covariance.resize(static_cast<std::size_t>(K));
   return c;
 }
 
