@@ -40,6 +40,18 @@ struct Discretization {
 // the matrix exponential of an augmented matrix.
 Discretization discretize(const Eigen::Ref<const Eigen::VectorXd>& denominator, double T, Hold hold);
 
+// The closed form for N = 2, d_0 != 0, as plain numbers: for callers that
+// re-discretise at every sample (the recursive estimator's modes), where
+// Eigen's dynamic-size storage costs more than the arithmetic. discretize()
+// returns exactly these numbers for such a D. gamma1 is the FOH term (a ZOH
+// caller ignores it). Unchecked: d_0 != 0, d_2 != 0 and T > 0 are the caller's.
+struct SecondOrderDiscretization {
+  double phi[2][2];
+  double gamma0[2];
+  double gamma1[2];
+};
+SecondOrderDiscretization discretize_second_order(double d0, double d1, double d2, double T) noexcept;
+
 class Prefilter {
  public:
   Prefilter() = default;

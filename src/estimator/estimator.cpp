@@ -70,6 +70,93 @@ constexpr const char* kResetDiverged =
     "output error diverged (residual RMS above divergence_ratio x its last good value)";
 constexpr const char* kResetDegenerate = "non-finite or degenerate update (NaN/Inf in theta, P or the gain)";
 
+// The prefilters of a block (eqs. 19-20, 29, 32-33): 1/A on the residual
+// output (kY) and on the auxiliary output (kX, the instrument), 1/(p^l A) on u
+// (kU) and on the instrument input z (kZ).
+enum Channel { kY = 0, kX = 1, kU = 2, kZ = 3 };
+
+// The four prefilters of a mode (n = 2, no rigid poles) with a held output
+// (ZOH): all four are 1/A(p) with the same hold, so one discretisation serves
+// them (DESIGN.md point 1). Fixed size, re-discretised in place at every update
+// without copies: this is the estimator's inner loop. The arithmetic is
+// Prefilter's, in the same order.
+struct ModeFilters {
+  struct State {
+    double x[2] = {0.0, 0.0};         // [w_f, p w_f] at t_k
+    double w_prev = 0.0;              // the held input
+    double out[3] = {0.0, 0.0, 0.0};  // [w_f, p w_f, p^2 w_f] at t_k
+  };
+  double d[3] = {1.0, 0.0, 1.0};  // A(p) = d0 + d1 p + d2 p^2 (normalised time)
+  SecondOrderDiscretization disc{};
+  State s[4];
+
+  void set_denominator(double a1, double a2, double T) {
+    d[0] = 1.0;
+    d[1] = a1;
+    d[2] = a2;
+    disc = discretize_second_order(1.0, a1, a2, T);
+  }
+  // x(t_k) = phi x(t_{k-1}) + gamma0 w_{k-1}.
+  void advance(Channel c) {
+    State& f = s[c];
+    const double x0 = disc.gamma0[0] * f.w_prev + disc.phi[0][0] * f.x[0] + disc.phi[0][1] * f.x[1];
+    const double x1 = disc.gamma0[1] * f.w_prev + disc.phi[1][0] * f.x[0] + disc.phi[1][1] * f.x[1];
+    f.x[0] = x0;
+    f.x[1] = x1;
+  }
+  // p^2 w_f(t_k) = (w_k - d0 w_f - d1 p w_f) / d2.
+  const double* complete(Channel c, double w) {
+    State& f = s[c];
+    f.out[0] = f.x[0];
+    f.out[1] = f.x[1];
+    f.out[2] = (w - d[0] * f.x[0] - d[1] * f.x[1]) / d[2];
+    f.w_prev = w;
+    return f.out;
+  }
+};
+
+// A block's four prefilters: the shared mode bank above where it applies,
+// otherwise four Prefilters (rigid-body submodels, FOH output, other orders).
+struct BlockFilters {
+  bool shared = false;
+  ModeFilters mode;
+  Prefilter f[4];
+
+  void init(const FilterVector& a, const FilterVector& den, double T, Hold output_hold) {
+    shared = a.size() == 3 && den.size() == 3 && output_hold == Hold::zoh;
+    if (shared) {
+      if (a(2) == 0.0) throw std::invalid_argument("discretize: leading coefficient is zero");
+      mode = ModeFilters{};
+      mode.set_denominator(a(1), a(2), T);
+      for (auto& p : f) p = Prefilter();
+      return;
+    }
+    f[kY] = Prefilter(a, T, output_hold);
+    f[kX] = Prefilter(a, T, output_hold);
+    f[kU] = Prefilter(den, T, Hold::zoh);
+    f[kZ] = Prefilter(den, T, Hold::zoh);
+  }
+  void reset() {
+    if (shared) {
+      for (auto& st : mode.s) st = ModeFilters::State{};
+      return;
+    }
+    for (auto& p : f) p.reset();
+  }
+  // Prefilter::step, advance, complete and derivatives for channel c.
+  const double* step(Channel c, double w) {
+    if (!shared) return f[c].step(w).data();
+    mode.advance(c);
+    return mode.complete(c, w);
+  }
+  void advance(Channel c) {
+    if (shared) mode.advance(c);
+    else f[c].advance();
+  }
+  const double* complete(Channel c, double w) { return shared ? mode.complete(c, w) : f[c].complete(w).data(); }
+  const double* derivatives(Channel c) const { return shared ? mode.s[c].out : f[c].derivatives().data(); }
+};
+
 struct Block {
   int n = 0, m = 0, l = 0, nt = 0;
   double ws = 1.0, lambda = 1.0;
@@ -77,8 +164,7 @@ struct Block {
   ThetaVec theta;  // theta-bar, normalised
   ThetaMat P;      // P-bar, normalised
   ThetaVec p_bound;  // per-direction bound on diag(P): covariance_bound x diag(P(t0))
-  Prefilter fy, fx;  // 1/A on the residual output and on the auxiliary output (instrument)
-  Prefilter fu, fz;  // 1/(p^l A) on u and on the instrument input z
+  BlockFilters filters;
   double xu = 0.0, xz = 0.0;  // B/(p^l A) driven by u and by z, at t_k
   ThetaVec good_theta;
   ThetaMat good_P;
@@ -95,22 +181,22 @@ struct Block {
     c.tail(n + 1) = a_poly();
     return c;
   }
-  double output(const Prefilter& f) const {
+  // B/(p^l A) w from the filter's derivatives d = [w_f, p w_f, ...].
+  double output(const double* d) const {
     double s = 0.0;
-    const auto& d = f.derivatives();
-    for (int j = 0; j <= m; ++j) s += theta(n + j) * d(j);
+    for (int j = 0; j <= m; ++j) s += theta(n + j) * d[j];
     return s;
   }
   // Regressor (eqs. 19, 33) and instrument (eqs. 20, 29, 32) from the filtered
   // residual output dy, auxiliary output dx, input du and instrument input dz.
-  void fill(const FilterVector& dy, const FilterVector& dx, const FilterVector& du, const FilterVector& dz) {
+  void fill(const double* dy, const double* dx, const double* du, const double* dz) {
     for (int j = 1; j <= n; ++j) {
-      phi(j - 1) = -dy(j);
-      psi(j - 1) = -dx(j);
+      phi(j - 1) = -dy[j];
+      psi(j - 1) = -dx[j];
     }
     for (int j = 0; j <= m; ++j) {
-      phi(n + j) = du(j);
-      psi(n + j) = dz(j);
+      phi(n + j) = du[j];
+      psi(n + j) = dz[j];
     }
   }
   double feedthrough() const {
@@ -141,7 +227,7 @@ struct RecursiveEstimator::Impl {
   AdditiveModel initial;
   std::shared_ptr<const WarmupFit::Context> fit_context;  // immutable, shared with the jobs
   std::vector<Block> blocks;
-  std::vector<Prefilter> snapshot;  // filters at t_{k-1}, for refinements
+  std::vector<BlockFilters> snapshot;  // filters at t_{k-1}, for refinements
   DiscreteTransferFunction controller;
   EstimatorStatus status;
 
@@ -184,20 +270,25 @@ struct RecursiveEstimator::Impl {
 };
 
 void RecursiveEstimator::Impl::rediscretise(Block& b) {
-  const FilterVector a = b.a_poly();
   const double Ts = b.ws * cfg.sample_time;
+  if (b.filters.shared) {  // a mode, ZOH: A = 1 + a1 p + a2 p^2 for all four
+    b.filters.mode.set_denominator(b.theta(0), b.theta(1), Ts);
+    return;
+  }
+  Prefilter* f = b.filters.f;
+  const FilterVector a = b.a_poly();
   const Discretization da = discretize(a, Ts, cfg.output_hold);
-  b.fy.set_denominator(a, da);
-  b.fx.set_denominator(a, da);
+  f[kY].set_denominator(a, da);
+  f[kX].set_denominator(a, da);
   if (b.l == 0 && cfg.output_hold == Hold::zoh) {  // p^l A = A: one discretisation serves all four
-    b.fu.set_denominator(a, da);
-    b.fz.set_denominator(a, da);
+    f[kU].set_denominator(a, da);
+    f[kZ].set_denominator(a, da);
     return;
   }
   const FilterVector den = b.denominator();
   const Discretization dd = discretize(den, Ts, Hold::zoh);
-  b.fu.set_denominator(den, dd);
-  b.fz.set_denominator(den, dd);
+  f[kU].set_denominator(den, dd);
+  f[kZ].set_denominator(den, dd);
 }
 
 void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>* fit_cov,
@@ -233,16 +324,12 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
       }
     }
     b.p_bound = cfg.covariance_bound * b.P.diagonal().cwiseMax(1e-300);
-    const FilterVector a = b.a_poly(), den = b.denominator();
-    b.fy = Prefilter(a, b.ws * T, cfg.output_hold);
-    b.fx = Prefilter(a, b.ws * T, cfg.output_hold);
-    b.fu = Prefilter(den, b.ws * T, Hold::zoh);
-    b.fz = Prefilter(den, b.ws * T, Hold::zoh);
+    b.filters.init(b.a_poly(), b.denominator(), b.ws * T, cfg.output_hold);
     b.phi.resize(b.nt);
     b.psi.resize(b.nt);
     blocks.push_back(std::move(b));
   }
-  snapshot.resize(4 * blocks.size());
+  snapshot.resize(blocks.size());
   controller = cfg.controller;
   controller.reset();
   save_good();
@@ -250,10 +337,7 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
 
 void RecursiveEstimator::Impl::reset_filters() {
   for (auto& b : blocks) {
-    b.fy.reset();
-    b.fx.reset();
-    b.fu.reset();
-    b.fz.reset();
+    b.filters.reset();
     b.xu = b.xz = 0.0;
   }
   controller.reset();
@@ -370,12 +454,7 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   unsigned flags = 0;
   const bool refine = cfg.refinements > 0 || cfg.block_iterations > 1;
   if (refine && allow_update) {
-    for (std::size_t i = 0; i < blocks.size(); ++i) {
-      snapshot[4 * i + 0] = blocks[i].fy;
-      snapshot[4 * i + 1] = blocks[i].fx;
-      snapshot[4 * i + 2] = blocks[i].fu;
-      snapshot[4 * i + 3] = blocks[i].fz;
-    }
+    for (std::size_t i = 0; i < blocks.size(); ++i) snapshot[i] = blocks[i].filters;
   }
   // 1. Instrument input z_k = S_uo(q, t_k) r_k: the noise-free loop with the
   //    known controller and the current model (eq. 29), solved for a biproper
@@ -384,23 +463,20 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   if (cfg.closed_loop) {
     double free = 0.0, D = 0.0;
     for (auto& b : blocks) {
-      b.fz.advance();
-      b.fz.complete(0.0);
-      free += b.output(b.fz);
+      b.filters.advance(kZ);
+      free += b.output(b.filters.complete(kZ, 0.0));
       D += b.feedthrough();
     }
     const double c0 = controller.feedthrough();
     z = (c0 * (s.r - free) + controller.peek(0.0)) / (1.0 + c0 * D);
     controller.step(s.r - (free + D * z));
     for (auto& b : blocks) {
-      b.fz.complete(z);
-      b.xz = b.output(b.fz);
+      b.xz = b.output(b.filters.complete(kZ, z));
     }
   }
   double y_hat = 0.0;
   for (auto& b : blocks) {
-    b.fu.step(s.u);
-    b.xu = b.output(b.fu);
+    b.xu = b.output(b.filters.step(kU, s.u));
     if (!cfg.closed_loop) b.xz = b.xu;
     y_hat += b.xu;
   }
@@ -468,8 +544,8 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   if (update && ++since_update < static_cast<std::uint64_t>(cfg.update_divisor)) update = false;
   if (!update) {
     for (auto& b : blocks) {
-      b.fy.step(y - (y_hat - b.xu));
-      b.fx.step(b.xz);
+      b.filters.step(kY, y - (y_hat - b.xu));
+      b.filters.step(kX, b.xz);
     }
     return flags;
   }
@@ -485,16 +561,16 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
         double y_tilde = y;
         for (std::size_t j = 0; j < blocks.size(); ++j)
           if (j != i) y_tilde -= blocks[j].xu;
-        const auto& dy = b.fy.step(y_tilde);
-        const auto& dx = b.fx.step(b.xz);
-        const auto& du = b.fu.derivatives();
-        const auto& dz = cfg.closed_loop ? b.fz.derivatives() : du;
+        const double* dy = b.filters.step(kY, y_tilde);
+        const double* dx = b.filters.step(kX, b.xz);
+        const double* du = b.filters.derivatives(kU);
+        const double* dz = cfg.closed_loop ? b.filters.derivatives(kZ) : du;
         b.fill(dy, dx, du, dz);
-        if (!update_block(b, dy(0))) {
+        if (!update_block(b, dy[0])) {
           healthy = false;
           break;
         }
-        b.xu = b.output(b.fu);
+        b.xu = b.output(b.filters.derivatives(kU));
         continue;
       }
       const ThetaVec theta_bar = b.theta;
@@ -508,24 +584,21 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
           if (j != i) y_tilde -= blocks[j].xu;
         if (l > 0 || s_it > 0) {
           // Refinement: the prefilter is the latest iterate; redo this sample.
-          b.fy = snapshot[4 * i + 0];
-          b.fx = snapshot[4 * i + 1];
-          b.fu = snapshot[4 * i + 2];
-          b.fz = snapshot[4 * i + 3];
+          b.filters = snapshot[i];
           b.theta = theta_iter;
           rediscretise(b);
-          b.fu.step(s.u);
-          if (cfg.closed_loop) b.fz.step(z);
+          b.filters.step(kU, s.u);
+          if (cfg.closed_loop) b.filters.step(kZ, z);
           b.theta = theta_bar;
         }
-        const auto& dy = b.fy.step(y_tilde);
-        const auto& dx = b.fx.step(b.xz);
-        const auto& du = b.fu.derivatives();
-        const auto& dz = cfg.closed_loop ? b.fz.derivatives() : du;
+        const double* dy = b.filters.step(kY, y_tilde);
+        const double* dx = b.filters.step(kX, b.xz);
+        const double* du = b.filters.derivatives(kU);
+        const double* dz = cfg.closed_loop ? b.filters.derivatives(kZ) : du;
         b.fill(dy, dx, du, dz);
         b.theta = theta_bar;
         b.P = P_bar;
-        if (!update_block(b, dy(0))) {
+        if (!update_block(b, dy[0])) {
           healthy = false;
           break;
         }
@@ -535,7 +608,7 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
       if (!healthy) break;
       b.theta = theta_iter;
       b.P = P_iter;
-      b.xu = b.output(b.fu);  // G_i(theta^{l+1}) u for the next blocks' residuals
+      b.xu = b.output(b.filters.derivatives(kU));  // G_i(theta^{l+1}) u for the next blocks' residuals
     }
   }
   if (!healthy) {
@@ -967,11 +1040,7 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
       b.p_bound = st.P_bound[i];
       b.good_theta = st.good_theta[i].cwiseProduct(Eigen::VectorXd(b.scale));
       b.good_P = st.good_P[i];
-      const FilterVector a = b.a_poly(), den = b.denominator();
-      b.fy = Prefilter(a, b.ws * next.cfg.sample_time, next.cfg.output_hold);
-      b.fx = Prefilter(a, b.ws * next.cfg.sample_time, next.cfg.output_hold);
-      b.fu = Prefilter(den, b.ws * next.cfg.sample_time, Hold::zoh);
-      b.fz = Prefilter(den, b.ws * next.cfg.sample_time, Hold::zoh);
+      b.filters.init(b.a_poly(), b.denominator(), b.ws * next.cfg.sample_time, next.cfg.output_hold);
     }
     next.buffered = 0;
   } else {

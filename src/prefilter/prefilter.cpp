@@ -39,43 +39,48 @@ Discretization first_order(const Eigen::Ref<const Eigen::VectorXd>& d, double T)
 // than the arithmetic.
 struct M2 {
   double a, b, c, d;  // [[a, b], [c, d]]
-  M2 operator*(const M2& o) const {
-    return {a * o.a + b * o.c, a * o.b + b * o.d, c * o.a + d * o.c, c * o.b + d * o.d};
-  }
-  M2 operator+(const M2& o) const { return {a + o.a, b + o.b, c + o.c, d + o.d}; }
-  M2 operator*(double k) const { return {a * k, b * k, c * k, d * k}; }
 };
+
+}  // namespace
 
 // N = 2, d_0 != 0. exp(A T) = c0 I + c1 A T by Cayley-Hamilton, with c0, c1
 // from the eigenvalues of A T (complex, real or repeated); the input integrals
 // follow from A^{-1}, or from the Taylor series when |A T| is small (where the
 // A^{-1} forms cancel). B = [0, 1/d2].
-Discretization second_order(const Eigen::Ref<const Eigen::VectorXd>& d, double T) {
-  const double d0 = d(0), d1 = d(1), d2 = d(2), bB = 1.0 / d2;
+SecondOrderDiscretization discretize_second_order(double d0, double d1, double d2, double T) noexcept {
+  const double bB = 1.0 / d2;
   const M2 AT{0.0, T, -d0 / d2 * T, -d1 / d2 * T};
   const double norm = std::max(std::abs(AT.b), std::abs(AT.c) + std::abs(AT.d));
-  Discretization z;
-  z.phi.resize(2, 2);
-  z.gamma0.resize(2);
-  z.gamma1.resize(2);
+  SecondOrderDiscretization z;
   if (norm < 0.5) {
-    // Taylor: phi = sum (AT)^k/k!, Psi0 = sum (AT)^k/(k+1)!, Psi1 = sum (AT)^k/(k+2)!.
-    M2 term{1, 0, 0, 1}, phi{0, 0, 0, 0}, psi0{0, 0, 0, 0}, psi1{0, 0, 0, 0};
-    double f0 = 1.0, f1 = 1.0, f2 = 0.5, power = 1.0;  // 1/k!, 1/(k+1)!, 1/(k+2)!, norm^k
-    for (int k = 0; k < 30; ++k) {
-      phi = phi + term * f0;
-      psi0 = psi0 + term * f1;
-      psi1 = psi1 + term * f2;
-      term = term * AT;
-      f0 /= (k + 1);
-      f1 /= (k + 2);
-      f2 /= (k + 3);
-      power *= norm;
-      if (f0 * power < 1e-18) break;
+    // Taylor: phi = sum (AT)^k/k!, Psi0 = sum (AT)^k/(k+1)!, Psi1 = sum (AT)^k/(k+2)!,
+    // up to the last term of phi above 1e-18 |AT|-relative. Only the second
+    // columns are needed (B = e2/d2), in Horner form: s1 = Psi1 e2, then
+    // s0 = Psi0 e2 = e2 + AT s1 and phi e2 = e2 + AT s0; the first column of phi
+    // from phi = c0 I + c1 AT (Cayley-Hamilton): c1 = phi_01/T, c0 = phi_11 - c1 AT_11.
+    int J = 0;  // phi's last term (AT)^J/J!
+    for (double next = norm; next >= 1e-18 && J < 30; next *= norm / (J + 2)) ++J;
+    const int K = std::max(J - 2, 0);  // Psi1's last term (AT)^K/(K+2)!
+    double f = 1.0;                    // 1/(K+2)!
+    for (int k = 2; k <= K + 2; ++k) f /= k;
+    double v0 = 0.0, v1 = f;  // s1, Horner from its last term
+    for (int k = K - 1; k >= 0; --k) {
+      f *= k + 3;  // 1/(k+2)!
+      const double n0 = AT.b * v1, n1 = AT.c * v0 + AT.d * v1 + f;
+      v0 = n0;
+      v1 = n1;
     }
-    z.phi << phi.a, phi.b, phi.c, phi.d;
-    z.gamma0 << T * psi0.b * bB, T * psi0.d * bB;
-    z.gamma1 << T * psi1.b * bB, T * psi1.d * bB;
+    const double s0 = AT.b * v1, s1 = 1.0 + AT.c * v0 + AT.d * v1;  // Psi0 e2
+    const double p01 = AT.b * s1, p11 = 1.0 + AT.c * s0 + AT.d * s1;  // phi e2
+    const double c1 = p01 / AT.b, c0 = p11 - c1 * AT.d;
+    z.phi[0][0] = c0;
+    z.phi[0][1] = p01;
+    z.phi[1][0] = c1 * AT.c;
+    z.phi[1][1] = p11;
+    z.gamma0[0] = T * s0 * bB;
+    z.gamma0[1] = T * s1 * bB;
+    z.gamma1[0] = T * v0 * bB;
+    z.gamma1[1] = T * v1 * bB;
     return z;
   }
   const double tr = AT.a + AT.d, det = AT.a * AT.d - AT.b * AT.c;
@@ -85,7 +90,7 @@ Discretization second_order(const Eigen::Ref<const Eigen::VectorXd>& d, double T
   double ch;  // cos(w), cosh(w) or 1
   if (disc < -1e-14 * (1.0 + std::abs(det))) {
     const double w = std::sqrt(-disc);
-    c1 = std::sin(w) / w;
+    c1 = std::sin(w) / w;  // sin and cos of one argument: one sincos call (GCC)
     ch = std::cos(w);
   } else if (disc > 1e-14 * (1.0 + std::abs(det))) {
     const double w = std::sqrt(disc);
@@ -103,11 +108,18 @@ Discretization second_order(const Eigen::Ref<const Eigen::VectorXd>& d, double T
   const double v0 = phi.b * bB, v1 = (phi.d - 1.0) * bB;
   const double g0 = Ainv.a * v0 + Ainv.b * v1, g1 = Ainv.c * v0 + Ainv.d * v1;
   const double w0 = g0, w1 = g1 - T * bB;
-  z.phi << phi.a, phi.b, phi.c, phi.d;
-  z.gamma0 << g0, g1;
-  z.gamma1 << (Ainv.a * w0 + Ainv.b * w1) / T, (Ainv.c * w0 + Ainv.d * w1) / T;
+  z.phi[0][0] = phi.a;
+  z.phi[0][1] = phi.b;
+  z.phi[1][0] = phi.c;
+  z.phi[1][1] = phi.d;
+  z.gamma0[0] = g0;
+  z.gamma0[1] = g1;
+  z.gamma1[0] = (Ainv.a * w0 + Ainv.b * w1) / T;
+  z.gamma1[1] = (Ainv.c * w0 + Ainv.d * w1) / T;
   return z;
 }
+
+namespace {
 
 // General order: exp([[A T, B T, 0], [0, 0, 1], [0, 0, 0]]) = [[phi, g0, g1], ...].
 Discretization general(const Eigen::Ref<const Eigen::VectorXd>& d, double T) {
@@ -144,7 +156,13 @@ Discretization discretize(const Eigen::Ref<const Eigen::VectorXd>& d, double T, 
   } else if (N == 1) {
     z = first_order(d, T);
   } else if (N == 2 && d(0) != 0.0) {
-    z = second_order(d, T);
+    const SecondOrderDiscretization s = discretize_second_order(d(0), d(1), d(2), T);
+    z.phi.resize(2, 2);
+    z.phi << s.phi[0][0], s.phi[0][1], s.phi[1][0], s.phi[1][1];
+    z.gamma0.resize(2);
+    z.gamma0 << s.gamma0[0], s.gamma0[1];
+    z.gamma1.resize(2);
+    z.gamma1 << s.gamma1[0], s.gamma1[1];
   } else {
     z = general(d, T);
   }
