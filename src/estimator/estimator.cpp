@@ -35,16 +35,16 @@ double time_scale(const Submodel& s) {
 // Stability projection of an anti-monic A (section 4.7). Orders 1 and 2 in
 // closed form without allocation; higher orders through the general routine
 // (allocates, only when A is unstable).
-bool project(Eigen::Ref<ThetaVec> a_part, int n) {
+bool project(double* a_part, int n) {
   constexpr double margin = 1e-6;
   if (n == 1) {
-    if (a_part(0) > 0.0) return false;
-    a_part(0) = a_part(0) < 0.0 ? -a_part(0) : margin;
+    if (a_part[0] > 0.0) return false;
+    a_part[0] = a_part[0] < 0.0 ? -a_part[0] : margin;
     return true;
   }
   if (n == 2) {
-    double& a1 = a_part(0);
-    double& a2 = a_part(1);
+    double& a1 = a_part[0];
+    double& a2 = a_part[1];
     if (a1 > 0.0 && a2 > 0.0) return false;
     if (a2 > 0.0) {
       // Both roots in the closed right half plane: reflecting both flips their sum.
@@ -58,9 +58,10 @@ bool project(Eigen::Ref<ThetaVec> a_part, int n) {
     }
     return true;
   }
-  Eigen::VectorXd a = a_part.head(n);
+  Eigen::Map<Eigen::VectorXd> part(a_part, n);
+  Eigen::VectorXd a = part;
   if (!project_stable(a)) return false;
-  a_part.head(n) = a;
+  part = a;
   return true;
 }
 
@@ -79,7 +80,8 @@ enum Channel { kY = 0, kX = 1, kU = 2, kZ = 3 };
 // (ZOH): all four are 1/A(p) with the same hold, so one discretisation serves
 // them (DESIGN.md point 1). Fixed size, re-discretised in place at every update
 // without copies: this is the estimator's inner loop. The arithmetic is
-// Prefilter's, in the same order.
+// Prefilter's, in the same order (but for a product with 1/d2 in place of a
+// division by d2).
 struct ModeFilters {
   struct State {
     double x[2] = {0.0, 0.0};         // [w_f, p w_f] at t_k
@@ -87,6 +89,7 @@ struct ModeFilters {
     double out[3] = {0.0, 0.0, 0.0};  // [w_f, p w_f, p^2 w_f] at t_k
   };
   double d[3] = {1.0, 0.0, 1.0};  // A(p) = d0 + d1 p + d2 p^2 (normalised time)
+  double inv_d2 = 1.0;
   SecondOrderDiscretization disc{};
   State s[4];
 
@@ -94,6 +97,7 @@ struct ModeFilters {
     d[0] = 1.0;
     d[1] = a1;
     d[2] = a2;
+    inv_d2 = 1.0 / a2;
     disc = discretize_second_order(1.0, a1, a2, T);
   }
   // x(t_k) = phi x(t_{k-1}) + gamma0 w_{k-1}.
@@ -109,7 +113,7 @@ struct ModeFilters {
     State& f = s[c];
     f.out[0] = f.x[0];
     f.out[1] = f.x[1];
-    f.out[2] = (w - d[0] * f.x[0] - d[1] * f.x[1]) / d[2];
+    f.out[2] = (w - d[0] * f.x[0] - d[1] * f.x[1]) * inv_d2;
     f.w_prev = w;
     return f.out;
   }
@@ -266,6 +270,8 @@ struct RecursiveEstimator::Impl {
   void restore_good(const char* reason);
   unsigned advance(const Sample& s, bool allow_update);
   bool update_block(Block& b, double y_f);
+  template <int N>
+  bool update_block_n(Block& b, double y_f);
   void finish_warmup(const WarmupFit& fit);
 };
 
@@ -421,32 +427,41 @@ bool iv_update(int nt_runtime, double* P, double* theta, const double* phi, cons
 // One block's update from theta-bar(t_{k-1}), P-bar(t_{k-1}); the filtered
 // regressor phi and instrument psi are already in b.
 bool RecursiveEstimator::Impl::update_block(Block& b, double y_f) {
-  const int nt = b.nt;
-  ThetaVec theta = b.theta;
-  const bool ok = nt == 3 ? iv_update<3>(nt, b.P.data(), theta.data(), b.phi.data(), b.psi.data(), b.lambda, y_f)
-                          : iv_update<0>(nt, b.P.data(), theta.data(), b.phi.data(), b.psi.data(), b.lambda, y_f);
-  if (!ok) return false;
-  if (b.n > 0 && project(theta.head(b.n), b.n)) ++status.projections;
-  if (b.n > 0 && theta(b.n - 1) == 0.0) return false;
-  b.theta = theta;
+  return b.nt == 3 ? update_block_n<3>(b, y_f) : update_block_n<0>(b, y_f);
+}
+
+// On raw storage, with nt fixed at compile time for N > 0 (as iv_update): at
+// nt = 3 Eigen's dynamic-size copies and row/column operations cost more than
+// the arithmetic.
+template <int N>
+bool RecursiveEstimator::Impl::update_block_n(Block& b, double y_f) {
+  const int nt = N > 0 ? N : b.nt;
+  double* P = b.P.data();  // nt x nt, column-major
+  double theta[kMaxTheta];
+  for (int j = 0; j < nt; ++j) theta[j] = b.theta(j);
+  if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), b.lambda, y_f)) return false;
+  if (b.n > 0 && project(theta, b.n)) ++status.projections;
+  if (b.n > 0 && theta[b.n - 1] == 0.0) return false;
+  for (int j = 0; j < nt; ++j) b.theta(j) = theta[j];
   // Guards: random walk (CONTSID's Kalman-filter adaptation), bounded trace.
   // Q is a parameter covariance; P carries theta^2 per output^2 (cov = sigma^2 P).
   if (cfg.random_walk > 0.0 && e_var > 0.0)
-    for (int j = 0; j < b.nt; ++j) b.P(j, j) += std::pow(cfg.random_walk * b.theta(j), 2) / e_var;
+    for (int j = 0; j < nt; ++j) P[j + j * nt] += std::pow(cfg.random_walk * theta[j], 2) / e_var;
   // Per-direction bound: D P D with D = diag(min(1, sqrt(bound/P_jj))) keeps P
   // symmetric positive definite while stopping wind-up in unexcited directions.
   bool clamped = false;
-  for (int j = 0; j < b.nt; ++j) {
-    if (b.P(j, j) > b.p_bound(j)) {
-      const double f = std::sqrt(b.p_bound(j) / b.P(j, j));
-      b.P.row(j) *= f;
-      b.P.col(j) *= f;
+  const double* bound = b.p_bound.data();
+  for (int j = 0; j < nt; ++j) {
+    if (P[j + j * nt] > bound[j]) {
+      const double f = std::sqrt(bound[j] / P[j + j * nt]);
+      for (int k = 0; k < nt; ++k) P[j + k * nt] *= f;  // row j
+      for (int k = 0; k < nt; ++k) P[k + j * nt] *= f;  // column j
       clamped = true;
     }
   }
   if (clamped) ++status.covariance_clamps;
   double trace = 0.0;
-  for (int j = 0; j < nt; ++j) trace += b.P(j, j) + b.theta(j);
+  for (int j = 0; j < nt; ++j) trace += P[j + j * nt] + theta[j];
   return std::isfinite(trace);
 }
 

@@ -41,6 +41,23 @@ struct M2 {
   double a, b, c, d;  // [[a, b], [c, d]]
 };
 
+// 1/k! and 1e-18 k! for k = 0..31: the series below without divisions.
+struct FactorialTables {
+  double inverse[32];
+  double tolerance[32];
+};
+constexpr FactorialTables factorial_tables() {
+  FactorialTables t{};
+  double f = 1.0;
+  for (int k = 0; k < 32; ++k) {
+    if (k > 0) f *= k;
+    t.inverse[k] = 1.0 / f;
+    t.tolerance[k] = 1e-18 * f;
+  }
+  return t;
+}
+constexpr FactorialTables kFactorial = factorial_tables();
+
 }  // namespace
 
 // N = 2, d_0 != 0. exp(A T) = c0 I + c1 A T by Cayley-Hamilton, with c0, c1
@@ -58,15 +75,12 @@ SecondOrderDiscretization discretize_second_order(double d0, double d1, double d
     // columns are needed (B = e2/d2), in Horner form: s1 = Psi1 e2, then
     // s0 = Psi0 e2 = e2 + AT s1 and phi e2 = e2 + AT s0; the first column of phi
     // from phi = c0 I + c1 AT (Cayley-Hamilton): c1 = phi_01/T, c0 = phi_11 - c1 AT_11.
-    int J = 0;  // phi's last term (AT)^J/J!
-    for (double next = norm; next >= 1e-18 && J < 30; next *= norm / (J + 2)) ++J;
+    int J = 0;  // phi's last term (AT)^J/J!: the next, norm^(J+1)/(J+1)!, is below 1e-18
+    for (double power = norm; J < 29 && power >= kFactorial.tolerance[J + 1]; power *= norm) ++J;
     const int K = std::max(J - 2, 0);  // Psi1's last term (AT)^K/(K+2)!
-    double f = 1.0;                    // 1/(K+2)!
-    for (int k = 2; k <= K + 2; ++k) f /= k;
-    double v0 = 0.0, v1 = f;  // s1, Horner from its last term
+    double v0 = 0.0, v1 = kFactorial.inverse[K + 2];  // s1, Horner from its last term
     for (int k = K - 1; k >= 0; --k) {
-      f *= k + 3;  // 1/(k+2)!
-      const double n0 = AT.b * v1, n1 = AT.c * v0 + AT.d * v1 + f;
+      const double n0 = AT.b * v1, n1 = AT.c * v0 + AT.d * v1 + kFactorial.inverse[k + 2];
       v0 = n0;
       v1 = n1;
     }
