@@ -1,6 +1,9 @@
 #include "modalwatch/prefilter.hpp"
 
+#include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
 
 #include <unsupported/Eigen/MatrixFunctions>
@@ -58,6 +61,25 @@ constexpr FactorialTables factorial_tables() {
 }
 constexpr FactorialTables kFactorial = factorial_tables();
 
+// The length of phi's series, sum_{k <= J} (AT)^k/k!, by binade of |AT|: for
+// |AT| < 2^-i, the J at 2^-i whose next term, 2^-i(J+1)/(J+1)!, is below 1e-18
+// (the term count then costs one table look-up instead of a loop).
+struct SeriesLengths {
+  int last_term[64];
+};
+constexpr SeriesLengths series_lengths() {
+  SeriesLengths t{};
+  double top = 1.0;  // 2^-i
+  for (int i = 0; i < 64; ++i) {
+    int J = 0;
+    for (double power = top; J < 29 && power >= kFactorial.tolerance[J + 1]; power *= top) ++J;
+    t.last_term[i] = J;
+    top *= 0.5;
+  }
+  return t;
+}
+constexpr SeriesLengths kSeriesLength = series_lengths();
+
 }  // namespace
 
 // N = 2, d_0 != 0. exp(A T) = c0 I + c1 A T by Cayley-Hamilton, with c0, c1
@@ -75,8 +97,9 @@ SecondOrderDiscretization discretize_second_order(double d0, double d1, double d
     // columns are needed (B = e2/d2), in Horner form: s1 = Psi1 e2, then
     // s0 = Psi0 e2 = e2 + AT s1 and phi e2 = e2 + AT s0; the first column of phi
     // from phi = c0 I + c1 AT (Cayley-Hamilton): c1 = phi_01/T, c0 = phi_11 - c1 AT_11.
-    int J = 0;  // phi's last term (AT)^J/J!: the next, norm^(J+1)/(J+1)!, is below 1e-18
-    for (double power = norm; J < 29 && power >= kFactorial.tolerance[J + 1]; power *= norm) ++J;
+    // norm < 2^-i with i from the exponent bits (norm < 0.5: i >= 1).
+    const int i = 1022 - static_cast<int>((std::bit_cast<std::uint64_t>(norm) >> 52) & 0x7ff);
+    const int J = kSeriesLength.last_term[std::min(i, 63)];  // phi's last term (AT)^J/J!
     const int K = std::max(J - 2, 0);  // Psi1's last term (AT)^K/(K+2)!
     double v0 = 0.0, v1 = kFactorial.inverse[K + 2];  // s1, Horner from its last term
     for (int k = K - 1; k >= 0; --k) {
