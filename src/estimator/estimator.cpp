@@ -930,8 +930,9 @@ ModeEstimate RecursiveEstimator::mode(int i) const noexcept {
       const double c11 = s2 * b.P(0, 0) / (b.scale(0) * b.scale(0));
       const double c22 = s2 * b.P(1, 1) / (b.scale(1) * b.scale(1));
       const double c12 = s2 * b.P(0, 1) / (b.scale(0) * b.scale(1));
-      const double dw2 = -0.5 * std::pow(a2, -1.5);
-      const double dz1 = 0.5 / std::sqrt(a2), dz2 = -0.25 * a1 * std::pow(a2, -1.5);
+      const double a2_32 = a2 * std::sqrt(a2);  // a2^1.5 (no pow: mode() runs per sample in `track`)
+      const double dw2 = -0.5 / a2_32;
+      const double dz1 = 0.5 / std::sqrt(a2), dz2 = -0.25 * a1 / a2_32;
       est.std.wn = std::sqrt(std::max(0.0, dw2 * dw2 * c22));
       est.std.zeta = std::sqrt(std::max(0.0, dz1 * dz1 * c11 + 2 * dz1 * dz2 * c12 + dz2 * dz2 * c22));
     }
