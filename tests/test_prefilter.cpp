@@ -1,11 +1,14 @@
 // The prefilter p^j/D(p) on sampled data must equal the continuous-time
 // response of the filter to the held (ZOH) or interpolated (FOH) input, to
 // round-off. Truth here is analytic: residues of the Laplace transform.
+#include <algorithm>
 #include <cmath>
 #include <complex>
 #include <numbers>
+#include <vector>
 
 #include <gtest/gtest.h>
+#include <unsupported/Eigen/MatrixFunctions>
 
 #include "modalwatch/polynomial.hpp"
 #include "modalwatch/prefilter.hpp"
@@ -142,6 +145,101 @@ TEST(Prefilter, ClosedFormDiscretisationComposesOverTwoSamplesAtEveryScale) {
     const FilterVector g2 = closed.phi * closed.gamma0 + closed.gamma0;
     EXPECT_LT((twice.gamma0 - g2).cwiseAbs().maxCoeff(), 1e-11 * g2.cwiseAbs().maxCoeff());
   }
+}
+
+// exp([[A T, B T, 0], [0, 0, 1], [0, 0, 0]]) = [[phi, gamma0, gamma1], ...] for
+// the companion form of 1/D, D = d0 + d1 p + d2 p^2: Eigen's matrix exponential
+// (Pade with scaling and squaring), independent of the closed forms.
+SecondOrderDiscretization reference_discretization(double d0, double d1, double d2, double T) {
+  Eigen::Matrix4d M = Eigen::Matrix4d::Zero();
+  M(0, 1) = T;
+  M(1, 0) = -d0 / d2 * T;
+  M(1, 1) = -d1 / d2 * T;
+  M(1, 2) = T / d2;
+  M(2, 3) = 1.0;
+  const Eigen::Matrix4d E = M.exp();
+  SecondOrderDiscretization z{};
+  for (int i = 0; i < 2; ++i) {
+    for (int j = 0; j < 2; ++j) z.phi[i][j] = E(i, j);
+    z.gamma0[i] = E(i, 2);
+    z.gamma1[i] = E(i, 3);
+  }
+  return z;
+}
+
+TEST(Prefilter, SecondOrderClosedFormMatchesTheMatrixExponentialInEveryBranch) {
+  // |A T| from 1e-7 to 4: every series length (one per binade) and the
+  // complex, real and nearly repeated eigenvalue closed forms; d0 != 1 too.
+  struct Case {
+    double d0, d1, d2;
+  };
+  const Case cases[] = {{1.0, 2.0 * 0.1 / 7.0, 1.0 / 49.0},   // underdamped
+                        {1.0, 2.0 * 2.5 / 3.0, 1.0 / 9.0},    // overdamped
+                        {1.0, 2.0 / 5.0, 1.0 / 25.0},         // critically damped
+                        {2.5, 0.3, 0.7},                      // d0 != 1
+                        {1.0, 2.0 * 0.001 / 20.0, 1.0 / 400.0}};  // light damping
+  int checked = 0;
+  for (const Case& c : cases) {
+    for (double T = 1e-8; T < 0.6; T *= 1.37) {
+      const SecondOrderDiscretization got = discretize_second_order(c.d0, c.d1, c.d2, T);
+      const SecondOrderDiscretization want = reference_discretization(c.d0, c.d1, c.d2, T);
+      const double g0 = std::max(std::abs(want.gamma0[0]), std::abs(want.gamma0[1]));
+      const double g1 = std::max(std::abs(want.gamma1[0]), std::abs(want.gamma1[1]));
+      double p = 1.0;
+      for (const auto& row : want.phi) p = std::max({p, std::abs(row[0]), std::abs(row[1])});
+      for (int i = 0; i < 2; ++i) {
+        for (int j = 0; j < 2; ++j) ASSERT_NEAR(got.phi[i][j], want.phi[i][j], 1e-13 * p) << "T=" << T;
+        ASSERT_NEAR(got.gamma0[i], want.gamma0[i], 1e-12 * g0) << "T=" << T << " i=" << i;
+        ASSERT_NEAR(got.gamma1[i], want.gamma1[i], 1e-12 * g1) << "T=" << T << " i=" << i;
+      }
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 200);
+}
+
+TEST(Prefilter, SecondOrderBankMatchesOnePrefilterPerSignalWhileTheDenominatorChanges) {
+  // The recursive estimator's mode prefilters: one shared discretisation,
+  // re-discretised every sample, against four Prefilters given the same
+  // denominators. wn T sweeps 0.025..1.25 (series and closed-form branches).
+  const double T = 0.05;
+  const int n = 3000;
+  auto denominator = [&](int k) { return mode_denominator(0.5 + 24.5 * k / n, 0.02 + 0.3 * k / n); };
+  std::vector<Prefilter> reference;
+  for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i) reference.emplace_back(denominator(0), T, Hold::zoh);
+  SecondOrderFilterBank bank;
+  double worst = 0.0;
+  for (int k = 0; k < n; ++k) {
+    const Eigen::VectorXd d = denominator(k);
+    bank.set_denominator(d(0), d(1), d(2), T);
+    for (auto& f : reference) f.set_denominator(d);
+    for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i) {
+      const double w = std::sin(0.37 * k * (i + 1)) + 0.2 * i;
+      const double* got;
+      if (i == 3) {  // two-phase, as the closed-loop instrument input
+        bank.advance(i);
+        reference[i].advance();
+        bank.complete(i, 0.0);
+        reference[i].complete(0.0);
+        got = bank.complete(i, w);
+        reference[i].complete(w);
+      } else {
+        got = bank.step(i, w);
+        reference[i].step(w);
+      }
+      const FilterVector& want = reference[i].derivatives();
+      ASSERT_EQ(got, bank.derivatives(i));
+      for (int j = 0; j <= 2; ++j) {
+        const double scale = 1.0 + std::abs(want(j));
+        ASSERT_NEAR(got[j], want(j), 1e-12 * scale) << "k=" << k << " signal " << i << " derivative " << j;
+        worst = std::max(worst, std::abs(got[j] - want(j)) / scale);
+      }
+    }
+  }
+  EXPECT_LT(worst, 1e-12);
+  bank.reset();
+  for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i)
+    for (int j = 0; j <= 2; ++j) EXPECT_EQ(bank.derivatives(i)[j], 0.0);
 }
 
 TEST(Prefilter, RigidBodyDoubleIntegratorIsExact) {

@@ -52,6 +52,64 @@ struct SecondOrderDiscretization {
 };
 SecondOrderDiscretization discretize_second_order(double d0, double d1, double d2, double T) noexcept;
 
+// Prefilters 1/D(p) of one second-order D = d0 + d1 p + d2 p^2 (d0, d2 != 0)
+// on kSignals held (ZOH) signals, sharing one discretisation: a mode's four
+// prefilters in the recursive estimator, re-discretised at every update. Fixed
+// size, the discretisation computed in place and never copied. The arithmetic
+// is a Prefilter's per signal, in the same order, but for the top derivative:
+// a product with 1/d2 in place of a division by d2 (equal to round-off).
+class SecondOrderFilterBank {
+ public:
+  static constexpr int kSignals = 4;
+
+  // Keeps the states (the parameters change only at sampling instants).
+  // Unchecked: d0 != 0, d2 != 0, T > 0 (discretize_second_order).
+  void set_denominator(double d0, double d1, double d2, double T) noexcept {
+    d_[0] = d0;
+    d_[1] = d1;
+    d_[2] = d2;
+    inv_d2_ = 1.0 / d2;
+    disc_ = discretize_second_order(d0, d1, d2, T);
+  }
+  void reset() noexcept {
+    for (auto& f : filters_) f = Filter{};
+  }
+  // Prefilter::advance, complete, step and derivatives for signal i.
+  // x(t_k) = phi x(t_{k-1}) + gamma0 w_{k-1}.
+  void advance(int i) noexcept {
+    Filter& f = filters_[i];
+    const double x0 = disc_.gamma0[0] * f.w_prev + disc_.phi[0][0] * f.x[0] + disc_.phi[0][1] * f.x[1];
+    const double x1 = disc_.gamma0[1] * f.w_prev + disc_.phi[1][0] * f.x[0] + disc_.phi[1][1] * f.x[1];
+    f.x[0] = x0;
+    f.x[1] = x1;
+  }
+  // [w_f, p w_f, p^2 w_f] at t_k with p^2 w_f = (w_k - d0 w_f - d1 p w_f) / d2.
+  const double* complete(int i, double w) noexcept {
+    Filter& f = filters_[i];
+    f.out[0] = f.x[0];
+    f.out[1] = f.x[1];
+    f.out[2] = (w - d_[0] * f.x[0] - d_[1] * f.x[1]) * inv_d2_;
+    f.w_prev = w;
+    return f.out;
+  }
+  const double* step(int i, double w) noexcept {
+    advance(i);
+    return complete(i, w);
+  }
+  const double* derivatives(int i) const noexcept { return filters_[i].out; }
+
+ private:
+  struct Filter {
+    double x[2] = {0.0, 0.0};         // [w_f, p w_f] at t_k
+    double w_prev = 0.0;              // the held input
+    double out[3] = {0.0, 0.0, 0.0};  // [w_f, p w_f, p^2 w_f] at t_k
+  };
+  double d_[3] = {1.0, 0.0, 1.0};
+  double inv_d2_ = 1.0;
+  SecondOrderDiscretization disc_{};
+  Filter filters_[kSignals];
+};
+
 class Prefilter {
  public:
   Prefilter() = default;

@@ -76,62 +76,22 @@ constexpr const char* kResetDegenerate = "non-finite or degenerate update (NaN/I
 // (kU) and on the instrument input z (kZ).
 enum Channel { kY = 0, kX = 1, kU = 2, kZ = 3 };
 
-// The four prefilters of a mode (n = 2, no rigid poles) with a held output
-// (ZOH): all four are 1/A(p) with the same hold, so one discretisation serves
-// them (DESIGN.md point 1). Fixed size, re-discretised in place at every update
-// without copies: this is the estimator's inner loop. The arithmetic is
-// Prefilter's, in the same order (but for a product with 1/d2 in place of a
-// division by d2).
-struct ModeFilters {
-  struct State {
-    double x[2] = {0.0, 0.0};         // [w_f, p w_f] at t_k
-    double w_prev = 0.0;              // the held input
-    double out[3] = {0.0, 0.0, 0.0};  // [w_f, p w_f, p^2 w_f] at t_k
-  };
-  double d[3] = {1.0, 0.0, 1.0};  // A(p) = d0 + d1 p + d2 p^2 (normalised time)
-  double inv_d2 = 1.0;
-  SecondOrderDiscretization disc{};
-  State s[4];
-
-  void set_denominator(double a1, double a2, double T) {
-    d[0] = 1.0;
-    d[1] = a1;
-    d[2] = a2;
-    inv_d2 = 1.0 / a2;
-    disc = discretize_second_order(1.0, a1, a2, T);
-  }
-  // x(t_k) = phi x(t_{k-1}) + gamma0 w_{k-1}.
-  void advance(Channel c) {
-    State& f = s[c];
-    const double x0 = disc.gamma0[0] * f.w_prev + disc.phi[0][0] * f.x[0] + disc.phi[0][1] * f.x[1];
-    const double x1 = disc.gamma0[1] * f.w_prev + disc.phi[1][0] * f.x[0] + disc.phi[1][1] * f.x[1];
-    f.x[0] = x0;
-    f.x[1] = x1;
-  }
-  // p^2 w_f(t_k) = (w_k - d0 w_f - d1 p w_f) / d2.
-  const double* complete(Channel c, double w) {
-    State& f = s[c];
-    f.out[0] = f.x[0];
-    f.out[1] = f.x[1];
-    f.out[2] = (w - d[0] * f.x[0] - d[1] * f.x[1]) * inv_d2;
-    f.w_prev = w;
-    return f.out;
-  }
-};
-
-// A block's four prefilters: the shared mode bank above where it applies,
-// otherwise four Prefilters (rigid-body submodels, FOH output, other orders).
+// A block's four prefilters. A mode (n = 2, no rigid poles) with a held output
+// (ZOH) filters all four signals through 1/A(p) with the same hold, so one
+// discretisation serves them (DESIGN.md point 1): a SecondOrderFilterBank,
+// re-discretised in place at every update (the estimator's inner loop).
+// Otherwise four Prefilters (rigid-body submodels, FOH output, other orders).
 struct BlockFilters {
   bool shared = false;
-  ModeFilters mode;
+  SecondOrderFilterBank mode;
   Prefilter f[4];
 
   void init(const FilterVector& a, const FilterVector& den, double T, Hold output_hold) {
     shared = a.size() == 3 && den.size() == 3 && output_hold == Hold::zoh;
     if (shared) {
       if (a(2) == 0.0) throw std::invalid_argument("discretize: leading coefficient is zero");
-      mode = ModeFilters{};
-      mode.set_denominator(a(1), a(2), T);
+      mode = SecondOrderFilterBank{};
+      mode.set_denominator(a(0), a(1), a(2), T);
       for (auto& p : f) p = Prefilter();
       return;
     }
@@ -142,7 +102,7 @@ struct BlockFilters {
   }
   void reset() {
     if (shared) {
-      for (auto& st : mode.s) st = ModeFilters::State{};
+      mode.reset();
       return;
     }
     for (auto& p : f) p.reset();
@@ -158,7 +118,7 @@ struct BlockFilters {
     else f[c].advance();
   }
   const double* complete(Channel c, double w) { return shared ? mode.complete(c, w) : f[c].complete(w).data(); }
-  const double* derivatives(Channel c) const { return shared ? mode.s[c].out : f[c].derivatives().data(); }
+  const double* derivatives(Channel c) const { return shared ? mode.derivatives(c) : f[c].derivatives().data(); }
 };
 
 struct Block {
@@ -278,7 +238,7 @@ struct RecursiveEstimator::Impl {
 void RecursiveEstimator::Impl::rediscretise(Block& b) {
   const double Ts = b.ws * cfg.sample_time;
   if (b.filters.shared) {  // a mode, ZOH: A = 1 + a1 p + a2 p^2 for all four
-    b.filters.mode.set_denominator(b.theta(0), b.theta(1), Ts);
+    b.filters.mode.set_denominator(1.0, b.theta(0), b.theta(1), Ts);
     return;
   }
   Prefilter* f = b.filters.f;

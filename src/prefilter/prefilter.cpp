@@ -44,15 +44,15 @@ struct M2 {
   double a, b, c, d;  // [[a, b], [c, d]]
 };
 
-// 1/k! and 1e-18 k! for k = 0..31: the series below without divisions.
+// 1/k! and 1e-18 k! for k = 0..39: the series below without divisions.
 struct FactorialTables {
-  double inverse[32];
-  double tolerance[32];
+  double inverse[40];
+  double tolerance[40];
 };
 constexpr FactorialTables factorial_tables() {
   FactorialTables t{};
   double f = 1.0;
-  for (int k = 0; k < 32; ++k) {
+  for (int k = 0; k < 40; ++k) {
     if (k > 0) f *= k;
     t.inverse[k] = 1.0 / f;
     t.tolerance[k] = 1e-18 * f;
@@ -93,14 +93,17 @@ SecondOrderDiscretization discretize_second_order(double d0, double d1, double d
   SecondOrderDiscretization z;
   if (norm < 0.5) {
     // Taylor: phi = sum (AT)^k/k!, Psi0 = sum (AT)^k/(k+1)!, Psi1 = sum (AT)^k/(k+2)!,
-    // up to the last term of phi above 1e-18 |AT|-relative. Only the second
+    // phi's terms while |AT|^k/k! >= 1e-18 (J <= 29). Only the second
     // columns are needed (B = e2/d2), in Horner form: s1 = Psi1 e2, then
     // s0 = Psi0 e2 = e2 + AT s1 and phi e2 = e2 + AT s0; the first column of phi
     // from phi = c0 I + c1 AT (Cayley-Hamilton): c1 = phi_01/T, c0 = phi_11 - c1 AT_11.
     // norm < 2^-i with i from the exponent bits (norm < 0.5: i >= 1).
     const int i = 1022 - static_cast<int>((std::bit_cast<std::uint64_t>(norm) >> 52) & 0x7ff);
     const int J = kSeriesLength.last_term[std::min(i, 63)];  // phi's last term (AT)^J/J!
-    const int K = std::max(J - 2, 0);  // Psi1's last term (AT)^K/(K+2)!
+    // Psi1's last term (AT)^K/(K+2)!. The first components of the columns start
+    // at order |AT| (gamma0_0, gamma1_0 ~ T^2): K = J + 1 keeps them accurate
+    // relative to themselves, not only to the largest entry.
+    const int K = J + 1;
     double v0 = 0.0, v1 = kFactorial.inverse[K + 2];  // s1, Horner from its last term
     for (int k = K - 1; k >= 0; --k) {
       const double n0 = AT.b * v1, n1 = AT.c * v0 + AT.d * v1 + kFactorial.inverse[k + 2];
