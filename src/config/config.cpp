@@ -471,6 +471,7 @@ struct SignalContext {
   Eigen::Index samples = 0;
   std::uint64_t seed = 1;
   std::filesystem::path directory;  // of the config file, for relative csv paths
+  const SignalFileReader* read_file = nullptr;  // null: CSV only
 };
 
 void parse_sum_of_sines(const Map& m, SignalSpec& s) {
@@ -556,15 +557,22 @@ Eigen::VectorXd interpolate(const Value& where, const Eigen::VectorXd& t, const 
 }
 
 Eigen::VectorXd parse_csv_signal(const Map& m, SignalSpec& s, const SignalContext& ctx) {
-  m.allow({"type", "path", "column"}, "type csv");
+  m.allow({"type", "path", "column", "channel"}, "type csv");
   const Value path = m.require("path");
   const Value column = m.require("column");
   const std::filesystem::path file = ctx.directory / path.text();
   s.csv_path = std::filesystem::absolute(file).lexically_normal().string();
   s.csv_column = column.text();
+  const auto channel = m.get("channel");
+  if (channel) s.csv_channel = channel->text();
   Table table;
   try {
-    table = read_table(s.csv_path);
+    if (ctx.read_file && *ctx.read_file) {
+      table = (*ctx.read_file)(s.csv_path, s.csv_channel);
+    } else {
+      if (channel) channel->fail("applies to LCM logs, which this program does not read (the modalwatch CLI does)");
+      table = read_table(s.csv_path);
+    }
   } catch (const InputError& e) {
     path.fail_plain(e.what());
   }
@@ -606,7 +614,8 @@ void parse_signal(const Value& v, const SignalContext& ctx, ExperimentSpec& expe
 
 // ---------------------------------------------------------------- simulation
 
-ExperimentSpec parse_simulation(const Map& sim, const Config& config, const std::filesystem::path& dir) {
+ExperimentSpec parse_simulation(const Map& sim, const Config& config, const std::filesystem::path& dir,
+                                const SignalFileReader& read_file) {
   sim.allow({"duration", "seed", "input", "reference"}, "simulation");
   ExperimentSpec e;
   e.sample_time = config.sample_time;
@@ -624,7 +633,7 @@ ExperimentSpec parse_simulation(const Map& sim, const Config& config, const std:
   if (const auto extra = sim.get(unused))
     extra->fail_plain("not used when model.loop is " + loop + " (the excitation is simulation." + used +
                       ")");
-  const SignalContext ctx{e.sample_time, static_cast<Eigen::Index>(samples), e.seed, dir};
+  const SignalContext ctx{e.sample_time, static_cast<Eigen::Index>(samples), e.seed, dir, &read_file};
   parse_signal(sim.require(used, "model.loop is " + loop), ctx, e);
   return e;
 }
@@ -777,7 +786,8 @@ void parse_faults(const Map& f, Config& config) {
 
 // ---------------------------------------------------------------- document
 
-void parse_document(const Map& top, Config& config, const std::filesystem::path& dir) {
+void parse_document(const Map& top, Config& config, const std::filesystem::path& dir,
+                    const SignalFileReader& read_file) {
   top.allow({"sample_rate_hz", "model", "controller", "plant", "simulation", "estimator", "lcm", "daemon",
              "faults"},
             "");
@@ -787,7 +797,7 @@ void parse_document(const Map& top, Config& config, const std::filesystem::path&
   if (config.closed_loop && !top.has("controller"))
     top.missing("controller", "model.loop is closed");
   if (const auto p = top.get("plant")) config.plant = parse_plant(Map(*p));
-  if (const auto s = top.get("simulation")) config.experiment = parse_simulation(Map(*s), config, dir);
+  if (const auto s = top.get("simulation")) config.experiment = parse_simulation(Map(*s), config, dir, read_file);
   if (const auto e = top.get("estimator")) parse_estimator(Map(*e), config.sample_time, config.estimator);
   if (const auto l = top.get("lcm")) parse_lcm(Map(*l), config.lcm);
   const bool gap_factor_given = top.get("estimator") && Map(*top.get("estimator")).has("gap_factor");
@@ -818,7 +828,8 @@ YAML::Node load_yaml(const std::string& text, const std::string& source) {
 
 }  // namespace
 
-Config parse_config(const std::string& yaml_text, const std::string& source_name) {
+Config parse_config(const std::string& yaml_text, const std::string& source_name,
+                    const SignalFileReader& read_signal_file) {
   const YAML::Node root = load_yaml(yaml_text, source_name);
   if (!root.IsDefined() || root.IsNull())
     throw InputError(source_name + ":1", "empty configuration (expected keys sample_rate_hz and model)");
@@ -826,18 +837,18 @@ Config parse_config(const std::string& yaml_text, const std::string& source_name
   Config config;
   config.source = source_name;
   const Map top(Value(source_name, root, "", line));
-  parse_document(top, config, std::filesystem::path(source_name).parent_path());
+  parse_document(top, config, std::filesystem::path(source_name).parent_path(), read_signal_file);
   complete_estimator(config);
   return config;
 }
 
-Config load_config(const std::string& path) {
+Config load_config(const std::string& path, const SignalFileReader& read_signal_file) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path, std::string("cannot open: ") + std::strerror(errno));
   std::ostringstream text;
   text << in.rdbuf();
   if (in.bad()) throw InputError(path, "cannot read");
-  return parse_config(text.str(), path);
+  return parse_config(text.str(), path, read_signal_file);
 }
 
 // ---------------------------------------------------------------- writing
@@ -1006,6 +1017,7 @@ void write_signal(YamlWriter& w, int in, const SignalSpec& s) {
       w.key(in, "type", "csv");
       w.key(in, "path", quoted(s.csv_path));  // absolute: valid wherever the YAML is written
       w.key(in, "column", quoted(s.csv_column));
+      if (!s.csv_channel.empty()) w.key(in, "channel", quoted(s.csv_channel));
       break;
   }
 }
