@@ -21,6 +21,7 @@ namespace modalwatch {
 
 struct SubmodelSettings {
   double forgetting = 1.0;  // lambda in (0, 1], eq. (13)
+  std::optional<double> random_walk;  // this submodel's Q (else estimator.random_walk)
 };
 
 // The `lcm:` section: where the daemon listens and publishes, and where `replay`

@@ -368,12 +368,13 @@ void parse_model(const Map& model, Config& config) {
   std::vector<SubmodelEntry> entries;
   for (const auto& item : items) {
     const Map m(item);
-    entries.push_back(parse_submodel(m, {"forgetting", "initial_covariance"}));
+    entries.push_back(parse_submodel(m, {"forgetting", "random_walk", "initial_covariance"}));
     SubmodelSettings settings;
     if (const auto f = m.get("forgetting")) {
       settings.forgetting = f->number();
       if (!(settings.forgetting > 0.0 && settings.forgetting <= 1.0)) f->fail("must be in (0, 1]");
     }
+    if (const auto q = m.get("random_walk")) settings.random_walk = q->at_least(0.0);
     const auto cov = m.get("initial_covariance");
     config.estimator.initial_covariance.push_back(
         cov ? parse_initial_covariance(*cov, entries.back().submodel) : Eigen::VectorXd());
@@ -816,6 +817,8 @@ void complete_estimator(Config& config) {
   e.output_hold = config.output_hold;
   e.forgetting.clear();
   for (const auto& s : config.submodel_settings) e.forgetting.push_back(s.forgetting);
+  e.random_walks.clear();
+  for (const auto& s : config.submodel_settings) e.random_walks.push_back(s.random_walk.value_or(e.random_walk));
 }
 
 YAML::Node load_yaml(const std::string& text, const std::string& source) {
@@ -943,6 +946,8 @@ void write_model(YamlWriter& w, const Config& config, const AdditiveModel& model
     const std::size_t c = configured_index(config, s.name, i);
     write_submodel(w, 2, s);
     w.number(3, "forgetting", c < config.submodel_settings.size() ? config.submodel_settings[c].forgetting : 1.0);
+    if (c < config.submodel_settings.size() && config.submodel_settings[c].random_walk)
+      w.number(3, "random_walk", *config.submodel_settings[c].random_walk);
     // Only when it still fits theta_i (a written model of another order would not load).
     if (c < covariances.size() && covariances[c].size() > 0 && covariances[c].size() == s.n_theta())
       w.key(3, "initial_covariance", flow_list(covariances[c]));

@@ -1168,7 +1168,8 @@ std::string Daemon::reload(const Config& next) {
       const auto a = y.find("\nestimator:"), b = y.find("\nlcm:");
       return y.substr(a, b - a);
     };
-    if (section(next) != section(m.config)) kept.emplace_back("estimator settings");
+    if (section(next) != section(m.config) || next.estimator.random_walks != m.config.estimator.random_walks)
+      kept.emplace_back("estimator settings");
   }
   if (next.lcm.url != m.config.lcm.url || next.lcm.samples_channel != m.config.lcm.samples_channel ||
       next.lcm.batches_channel != m.config.lcm.batches_channel ||
