@@ -738,6 +738,12 @@ TEST(ConfigErrors, Simulation) {
             "test.yaml:22: key 'simulation.duration': shorter than one sample period (got 0.01)");
   EXPECT_EQ(parse_error(edit(kClosed, "seed: 7", "seed: -1")),
             "test.yaml:23: key 'simulation.seed': must be >= 0 (got -1)");
+  // More samples than the record's index holds (fuzz_config found 7e59 s, whose
+  // conversion to a sample count was undefined behaviour).
+  for (const char* duration : {"duration: 2.0e8", "duration: 7.0e59"})
+    EXPECT_CONTAINS(parse_error(edit(kClosed, "duration: 10", duration)),
+                    "test.yaml:22: key 'simulation.duration': too long: ");
+  EXPECT_NO_THROW(parse_config(edit(kClosed, "duration: 10", "duration: 1.0e8"), "test.yaml"));  // 2e9 samples
   EXPECT_EQ(parse_error(edit(kClosed, "  reference:", "  input:")),
             "test.yaml:24: key 'simulation.input': not used when model.loop is closed (the excitation is "
             "simulation.reference)");
@@ -804,6 +810,9 @@ TEST(ConfigErrors, SumOfSinesAndMultisine) {
             "test.yaml:27: key 'simulation.reference.f_max_hz': must be > f_min_hz (got 0.05)");
   EXPECT_EQ(parse_error(with_signal(edit(ms, "    rms: 1\n", ""))),
             "test.yaml:24: key 'simulation.reference.rms': missing required key");
+  // 4.9e7 lines of 0.1 mHz in [0.1, 5] Hz: each would be a sine per sample.
+  EXPECT_CONTAINS(parse_error(with_signal(edit(ms, "period_s: 100", "period_s: 1.0e7"))),
+                  "test.yaml:28: key 'simulation.reference.period_s': 49000001 frequency lines");
 }
 
 TEST(ConfigErrors, YamlSyntax) {

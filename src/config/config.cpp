@@ -514,8 +514,13 @@ void parse_multisine(const Map& m, SignalSpec& s, const SignalContext& ctx) {
   s.rms = m.require("rms").positive();
   // The grid lines k / period_s, k >= 1, inside [f_min, f_max].
   const double first = std::max(1.0, std::ceil(s.f_min_hz * s.period_s));
-  if (first > std::floor(s.f_max_hz * s.period_s))
-    period.fail("no frequency k / period_s (k >= 1) falls in [f_min_hz, f_max_hz]");
+  const double last = std::floor(s.f_max_hz * s.period_s);
+  if (first > last) period.fail("no frequency k / period_s (k >= 1) falls in [f_min_hz, f_max_hz]");
+  // Every line is a sine per sample; the count also has to fit the generator's integers.
+  constexpr double kMaxLines = 1e6;
+  if (last - first + 1.0 > kMaxLines)
+    period.fail(format_number(last - first + 1.0) + " frequency lines k / period_s in [f_min_hz, f_max_hz], at most " +
+                format_number(kMaxLines) + ": shorten period_s or the band");
 }
 
 void parse_prbs(const Map& m, SignalSpec& s) {
@@ -624,6 +629,12 @@ ExperimentSpec parse_simulation(const Map& sim, const Config& config, const std:
   e.duration = duration.positive();
   const double samples = std::round(e.duration / e.sample_time);
   if (samples < 1.0) duration.fail("shorter than one sample period");
+  // The record is held in memory, and the count must fit the index type (found
+  // by fuzz_config: a duration of 7e59 s made the conversion undefined).
+  constexpr double kMaxSamples = std::numeric_limits<int>::max();
+  if (samples > kMaxSamples)
+    duration.fail("too long: " + format_number(samples) + " samples at sample_rate_hz, at most " +
+                  format_number(kMaxSamples));
   if (const auto seed = sim.get("seed"))
     e.seed = static_cast<std::uint64_t>(seed->integer(0, std::numeric_limits<long long>::max()));
   e.closed_loop = config.closed_loop;
