@@ -132,9 +132,9 @@ TEST_F(Cli, ConfigWithWrongTypeNamesKeyAndLine) {
 }
 
 TEST_F(Cli, ConfigWithForgettingOutsideUnitIntervalNamesKeyAndLine) {
-  const int line = line_of("forgetting");
+  const int line = line_of("      forgetting: ");  // the first submodel's
   ASSERT_GT(line, 0);
-  expect_config_rejected(*this, "forgetting: 0.997", "forgetting: 1.5", "model.submodels[0].forgetting", line);
+  expect_config_rejected(*this, "forgetting: 0.999", "forgetting: 1.5", "model.submodels[0].forgetting", line);
 }
 
 TEST_F(Cli, ConfigWithNonPositiveFrequencyNamesKeyAndLine) {

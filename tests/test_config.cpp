@@ -231,6 +231,16 @@ TEST(Config, EstimatorParsesEveryKey) {
   // Still completed from the other sections.
   EXPECT_DOUBLE_EQ(e.sample_time, 0.05);
   EXPECT_EQ(e.forgetting, (std::vector<double>{0.99, 1.0}));
+  EXPECT_EQ(e.random_walks, (std::vector<double>{1e-4, 1e-4}));  // estimator.random_walk for each
+  // A submodel's own random walk overrides the section's, and survives the round trip.
+  const Config own = parse_config(edit(kBase, "      forgetting: 0.99", "      forgetting: 0.99\n      random_walk: 3.0e-4") +
+                                      kEstimator,
+                                  "test.yaml");
+  EXPECT_EQ(own.estimator.random_walks, (std::vector<double>{3e-4, 1e-4}));
+  EXPECT_EQ(parse_config(modalwatch::config_to_yaml(own, own.model), "again.yaml").estimator.random_walks,
+            own.estimator.random_walks);
+  EXPECT_EQ(parse_error(edit(kBase, "      forgetting: 0.99", "      forgetting: 0.99\n      random_walk: -1")),
+            "test.yaml:11: key 'model.submodels[0].random_walk': must be >= 0 (got -1)");
   // Boundary values that are allowed.
   const std::string edge = edit(edit(edit(edit(edit(kEstimator, "refinements: 2", "refinements: 0"), "warmup: 12.5",
                                                   "warmup: 0"),
@@ -338,10 +348,12 @@ TEST(Config, ShippedPaperSim) {
     EXPECT_NEAR(s.b(0) / gain[i], 1.0, 0.02);
     EXPECT_NE(s.a(1), a2[i]);
   }
-  // The paper uses 0.999 for all three.
-  const std::vector<double> forgetting{0.997, 0.999, 0.9985};
+  // The paper's lambda = 0.999 for all three, and a random walk per mode.
+  const std::vector<double> forgetting{0.999, 0.999, 0.999}, random_walks{5e-4, 0.0, 3e-4};
   for (std::size_t i = 0; i < 3; ++i) EXPECT_EQ(c.submodel_settings[i].forgetting, forgetting[i]) << i;
   EXPECT_EQ(c.estimator.forgetting, forgetting);
+  EXPECT_EQ(c.estimator.random_walks, random_walks);
+  EXPECT_EQ(c.estimator.random_walk, 0.0);
   // estimator: 50 s of warm-up at 20 Hz with the given theta(t0), P(t0) (no fit).
   modalwatch::EstimatorSettings expected = c.estimator;
   expected.fit_on_warmup = modalwatch::EstimatorSettings{}.fit_on_warmup;
@@ -610,7 +622,7 @@ TEST(ConfigErrors, TransferFunctionOrders) {
             "test.yaml:4: key 'model.submodels[0].a': missing required key (kind transfer_function)");
   EXPECT_EQ(parse_error(edit(kTf, "a: [0.1, 0.01]", "wn: 3")),
             "test.yaml:6: key 'model.submodels[0].wn': unknown key for kind transfer_function (allowed: name, "
-            "kind, a, b, rigid_poles, forgetting, initial_covariance)");
+            "kind, a, b, rigid_poles, forgetting, random_walk, initial_covariance)");
 }
 
 TEST(ConfigErrors, InitialCovariance) {
@@ -726,6 +738,12 @@ TEST(ConfigErrors, Simulation) {
             "test.yaml:22: key 'simulation.duration': shorter than one sample period (got 0.01)");
   EXPECT_EQ(parse_error(edit(kClosed, "seed: 7", "seed: -1")),
             "test.yaml:23: key 'simulation.seed': must be >= 0 (got -1)");
+  // More samples than the record's index holds (fuzz_config found 7e59 s, whose
+  // conversion to a sample count was undefined behaviour).
+  for (const char* duration : {"duration: 2.0e8", "duration: 7.0e59"})
+    EXPECT_CONTAINS(parse_error(edit(kClosed, "duration: 10", duration)),
+                    "test.yaml:22: key 'simulation.duration': too long: ");
+  EXPECT_NO_THROW(parse_config(edit(kClosed, "duration: 10", "duration: 1.0e8"), "test.yaml"));  // 2e9 samples
   EXPECT_EQ(parse_error(edit(kClosed, "  reference:", "  input:")),
             "test.yaml:24: key 'simulation.input': not used when model.loop is closed (the excitation is "
             "simulation.reference)");
@@ -792,6 +810,9 @@ TEST(ConfigErrors, SumOfSinesAndMultisine) {
             "test.yaml:27: key 'simulation.reference.f_max_hz': must be > f_min_hz (got 0.05)");
   EXPECT_EQ(parse_error(with_signal(edit(ms, "    rms: 1\n", ""))),
             "test.yaml:24: key 'simulation.reference.rms': missing required key");
+  // 4.9e7 lines of 0.1 mHz in [0.1, 5] Hz: each would be a sine per sample.
+  EXPECT_CONTAINS(parse_error(with_signal(edit(ms, "period_s: 100", "period_s: 1.0e7"))),
+                  "test.yaml:28: key 'simulation.reference.period_s': 49000001 frequency lines");
 }
 
 TEST(ConfigErrors, YamlSyntax) {

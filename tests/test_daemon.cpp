@@ -10,7 +10,10 @@
 // - Acceptance 3 runs the modalwatchd binary as a child process over udpm on
 //   loopback (ttl=0, a port of its own) and signals it.
 #include <fcntl.h>
+#include <pthread.h>
+#include <sched.h>
 #include <signal.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
@@ -22,7 +25,10 @@
 #include <cstddef>
 #include <cstring>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <map>
 #include <numbers>
 #include <random>
 #include <sstream>
@@ -516,8 +522,10 @@ class DaemonProcess : public ScratchDir {
   }
 
   // Runs modalwatchd to completion and checks its exit code and message.
-  void start_expect_exit(const std::string& config, int code, const std::string& message) {
-    const std::string cmd = std::string(MODALWATCHD) + " --config " + config + " 2>&1";
+  // `wrapper` is a command line prefix (limits, privileges) for the daemon.
+  void start_expect_exit(const std::string& config, int code, const std::string& message,
+                         const std::string& wrapper = "") {
+    const std::string cmd = wrapper + std::string(MODALWATCHD) + " --config " + config + " 2>&1";
     FILE* pipe = popen(cmd.c_str(), "r");
     ASSERT_NE(pipe, nullptr);
     std::string out;
@@ -685,6 +693,107 @@ TEST_F(DaemonProcess, BadConfigOrLcmUrlExitsWithAMessage) {
   }
   text.replace(text.find(url_), url_.size(), "nosuchprovider://x");
   start_expect_exit(write("url.yaml", text), 2, "cannot open LCM provider");
+}
+
+// An ASan/TSan build reserves terabytes of shadow memory: the daemon's mlockall
+// must not run there.
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+constexpr bool kSanitized = true;
+#else
+constexpr bool kSanitized = false;
+#endif
+
+// daemon.realtime_priority where the process may not have it: start-up stops
+// with exit code 2 and says which key and which limit, rather than running
+// without the real-time scheduling the config asked for. The refusals are
+// provoked with util-linux's prlimit and, as root, setpriv, which drops
+// CAP_IPC_LOCK / CAP_SYS_NICE from the bounding set (exec then drops them from
+// the process): a locked-memory limit below the process size fails mlockall;
+// with mlockall allowed, RLIMIT_RTPRIO = 0 fails SCHED_FIFO.
+TEST_F(DaemonProcess, RealtimePriorityThatIsNotPermittedExitsNamingTheKey) {
+  const std::string config = write_config("rt.yaml", "  realtime_priority: 50\n", "");
+  const bool root = ::geteuid() == 0;
+  start_expect_exit(config, 2, "key 'daemon.realtime_priority': mlockall failed",
+                    std::string("prlimit --memlock=65536:65536 --rtprio=0:0 ") +
+                        (root ? "setpriv --bounding-set=-sys_nice,-ipc_lock " : ""));
+  if (kSanitized) return;  // below mlockall succeeds (kSanitized)
+  rlimit memlock{};
+  ::getrlimit(RLIMIT_MEMLOCK, &memlock);
+  if (!root && memlock.rlim_cur != RLIM_INFINITY) return;  // mlockall refused first: checked above
+  start_expect_exit(config, 2, "key 'daemon.realtime_priority': SCHED_FIFO at priority 50 not permitted",
+                    std::string("prlimit --rtprio=0:0 ") + (root ? "setpriv --bounding-set=-sys_nice " : ""));
+}
+
+namespace {
+struct ThreadSched {
+  std::string name;
+  int policy = -1;
+  int priority = -1;
+};
+// Every thread of `pid` with its scheduling policy and real-time priority
+// (fields 41 and 40 of /proc/<pid>/task/<tid>/stat, counted after the comm).
+std::vector<ThreadSched> thread_scheduling(pid_t pid) {
+  std::vector<ThreadSched> out;
+  for (const auto& task : std::filesystem::directory_iterator("/proc/" + std::to_string(pid) + "/task")) {
+    std::ifstream comm(task.path() / "comm"), stat(task.path() / "stat");
+    ThreadSched t;
+    std::getline(comm, t.name);
+    std::string line;
+    std::getline(stat, line);
+    std::istringstream rest(line.substr(line.rfind(')') + 2));
+    std::vector<std::string> f{std::istream_iterator<std::string>(rest), std::istream_iterator<std::string>()};
+    if (f.size() < 39) continue;  // the thread exited while being read
+    t.priority = std::stoi(f[37]);
+    t.policy = std::stoi(f[38]);
+    out.push_back(t);
+  }
+  return out;
+}
+}  // namespace
+
+// daemon.realtime_priority where it is permitted: the latency path (subscriber,
+// estimation loop, publisher, and LCM's receive thread that the subscription
+// starts) runs SCHED_FIFO at that priority, the rest (main, checkpointer,
+// warm-up fitter) at normal priority, and memory is locked.
+TEST_F(DaemonProcess, RealtimePriorityPutsTheLatencyPathOnSchedFifo) {
+  if (kSanitized) GTEST_SKIP() << "mlockall would lock the sanitizer's shadow memory (terabytes reserved)";
+  // The same checks as the daemon's own, made here on this thread.
+  sched_param fifo{};
+  fifo.sched_priority = 20;
+  rlimit memlock{};
+  ::getrlimit(RLIMIT_MEMLOCK, &memlock);
+  if (pthread_setschedparam(pthread_self(), SCHED_FIFO, &fifo) != 0 ||
+      (::geteuid() != 0 && memlock.rlim_cur != RLIM_INFINITY))
+    GTEST_SKIP() << "SCHED_FIFO 20 or mlockall not permitted for this user (root, or LimitRTPRIO/LimitMEMLOCK)";
+  sched_param normal{};
+  pthread_setschedparam(pthread_self(), SCHED_OTHER, &normal);
+
+  start(write_config("rt.yaml", "  realtime_priority: 20\n", ""));
+  publish(0, samples_at(2.0), 4.0);
+  // Threads the daemon does not name keep the process name: main and LCM's receiver.
+  std::map<std::string, std::vector<int>> policies;  // thread name -> policy of each
+  for (const auto& t : thread_scheduling(pid_)) {
+    policies[t.name].push_back(t.policy);
+    if (t.policy == SCHED_FIFO) {
+      EXPECT_EQ(t.priority, 20) << t.name;
+    }
+  }
+  for (const char* rt : {"mw-subscribe", "mw-estimate", "mw-publish"})
+    EXPECT_EQ(policies[rt], std::vector<int>{SCHED_FIFO}) << rt;
+  EXPECT_EQ(policies["mw-checkpoint"], std::vector<int>{SCHED_OTHER});
+  if (policies.count("mw-fit")) {
+    EXPECT_EQ(policies["mw-fit"], std::vector<int>{SCHED_OTHER});
+  }
+  std::vector<int> unnamed = policies["modalwatchd"];
+  std::sort(unnamed.begin(), unnamed.end());
+  EXPECT_EQ(unnamed, (std::vector<int>{SCHED_OTHER, SCHED_FIFO})) << "main, LCM's receive thread";
+  std::ifstream status("/proc/" + std::to_string(pid_) + "/status");
+  std::string line;
+  long locked_kib = 0;
+  while (std::getline(status, line))
+    if (line.rfind("VmLck:", 0) == 0) locked_kib = std::stol(line.substr(6));
+  EXPECT_GT(locked_kib, 1024) << "mlockall";
+  EXPECT_EQ(stop(SIGTERM), 0) << log();
 }
 
 // A checkpoint that cannot be written (here: its directory is missing; a full

@@ -32,6 +32,7 @@ Config paper_config() { return load_config(std::string(MODALWATCH_SOURCE_DIR) + 
 EstimatorSettings settings_for(const Config& c, std::vector<double> forgetting, int warmup) {
   EstimatorSettings s = c.estimator;  // completed from the rest of the file by load_config
   s.forgetting = std::move(forgetting);
+  s.random_walks.clear();  // the shipped random walks go with the shipped forgetting: lambda alone here
   s.warmup_samples = warmup;
   return s;
 }
@@ -227,36 +228,37 @@ TEST(RecursiveEstimator, TracksTheSeedExample) {
   // zeta2 drifting in [100, 300] s, wn3 and zeta3 in [500, 800] s.
   const Config c = paper_config();
   const auto sim = simulate(*c.plant, *c.experiment);
-  RecursiveEstimator paper(c.model, settings_for(c, {0.999, 0.999, 0.999}, 1000));
+  RecursiveEstimator paper(c.model, settings_for(c, {0.999, 0.999, 0.999}, 1000));  // lambda alone
   const Tracking tp = track(paper, sim, 50.0);
-  print_table("lambda = 0.999 (the paper's):", tp);
-  RecursiveEstimator best(c.model, c.estimator);  // the shipped forgetting and warm-up
+  print_table("lambda = 0.999 alone (the paper's):", tp);
+  RecursiveEstimator best(c.model, c.estimator);  // the shipped lambda, random walks and warm-up
   const Tracking tb = track(best, sim, 50.0);
   print_table("shipped defaults (config/paper-sim.yaml):", tb);
   EXPECT_EQ(paper.status().resets, 0u);
   EXPECT_EQ(best.status().resets, 0u);
-  // The issue's thresholds, exactly. With theta(t0), P(t0) as the paper gives them
-  // (config/paper-sim.yaml) these hold for every one of ten draws of the 2 % start
-  // (scripts/seed_example.sh): all of mode 2; mode 1's frequency p95 (lambda 0.997
-  // follows its 0.1 %/s ramp); every damping median and p95.
-  EXPECT_LT(tb.percentile(tb.wn[0], 0.95), 3.0);
-  EXPECT_LT(tb.percentile(tb.wn[1], 0.5), 0.5);
-  EXPECT_LT(tb.percentile(tb.wn[1], 0.95), 3.0);
+  // The issue's thresholds, exactly. With theta(t0), P(t0) as the paper gives them,
+  // its lambda and a random walk per mode (config/paper-sim.yaml), these hold for
+  // every one of eleven draws of the 2 % start on this record
+  // (scripts/seed_example.sh): everything but mode 3's frequency median.
   for (int i = 0; i < 3; ++i) {
+    if (i != 2) {
+      EXPECT_LT(tb.percentile(tb.wn[i], 0.5), 0.5) << "mode " << i + 1;
+    }
+    EXPECT_LT(tb.percentile(tb.wn[i], 0.95), 3.0) << "mode " << i + 1;
     EXPECT_LT(tb.percentile(tb.zeta[i], 0.5), 5.0) << "mode " << i + 1;
     EXPECT_LT(tb.percentile(tb.zeta[i], 0.95), 20.0) << "mode " << i + 1;
   }
-  // Not met, and reported in the issue note rather than asserted with wider
-  // tolerances:
-  // - mode 3's frequency median (1.25 %; p95 2.96-3.30 % over the draws). The
-  //   record carries too little about it: the 17.5 rad/s line of y is 0.055 against
-  //   a noise std of 0.1, and a 1 % change of wn3 moves it by 5 %. The estimator's
-  //   own std of wn3 is 1.85 % over [100, 500] s, and 0.674 of it (the median of
-  //   a Gaussian's |error|) is the 1.25 % measured: it is as good as its data.
-  //   A 0.5 % median needs 6x the memory, and 6x the lag on the [500, 800] s ramp.
-  // - mode 1's frequency median: 0.43-0.50 % over the draws, 0.501 % on the shipped
-  //   one, whose gain is 1 % off and held there by P(t0).
-  // The paper's lambda = 0.999: mode 1's p95 is 8 % (lag of a 50 s memory).
+  // Not met, and reported in the issue note rather than asserted with a wider
+  // tolerance: mode 3's frequency median (1.24 %, 1.09-1.24 % over the draws).
+  // The record carries too little about it: the 17.5 rad/s line of y is 0.055
+  // against a noise std of 0.1, and a 1 % change of wn3 moves it by 5 %. With
+  // forgetting alone the estimator's own std of wn3 is 1.85 % over [100, 500] s,
+  // and 0.674 of it (the median of a Gaussian's |error|) is the 1.25 % measured
+  // then: it is as good as its data. A 0.5 % median needs about 6x the memory,
+  // and 6x the lag on the [500, 800] s ramp.
+  // The paper's lambda = 0.999 alone: mode 1's p95 is 8 % (lag of a 50 s memory
+  // on the ramp, which the random walk removes).
+  EXPECT_GT(tp.percentile(tp.wn[0], 0.95), 3.0);
   EXPECT_LT(tp.percentile(tp.wn[1], 0.5), 0.5);
   EXPECT_LT(tp.percentile(tp.wn[1], 0.95), 3.0);
 }
@@ -399,6 +401,13 @@ TEST(RecursiveEstimator, RejectsInconsistentSettings) {
   s = settings_for(c, {0.999, 0.999, 0.999}, 0);
   s.controller = DiscreteTransferFunction();
   EXPECT_THROW(RecursiveEstimator(c.model, s), std::invalid_argument);
+  s = c.estimator;
+  s.random_walks = {1e-4, 1e-4};  // one per submodel, or none
+  EXPECT_THROW(RecursiveEstimator(c.model, s), std::invalid_argument);
+  s.random_walks = {1e-4, -1e-4, 1e-4};
+  EXPECT_THROW(RecursiveEstimator(c.model, s), std::invalid_argument);
+  s.random_walks = {1e-4, 1e-4, 1e-4};
+  EXPECT_NO_THROW(RecursiveEstimator(c.model, s));
 }
 
 // ------------------------------------------------------------------ acceptance 3

@@ -226,6 +226,58 @@ TEST_F(LcmLog, FitTrackAndDiagnoseReadLogsExactlyAsTheyReadCsv) {
   EXPECT_EQ(slurp(path("d_lcm/summary.json")), summary);
 }
 
+// A config's signal file (`type: csv` under simulation.reference) may be an LCM
+// log too: `simulate` driven by the reference recorded in a log gives the run it
+// gives from the same record as CSV; the log's two sample channels need the
+// key `channel`, and the library's own loader (no LCM) refuses that key.
+TEST_F(LcmLog, SimulateReadsItsExcitationFromALogAsFromCsv) {
+  const Record rec = csv_record(path("run.csv"));
+  write_log(path("run.lcm"), rec, "MODALWATCH_SAMPLES", 1);
+  std::ifstream in(kConfig);
+  std::string yaml(std::istreambuf_iterator<char>(in), {});
+  const std::string from = "    type: sum_of_sines\n    amplitudes: [3, 1, 1, 1]\n    frequencies_rad_s: [0.005, 2, 5, 17.5]\n";
+  ASSERT_NE(yaml.find(from), std::string::npos);
+  const auto config_with = [&](const std::string& name, const std::string& reference) {
+    std::string text = yaml;
+    text.replace(text.find(from), from.size(), reference);
+    text.replace(text.find("duration: 1000"), 14, "duration: 99");  // within the 100 s record
+    std::ofstream(path(name)) << text;
+    return path(name);
+  };
+  const std::string from_csv = config_with("csv.yaml", "    type: csv\n    path: run.csv\n    column: r\n");
+  const std::string from_log = config_with(
+      "log.yaml", "    type: csv\n    path: run.lcm\n    column: r\n    channel: MODALWATCH_SAMPLES\n");
+  const auto a = run_cli("simulate -c " + from_csv + " -o " + path("a.csv"));
+  const auto b = run_cli("simulate -c " + from_log + " -o " + path("b.csv"));
+  ASSERT_EQ(a.code, 0) << a.output;
+  ASSERT_EQ(b.code, 0) << b.output;
+  EXPECT_NE(b.output.find("2000 samples from LCM log"), std::string::npos) << b.output;
+  const Table ta = read_table(path("a.csv")), tb = read_table(path("b.csv"));
+  ASSERT_EQ(ta.columns, tb.columns);
+  ASSERT_EQ(ta.data.rows(), 1980);
+  // The log's t is the CSV's rounded to 1 us, which moves the interpolation
+  // weights by round-off only.
+  EXPECT_LT((ta.data - tb.data).cwiseAbs().maxCoeff(), 1e-9);
+  // ... and the reference on the grid is the recorded one.
+  const int r = tb.column("r");
+  ASSERT_GE(r, 0);
+  EXPECT_LT((tb.data.col(r) - rec.r.head(1980)).cwiseAbs().maxCoeff(), 1e-12);
+
+  const std::string no_channel = config_with("nochannel.yaml", "    type: csv\n    path: run.lcm\n    column: r\n");
+  const auto ambiguous = run_cli("simulate -c " + no_channel + " -o " + path("c.csv"));
+  EXPECT_EQ(ambiguous.code, 2);
+  EXPECT_NE(ambiguous.output.find("key 'simulation.reference.path'"), std::string::npos) << ambiguous.output;
+  EXPECT_NE(ambiguous.output.find("choose one"), std::string::npos) << ambiguous.output;
+  const auto no_column = run_cli("simulate -c " + config_with("q.yaml", "    type: csv\n    path: run.lcm\n"
+                                                                         "    column: q\n    channel: MODALWATCH_SAMPLES\n") +
+                                 " -o " + path("c.csv"));
+  EXPECT_EQ(no_column.code, 2);
+  EXPECT_NE(no_column.output.find("no such column"), std::string::npos) << no_column.output;
+
+  EXPECT_NE(error_of([&] { (void)load_config(from_log); }).find("key 'simulation.reference.channel': applies to LCM logs"),
+            std::string::npos);
+}
+
 // ------------------------------------------------------------------ replay
 
 struct Received {

@@ -4,10 +4,12 @@
 // documented in config/README.md; an unknown key, a wrong type or an invalid
 // value is an InputError naming the key and its line.
 #include <array>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "modalwatch/csv.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/fault_detector.hpp"
 #include "modalwatch/model.hpp"
@@ -19,6 +21,7 @@ namespace modalwatch {
 
 struct SubmodelSettings {
   double forgetting = 1.0;  // lambda in (0, 1], eq. (13)
+  std::optional<double> random_walk;  // this submodel's Q (else estimator.random_walk)
 };
 
 // The `lcm:` section: where the daemon listens and publishes, and where `replay`
@@ -77,8 +80,16 @@ struct Config {
   FaultSettings faults;
 };
 
-Config load_config(const std::string& path);
-Config parse_config(const std::string& yaml_text, const std::string& source_name);
+// Reads a file that the config names as a signal (`type: csv` under
+// simulation.input or simulation.reference): a table with a time column 't'.
+// `channel` is the key's `channel` (empty when absent). The default reads CSV
+// only (read_table) and refuses a channel; the CLI passes one that also reads
+// LCM logs, which modalwatch_io does not know.
+using SignalFileReader = std::function<Table(const std::string& path, const std::string& channel)>;
+
+Config load_config(const std::string& path, const SignalFileReader& read_signal_file = {});
+Config parse_config(const std::string& yaml_text, const std::string& source_name,
+                    const SignalFileReader& read_signal_file = {});
 
 // The configuration as YAML, with `model` in place of the configured one (for
 // `fit --out`: a fitted model that seeds the other commands).

@@ -61,6 +61,9 @@ struct EstimatorSettings {
 
   // Guards (DESIGN.md point 4).
   double random_walk = 0.0;        // Q = random_walk^2 diag(theta'^2) added to P at each update
+  // Per submodel (empty: random_walk for every one): like the forgetting factor,
+  // the drift a mode may follow is a property of that mode.
+  std::vector<double> random_walks;
   double covariance_bound = 100.0; // diag(P_i) is held below this times diag(P_i(t0))
   double divergence_ratio = 10.0;  // residual RMS this many times its last good value: reset
   double gap_factor = 1.5;         // a time step above gap_factor T is a gap: filter states reset

@@ -34,9 +34,11 @@ struct SignalSpec {
   double frequency_hz = 1.0;
   double offset = 0.0;
 
-  // csv: a column of a CSV file, interpolated linearly onto the time grid.
+  // csv: a column of a CSV file (or of an LCM log's samples: t, u, y, r),
+  // interpolated linearly onto the time grid.
   std::string csv_path;
   std::string csv_column;
+  std::string csv_channel;  // LCM log: the channel of the samples (empty: the only one)
 
   std::uint64_t seed = 1;  // random phases (multisine)
 };

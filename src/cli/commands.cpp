@@ -48,7 +48,7 @@ Record window(const Record& r, const FitArgs& args) {
 
 int simulate(const SimulateArgs& args) {
   return guarded("simulate", [&] {
-    const Config config = load_config(args.config);
+    const Config config = load_cli_config(args.config);
     if (!config.plant || !config.experiment)
       throw InputError(args.config, "simulate needs the 'plant' and 'simulation' sections");
     ExperimentSpec experiment = *config.experiment;
@@ -75,7 +75,7 @@ int simulate(const SimulateArgs& args) {
 
 int fit(const FitArgs& args) {
   return guarded("fit", [&] {
-    const Config config = load_config(args.config);
+    const Config config = load_cli_config(args.config);
     const Record full = load_record({args.data, args.channel, config.closed_loop, {}});
     const Record data = window(full, args);
     const int nb = config.model.n_beta();

@@ -254,7 +254,7 @@ void write_tables(const std::string& dir, const DiagnoseResult& r, const Record&
 
 int diagnose(const DiagnoseArgs& args) {
   return guarded("diagnose", [&] {
-    const Config config = load_config(args.config);
+    const Config config = load_cli_config(args.config);
     if (!args.validate.empty() && args.split) throw InputError("--split", "give --validate or --split, not both");
     RecordColumns columns;
     columns.t = args.t_column;

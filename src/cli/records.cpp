@@ -57,4 +57,26 @@ Record load_record(const RecordSource& source, const RecordReadOptions& options)
   return rec;
 }
 
+Table read_signal_file(const std::string& path, const std::string& channel) {
+  if (!is_lcm_log(path)) {
+    if (!channel.empty()) throw InputError(path, "key 'channel' applies to LCM logs only; this is not one (no LCM sync word)");
+    return read_table(path);
+  }
+  RecordSource source;
+  source.path = path;
+  source.channel = channel;
+  source.closed_loop = true;
+  RecordReadOptions options;
+  options.allow_gaps = true;
+  const Record rec = load_record(source, options);
+  Table table;
+  table.columns = {"t", "u", "y", "r"};
+  table.data.resize(rec.size(), 4);
+  table.data.col(0) = rec.t;
+  table.data.col(1) = rec.u;
+  table.data.col(2) = rec.y;
+  table.data.col(3) = rec.r;
+  return table;
+}
+
 }  // namespace modalwatch::cli

@@ -3,6 +3,7 @@
 // lcm-logger, told apart by content (the LCM sync word), not by file name.
 #include <string>
 
+#include "modalwatch/config.hpp"
 #include "modalwatch/csv.hpp"
 #include "modalwatch/record.hpp"
 
@@ -20,5 +21,13 @@ struct RecordSource {
 // the row (CSV) or the byte offset of the event (LCM). For an LCM log a line on
 // stderr says how many samples and which events were skipped.
 Record load_record(const RecordSource& source, const RecordReadOptions& options = {});
+
+// A signal file named in a config (`type: csv`): a CSV table as it is, or an LCM
+// log's samples as the columns t, u, y, r (gaps allowed: the config
+// interpolates). `channel` selects the log's channel.
+Table read_signal_file(const std::string& path, const std::string& channel);
+
+// load_config for the subcommands: signal files may be LCM logs too.
+inline Config load_cli_config(const std::string& path) { return load_config(path, read_signal_file); }
 
 }  // namespace modalwatch::cli

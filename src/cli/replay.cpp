@@ -48,7 +48,7 @@ void sleep_until(const timespec& start, double seconds) {
 
 int replay(const ReplayArgs& args) {
   return guarded("replay", [&] {
-    const Config config = load_config(args.config);
+    const Config config = load_cli_config(args.config);
     RecordReadOptions read_options;  // the daemon counts NaN samples and gaps: pass them on
     read_options.allow_nonfinite = true;
     read_options.allow_gaps = true;

@@ -333,7 +333,7 @@ double seconds_between(Clock::time_point a, Clock::time_point b) { return std::c
 int track(const TrackArgs& args) {
   return guarded("track", [&] {
     const auto t_start = Clock::now();
-    const Config config = load_config(args.config);
+    const Config config = load_cli_config(args.config);
     const EstimatorSettings& settings = config.estimator;  // completed by load_config
 
     RecordReadOptions read_options;

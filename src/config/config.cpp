@@ -368,12 +368,13 @@ void parse_model(const Map& model, Config& config) {
   std::vector<SubmodelEntry> entries;
   for (const auto& item : items) {
     const Map m(item);
-    entries.push_back(parse_submodel(m, {"forgetting", "initial_covariance"}));
+    entries.push_back(parse_submodel(m, {"forgetting", "random_walk", "initial_covariance"}));
     SubmodelSettings settings;
     if (const auto f = m.get("forgetting")) {
       settings.forgetting = f->number();
       if (!(settings.forgetting > 0.0 && settings.forgetting <= 1.0)) f->fail("must be in (0, 1]");
     }
+    if (const auto q = m.get("random_walk")) settings.random_walk = q->at_least(0.0);
     const auto cov = m.get("initial_covariance");
     config.estimator.initial_covariance.push_back(
         cov ? parse_initial_covariance(*cov, entries.back().submodel) : Eigen::VectorXd());
@@ -471,6 +472,7 @@ struct SignalContext {
   Eigen::Index samples = 0;
   std::uint64_t seed = 1;
   std::filesystem::path directory;  // of the config file, for relative csv paths
+  const SignalFileReader* read_file = nullptr;  // null: CSV only
 };
 
 void parse_sum_of_sines(const Map& m, SignalSpec& s) {
@@ -512,8 +514,13 @@ void parse_multisine(const Map& m, SignalSpec& s, const SignalContext& ctx) {
   s.rms = m.require("rms").positive();
   // The grid lines k / period_s, k >= 1, inside [f_min, f_max].
   const double first = std::max(1.0, std::ceil(s.f_min_hz * s.period_s));
-  if (first > std::floor(s.f_max_hz * s.period_s))
-    period.fail("no frequency k / period_s (k >= 1) falls in [f_min_hz, f_max_hz]");
+  const double last = std::floor(s.f_max_hz * s.period_s);
+  if (first > last) period.fail("no frequency k / period_s (k >= 1) falls in [f_min_hz, f_max_hz]");
+  // Every line is a sine per sample; the count also has to fit the generator's integers.
+  constexpr double kMaxLines = 1e6;
+  if (last - first + 1.0 > kMaxLines)
+    period.fail(format_number(last - first + 1.0) + " frequency lines k / period_s in [f_min_hz, f_max_hz], at most " +
+                format_number(kMaxLines) + ": shorten period_s or the band");
 }
 
 void parse_prbs(const Map& m, SignalSpec& s) {
@@ -556,15 +563,22 @@ Eigen::VectorXd interpolate(const Value& where, const Eigen::VectorXd& t, const 
 }
 
 Eigen::VectorXd parse_csv_signal(const Map& m, SignalSpec& s, const SignalContext& ctx) {
-  m.allow({"type", "path", "column"}, "type csv");
+  m.allow({"type", "path", "column", "channel"}, "type csv");
   const Value path = m.require("path");
   const Value column = m.require("column");
   const std::filesystem::path file = ctx.directory / path.text();
   s.csv_path = std::filesystem::absolute(file).lexically_normal().string();
   s.csv_column = column.text();
+  const auto channel = m.get("channel");
+  if (channel) s.csv_channel = channel->text();
   Table table;
   try {
-    table = read_table(s.csv_path);
+    if (ctx.read_file && *ctx.read_file) {
+      table = (*ctx.read_file)(s.csv_path, s.csv_channel);
+    } else {
+      if (channel) channel->fail("applies to LCM logs, which this program does not read (the modalwatch CLI does)");
+      table = read_table(s.csv_path);
+    }
   } catch (const InputError& e) {
     path.fail_plain(e.what());
   }
@@ -606,7 +620,8 @@ void parse_signal(const Value& v, const SignalContext& ctx, ExperimentSpec& expe
 
 // ---------------------------------------------------------------- simulation
 
-ExperimentSpec parse_simulation(const Map& sim, const Config& config, const std::filesystem::path& dir) {
+ExperimentSpec parse_simulation(const Map& sim, const Config& config, const std::filesystem::path& dir,
+                                const SignalFileReader& read_file) {
   sim.allow({"duration", "seed", "input", "reference"}, "simulation");
   ExperimentSpec e;
   e.sample_time = config.sample_time;
@@ -614,6 +629,12 @@ ExperimentSpec parse_simulation(const Map& sim, const Config& config, const std:
   e.duration = duration.positive();
   const double samples = std::round(e.duration / e.sample_time);
   if (samples < 1.0) duration.fail("shorter than one sample period");
+  // The record is held in memory, and the count must fit the index type (found
+  // by fuzz_config: a duration of 7e59 s made the conversion undefined).
+  constexpr double kMaxSamples = std::numeric_limits<int>::max();
+  if (samples > kMaxSamples)
+    duration.fail("too long: " + format_number(samples) + " samples at sample_rate_hz, at most " +
+                  format_number(kMaxSamples));
   if (const auto seed = sim.get("seed"))
     e.seed = static_cast<std::uint64_t>(seed->integer(0, std::numeric_limits<long long>::max()));
   e.closed_loop = config.closed_loop;
@@ -624,7 +645,7 @@ ExperimentSpec parse_simulation(const Map& sim, const Config& config, const std:
   if (const auto extra = sim.get(unused))
     extra->fail_plain("not used when model.loop is " + loop + " (the excitation is simulation." + used +
                       ")");
-  const SignalContext ctx{e.sample_time, static_cast<Eigen::Index>(samples), e.seed, dir};
+  const SignalContext ctx{e.sample_time, static_cast<Eigen::Index>(samples), e.seed, dir, &read_file};
   parse_signal(sim.require(used, "model.loop is " + loop), ctx, e);
   return e;
 }
@@ -777,7 +798,8 @@ void parse_faults(const Map& f, Config& config) {
 
 // ---------------------------------------------------------------- document
 
-void parse_document(const Map& top, Config& config, const std::filesystem::path& dir) {
+void parse_document(const Map& top, Config& config, const std::filesystem::path& dir,
+                    const SignalFileReader& read_file) {
   top.allow({"sample_rate_hz", "model", "controller", "plant", "simulation", "estimator", "lcm", "daemon",
              "faults"},
             "");
@@ -787,7 +809,7 @@ void parse_document(const Map& top, Config& config, const std::filesystem::path&
   if (config.closed_loop && !top.has("controller"))
     top.missing("controller", "model.loop is closed");
   if (const auto p = top.get("plant")) config.plant = parse_plant(Map(*p));
-  if (const auto s = top.get("simulation")) config.experiment = parse_simulation(Map(*s), config, dir);
+  if (const auto s = top.get("simulation")) config.experiment = parse_simulation(Map(*s), config, dir, read_file);
   if (const auto e = top.get("estimator")) parse_estimator(Map(*e), config.sample_time, config.estimator);
   if (const auto l = top.get("lcm")) parse_lcm(Map(*l), config.lcm);
   const bool gap_factor_given = top.get("estimator") && Map(*top.get("estimator")).has("gap_factor");
@@ -806,6 +828,8 @@ void complete_estimator(Config& config) {
   e.output_hold = config.output_hold;
   e.forgetting.clear();
   for (const auto& s : config.submodel_settings) e.forgetting.push_back(s.forgetting);
+  e.random_walks.clear();
+  for (const auto& s : config.submodel_settings) e.random_walks.push_back(s.random_walk.value_or(e.random_walk));
 }
 
 YAML::Node load_yaml(const std::string& text, const std::string& source) {
@@ -818,7 +842,8 @@ YAML::Node load_yaml(const std::string& text, const std::string& source) {
 
 }  // namespace
 
-Config parse_config(const std::string& yaml_text, const std::string& source_name) {
+Config parse_config(const std::string& yaml_text, const std::string& source_name,
+                    const SignalFileReader& read_signal_file) {
   const YAML::Node root = load_yaml(yaml_text, source_name);
   if (!root.IsDefined() || root.IsNull())
     throw InputError(source_name + ":1", "empty configuration (expected keys sample_rate_hz and model)");
@@ -826,18 +851,18 @@ Config parse_config(const std::string& yaml_text, const std::string& source_name
   Config config;
   config.source = source_name;
   const Map top(Value(source_name, root, "", line));
-  parse_document(top, config, std::filesystem::path(source_name).parent_path());
+  parse_document(top, config, std::filesystem::path(source_name).parent_path(), read_signal_file);
   complete_estimator(config);
   return config;
 }
 
-Config load_config(const std::string& path) {
+Config load_config(const std::string& path, const SignalFileReader& read_signal_file) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path, std::string("cannot open: ") + std::strerror(errno));
   std::ostringstream text;
   text << in.rdbuf();
   if (in.bad()) throw InputError(path, "cannot read");
-  return parse_config(text.str(), path);
+  return parse_config(text.str(), path, read_signal_file);
 }
 
 // ---------------------------------------------------------------- writing
@@ -932,6 +957,8 @@ void write_model(YamlWriter& w, const Config& config, const AdditiveModel& model
     const std::size_t c = configured_index(config, s.name, i);
     write_submodel(w, 2, s);
     w.number(3, "forgetting", c < config.submodel_settings.size() ? config.submodel_settings[c].forgetting : 1.0);
+    if (c < config.submodel_settings.size() && config.submodel_settings[c].random_walk)
+      w.number(3, "random_walk", *config.submodel_settings[c].random_walk);
     // Only when it still fits theta_i (a written model of another order would not load).
     if (c < covariances.size() && covariances[c].size() > 0 && covariances[c].size() == s.n_theta())
       w.key(3, "initial_covariance", flow_list(covariances[c]));
@@ -1006,6 +1033,7 @@ void write_signal(YamlWriter& w, int in, const SignalSpec& s) {
       w.key(in, "type", "csv");
       w.key(in, "path", quoted(s.csv_path));  // absolute: valid wherever the YAML is written
       w.key(in, "column", quoted(s.csv_column));
+      if (!s.csv_channel.empty()) w.key(in, "channel", quoted(s.csv_channel));
       break;
   }
 }

@@ -124,6 +124,7 @@ struct BlockFilters {
 struct Block {
   int n = 0, m = 0, l = 0, nt = 0;
   double ws = 1.0, lambda = 1.0;
+  double random_walk = 0.0;  // relative std of theta's drift per update (Q, CONTSID's Kalman-filter adaptation)
   ThetaVec scale;  // theta' = scale .* theta (physical)
   ThetaVec theta;  // theta-bar, normalised
   ThetaMat P;      // P-bar, normalised
@@ -270,6 +271,7 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.nt = s.n_theta();
     b.ws = time_scale(s);
     b.lambda = cfg.forgetting.empty() ? 1.0 : cfg.forgetting[i];
+    b.random_walk = cfg.random_walks.empty() ? cfg.random_walk : cfg.random_walks[i];
     b.scale.resize(b.nt);
     for (int j = 1; j <= b.n; ++j) b.scale(j - 1) = std::pow(b.ws, j);
     for (int k = 0; k <= b.m; ++k) b.scale(b.n + k) = std::pow(b.ws, k - b.l);
@@ -405,8 +407,11 @@ bool RecursiveEstimator::Impl::update_block_n(Block& b, double y_f) {
   for (int j = 0; j < nt; ++j) b.theta(j) = theta[j];
   // Guards: random walk (CONTSID's Kalman-filter adaptation), bounded trace.
   // Q is a parameter covariance; P carries theta^2 per output^2 (cov = sigma^2 P).
-  if (cfg.random_walk > 0.0 && e_var > 0.0)
-    for (int j = 0; j < nt; ++j) P[j + j * nt] += std::pow(cfg.random_walk * theta[j], 2) / e_var;
+  if (b.random_walk > 0.0 && e_var > 0.0)
+    for (int j = 0; j < nt; ++j) {
+      const double q = b.random_walk * theta[j];
+      P[j + j * nt] += q * q / e_var;
+    }
   // Per-direction bound: D P D with D = diag(min(1, sqrt(bound/P_jj))) keeps P
   // symmetric positive definite while stopping wind-up in unexcited directions.
   bool clamped = false;
@@ -708,6 +713,10 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
     throw std::invalid_argument("estimator: one forgetting factor per submodel");
   for (double l : settings.forgetting)
     if (!(l > 0.0 && l <= 1.0)) throw std::invalid_argument("estimator: forgetting factor outside (0, 1]");
+  if (!settings.random_walks.empty() && settings.random_walks.size() != initial.submodels.size())
+    throw std::invalid_argument("estimator: one random walk per submodel (or none)");
+  for (double q : settings.random_walks)
+    if (!(q >= 0.0 && std::isfinite(q))) throw std::invalid_argument("estimator: random walk negative or not finite");
   if (settings.block_iterations < 1 || settings.refinements < 0 || settings.update_divisor < 1)
     throw std::invalid_argument("estimator: M_l >= 1, M_s >= 0 and the update divisor >= 1");
   if (settings.closed_loop && settings.controller.empty())
