@@ -457,19 +457,9 @@ Daemon::Impl::Impl(const Config& cfg, lcm_t* shared, LoopProbe* p)
   decode_buffer.resize(kMaxBatch);
   closed_loop = config.closed_loop;
   realtime_priority = config.daemon.realtime_priority;
-  encode_buffer.reserve(4096);
-  if (shared) {
-    lcm = shared;
-  } else {
-    lcm = lcm_create(config.lcm.url.c_str());
-    if (!lcm)
-      throw InputError(config.source, "key 'lcm.url': cannot open LCM provider '" + config.lcm.url +
-                                          "' (a udpm:// URL needs a multicast route, e.g. "
-                                          "'ip route add 224.0.0.0/4 dev lo')");
-    owns_lcm = true;
-  }
   if (config.daemon.realtime_priority > 0) {
-    // Here, where it can fail loudly, rather than in the threads.
+    // Here, where it can fail loudly, rather than in the threads; and before the
+    // LCM instance exists, which a throwing constructor would leak.
     const std::string key = "key 'daemon.realtime_priority': ";
     if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
       throw InputError(config.source, key + "mlockall failed (" + std::strerror(errno) +
@@ -486,6 +476,17 @@ Daemon::Impl::Impl(const Config& cfg, lcm_t* shared, LoopProbe* p)
                                           std::to_string(config.daemon.realtime_priority) +
                                           " (README.md, \"Running under systemd\"), or grant CAP_SYS_NICE");
     pthread_setschedparam(pthread_self(), policy, &old);  // the control thread stays as it was
+  }
+  encode_buffer.reserve(4096);
+  if (shared) {
+    lcm = shared;
+  } else {
+    lcm = lcm_create(config.lcm.url.c_str());
+    if (!lcm)
+      throw InputError(config.source, "key 'lcm.url': cannot open LCM provider '" + config.lcm.url +
+                                          "' (a udpm:// URL needs a multicast route, e.g. "
+                                          "'ip route add 224.0.0.0/4 dev lo')");
+    owns_lcm = true;
   }
   start_ns = mono_ns();
 }
