@@ -82,6 +82,8 @@ for t in "${targets[@]}"; do
   runs=()
   [ -n "${RUNS:-}" ] && runs=(-runs="$RUNS")
   t0=$SECONDS
+  stamp="$DIR/.started-$t"
+  touch "$stamp"
   nice -n "${NICE:-0}" "$DIR/tests/fuzz/$t" "$corpus" -max_total_time="$SECONDS_EACH" "${runs[@]}" \
     -max_len="$max_len" -print_final_stats=1 \
     -artifact_prefix="$findings/" -fork=1 -ignore_crashes=1 -ignore_ooms=1 -ignore_timeouts=1 \
@@ -93,8 +95,11 @@ for t in "${targets[@]}"; do
   # at nice 19 on a busy machine that is the scheduler (one such input, replayed,
   # ran in 60 ms with the process start), so it is listed, not counted as a
   # finding; crash-, leak-, oom- and timeout- files are.
-  found=$(find "$findings" -type f ! -name 'slow-unit-*' | wc -l)
-  slow=$(find "$findings" -type f -name 'slow-unit-*' | wc -l)
+  # This run's findings; those of earlier runs stay in the folder and are listed.
+  found=$(find "$findings" -type f ! -name 'slow-unit-*' -newer "$stamp" | wc -l)
+  earlier=$(find "$findings" -type f ! -name 'slow-unit-*' ! -newer "$stamp" | wc -l)
+  [ "$earlier" -gt 0 ] && echo "$t: $earlier finding(s) of earlier runs in $findings (keep them in tests/fuzz/regressions/$t/)"
+  slow=$(find "$findings" -type f -name 'slow-unit-*' -newer "$stamp" | wc -l)
   [ "$slow" -gt 0 ] && echo "$t: $slow slow-unit input(s) in $findings (replay them to check)"
   total_findings=$((total_findings + found))
   cov=$(grep -oE 'cov: [0-9]+' "$log" | tail -n 1)
