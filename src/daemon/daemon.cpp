@@ -110,12 +110,13 @@ timespec to_timespec(std::int64_t ns) {
 void name_this_thread(const char* name) noexcept { pthread_setname_np(pthread_self(), name); }
 
 // daemon.realtime_priority: SCHED_FIFO for the calling thread (one of those on
-// the latency path); the Daemon's constructor has checked that it is permitted.
-void make_realtime(int priority) noexcept {
-  if (priority <= 0) return;
+// the latency path). Returns pthread_setschedparam's error: the Daemon's
+// constructor checks it once; the threads then know it is permitted.
+int make_realtime(int priority) noexcept {
+  if (priority <= 0) return 0;
   sched_param p{};
   p.sched_priority = priority;
-  pthread_setschedparam(pthread_self(), SCHED_FIFO, &p);
+  return pthread_setschedparam(pthread_self(), SCHED_FIFO, &p);
 }
 
 // The calling thread at SCHED_FIFO `priority` for the scope (nothing for 0), then
@@ -467,9 +468,7 @@ Daemon::Impl::Impl(const Config& cfg, lcm_t* shared, LoopProbe* p)
     int policy = 0;
     sched_param old{};
     pthread_getschedparam(pthread_self(), &policy, &old);
-    sched_param fifo{};
-    fifo.sched_priority = config.daemon.realtime_priority;
-    if (const int e = pthread_setschedparam(pthread_self(), SCHED_FIFO, &fifo); e != 0)
+    if (const int e = make_realtime(config.daemon.realtime_priority); e != 0)
       throw InputError(config.source, key + "SCHED_FIFO at priority " +
                                           std::to_string(config.daemon.realtime_priority) + " not permitted (" +
                                           std::strerror(e) + "); under systemd set LimitRTPRIO=" +

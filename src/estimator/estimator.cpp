@@ -108,11 +108,7 @@ struct BlockFilters {
     for (auto& p : f) p.reset();
   }
   // Prefilter::step, advance, complete and derivatives for channel c.
-  const double* step(Channel c, double w) {
-    if (!shared) return f[c].step(w).data();
-    mode.advance(c);
-    return mode.complete(c, w);
-  }
+  const double* step(Channel c, double w) { return shared ? mode.step(c, w) : f[c].step(w).data(); }
   void advance(Channel c) {
     if (shared) mode.advance(c);
     else f[c].advance();
@@ -225,6 +221,9 @@ struct RecursiveEstimator::Impl {
   void build(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>* fit_covariance, double fit_sigma2,
              double y_var);
   void rediscretise(Block& b);
+  void allocate_window() {
+    for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) w->resize(cfg.warmup_samples);
+  }
   void reset_filters();
   void restart_filters();
   void save_good();
@@ -741,10 +740,7 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
 
   if (settings.warmup_samples > 0) {
     m.fit_context = std::make_shared<const WarmupFit::Context>(WarmupFit::Context{initial, m.cfg});
-    m.wt.resize(settings.warmup_samples);
-    m.wu.resize(settings.warmup_samples);
-    m.wy.resize(settings.warmup_samples);
-    m.wr.resize(settings.warmup_samples);
+    m.allocate_window();
     m.status.warming_up = true;
   } else {
     m.build(initial, nullptr, 0.0, 1.0);
@@ -1004,10 +1000,7 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
   // of range, allocation) leaves this estimator as it was.
   Impl next = m;
   if (next.fit_taken) {  // the window is out in a job: a new one
-    next.wt.resize(next.cfg.warmup_samples);
-    next.wu.resize(next.cfg.warmup_samples);
-    next.wy.resize(next.cfg.warmup_samples);
-    next.wr.resize(next.cfg.warmup_samples);
+    next.allocate_window();
   }
   next.fit_pending = next.fit_taken = false;
   ++next.fit_generation;
