@@ -242,6 +242,39 @@ TEST(Prefilter, SecondOrderBankMatchesOnePrefilterPerSignalWhileTheDenominatorCh
     for (int j = 0; j <= 2; ++j) EXPECT_EQ(bank.derivatives(i)[j], 0.0);
 }
 
+TEST(Prefilter, SecondOrderBankAdvancingAllSignalsAtOnceMatchesOnePrefilterPerSignal) {
+  // The estimator's order of work: advance_all() moves the four held-input
+  // states to t_k, then complete() takes each sample. Against four Prefilters
+  // stepped one by one, with the denominator changing every sample across the
+  // series and closed-form branches (wn T = 0.025..2.5).
+  const double T = 0.05;
+  const int n = 3000;
+  auto denominator = [&](int k) { return mode_denominator(0.5 + 49.5 * k / n, 0.02 + 0.5 * k / n); };
+  std::vector<Prefilter> reference;
+  for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i) reference.emplace_back(denominator(0), T, Hold::zoh);
+  SecondOrderFilterBank bank;
+  const Eigen::VectorXd d_start = denominator(0);
+  bank.set_denominator(d_start(0), d_start(1), d_start(2), T);
+  double worst = 0.0;
+  for (int k = 0; k < n; ++k) {
+    bank.advance_all();
+    for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i) {
+      const double w = std::cos(0.23 * k * (i + 1)) - 0.1 * i;
+      const double* got = bank.complete(i, w);
+      const FilterVector& want = reference[i].step(w);
+      for (int j = 0; j <= 2; ++j) {
+        const double scale = 1.0 + std::abs(want(j));
+        ASSERT_NEAR(got[j], want(j), 1e-12 * scale) << "k=" << k << " signal " << i << " derivative " << j;
+        worst = std::max(worst, std::abs(got[j] - want(j)) / scale);
+      }
+    }
+    const Eigen::VectorXd d = denominator(k + 1);
+    bank.set_denominator(d(0), d(1), d(2), T);
+    for (auto& f : reference) f.set_denominator(d);
+  }
+  EXPECT_LT(worst, 1e-12);
+}
+
 TEST(Prefilter, RigidBodyDoubleIntegratorIsExact) {
   Eigen::VectorXd d(3);
   d << 0.0, 0.0, 1.0;  // 1/p^2

@@ -107,11 +107,18 @@ struct BlockFilters {
     }
     for (auto& p : f) p.reset();
   }
-  // Prefilter::step, advance, complete and derivatives for channel c.
-  const double* step(Channel c, double w) { return shared ? mode.step(c, w) : f[c].step(w).data(); }
-  void advance(Channel c) {
-    if (shared) mode.advance(c);
-    else f[c].advance();
+  // A sample t_k in two phases. begin_sample() moves the held-input states to
+  // t_k: all four at once for a mode (one vectorised loop); Prefilters (a FOH
+  // output needs w_k) wait for their sample. take(c, w) then gives channel c's
+  // derivatives at t_k for w_k (Prefilter::step for those that waited).
+  // advance_held(c) + complete(c, w) is take() split for the instrument input,
+  // whose w_k is solved for after its free response is known.
+  void begin_sample() {
+    if (shared) mode.advance_all();
+  }
+  const double* take(Channel c, double w) { return shared ? mode.complete(c, w) : f[c].step(w).data(); }
+  void advance_held(Channel c) {
+    if (!shared) f[c].advance();
   }
   const double* complete(Channel c, double w) { return shared ? mode.complete(c, w) : f[c].complete(w).data(); }
   const double* derivatives(Channel c) const { return shared ? mode.derivatives(c) : f[c].derivatives().data(); }
@@ -144,6 +151,7 @@ struct Block {
   }
   // B/(p^l A) w from the filter's derivatives d = [w_f, p w_f, ...].
   double output(const double* d) const {
+    if (m == 0) return theta(n) * d[0];  // a mode's B = b0 (the common case)
     double s = 0.0;
     for (int j = 0; j <= m; ++j) s += theta(n + j) * d[j];
     return s;
@@ -151,6 +159,15 @@ struct Block {
   // Regressor (eqs. 19, 33) and instrument (eqs. 20, 29, 32) from the filtered
   // residual output dy, auxiliary output dx, input du and instrument input dz.
   void fill(const double* dy, const double* dx, const double* du, const double* dz) {
+    if (n == 2 && m == 0) {  // a mode (the common case), without the loops
+      phi(0) = -dy[1];
+      phi(1) = -dy[2];
+      phi(2) = du[0];
+      psi(0) = -dx[1];
+      psi(1) = -dx[2];
+      psi(2) = dz[0];
+      return;
+    }
     for (int j = 1; j <= n; ++j) {
       phi(j - 1) = -dy[j];
       psi(j - 1) = -dx[j];
@@ -221,6 +238,7 @@ struct RecursiveEstimator::Impl {
   void build(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>* fit_covariance, double fit_sigma2,
              double y_var);
   void rediscretise(Block& b);
+  void rediscretise_prefilters(Block& b, double Ts);
   void allocate_window() {
     for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) w->resize(cfg.warmup_samples);
   }
@@ -241,6 +259,12 @@ void RecursiveEstimator::Impl::rediscretise(Block& b) {
     b.filters.mode.set_denominator(1.0, b.theta(0), b.theta(1), Ts);
     return;
   }
+  rediscretise_prefilters(b, Ts);
+}
+
+// Out of line: its Eigen temporaries would otherwise cost every mode's
+// rediscretise() a heavier call frame.
+[[gnu::noinline]] void RecursiveEstimator::Impl::rediscretise_prefilters(Block& b, double Ts) {
   Prefilter* f = b.filters.f;
   const FilterVector a = b.a_poly();
   const Discretization da = discretize(a, Ts, cfg.output_hold);
@@ -353,35 +377,44 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
 
 // eqs. (23)-(25) on raw column-major storage (P is nt x nt, leading dimension nt):
 // K = P psi / (lambda + phi^T P psi), theta += K (y_f - phi^T theta),
-// P = (P - K phi^T P) / lambda. N > 0 fixes the size at compile time so that the
-// loops unroll (N = 3: a mode, the common case); N = 0 takes nt at run time.
+// P = (P - K phi^T P) / lambda. The IV recursion (eq. 24) does not keep P
+// symmetric; its symmetric part is kept against round-off (DESIGN.md point 4):
+// P = (P - (K w^T + w K^T)/2) / lambda with w = P^T phi = P phi (P symmetric on
+// entry), computed on the upper triangle and mirrored. N > 0 fixes the size at
+// compile time so that the loops unroll (N = 3: a mode, the common case); N = 0
+// takes nt at run time.
 template <int N>
 bool iv_update(int nt_runtime, double* P, double* theta, const double* phi, const double* psi, double lambda,
                double y_f) {
   const int nt = N > 0 ? N : nt_runtime;
-  double Ppsi[kMaxTheta], phiP[kMaxTheta];
+  double Ppsi[kMaxTheta], w[kMaxTheta];
+  for (int i = 0; i < nt; ++i) Ppsi[i] = w[i] = 0.0;
+  for (int j = 0; j < nt; ++j) {  // by columns: P psi and P phi
+    const double* column = P + j * nt;
+    for (int i = 0; i < nt; ++i) {
+      Ppsi[i] += column[i] * psi[j];
+      w[i] += column[i] * phi[j];
+    }
+  }
   double denom = lambda, eps = y_f;
   for (int i = 0; i < nt; ++i) {
-    double v = 0.0, w = 0.0;
-    for (int j = 0; j < nt; ++j) {
-      v += P[i + j * nt] * psi[j];
-      w += P[j + i * nt] * phi[j];
-    }
-    Ppsi[i] = v;
-    phiP[i] = w;
-    denom += phi[i] * v;
+    denom += phi[i] * Ppsi[i];
     eps -= phi[i] * theta[i];
   }
   if (!std::isfinite(denom) || std::abs(denom) < 1e-300) return false;
   const double inv_lambda = 1.0 / lambda;
+  double K[kMaxTheta];
   for (int i = 0; i < nt; ++i) {
-    const double k = Ppsi[i] / denom;
-    theta[i] += k * eps;
-    for (int j = 0; j < nt; ++j) P[i + j * nt] = (P[i + j * nt] - k * phiP[j]) * inv_lambda;
+    K[i] = Ppsi[i] / denom;
+    theta[i] += K[i] * eps;
   }
-  // Kept symmetric against round-off.
-  for (int i = 0; i < nt; ++i)
-    for (int j = i + 1; j < nt; ++j) P[i + j * nt] = P[j + i * nt] = 0.5 * (P[i + j * nt] + P[j + i * nt]);
+  for (int j = 0; j < nt; ++j) {
+    for (int i = 0; i <= j; ++i) {
+      const double v = (P[i + j * nt] - 0.5 * (K[i] * w[j] + K[j] * w[i])) * inv_lambda;
+      P[i + j * nt] = v;
+      P[j + i * nt] = v;
+    }
+  }
   return true;
 }
 
@@ -401,7 +434,9 @@ bool RecursiveEstimator::Impl::update_block_n(Block& b, double y_f) {
   double theta[kMaxTheta];
   for (int j = 0; j < nt; ++j) theta[j] = b.theta(j);
   if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), b.lambda, y_f)) return false;
-  if (b.n > 0 && project(theta, b.n)) ++status.projections;
+  // A mode with a_1, a_2 > 0 is stable: the common case, decided here.
+  const bool stable_mode = b.n == 2 && theta[0] > 0.0 && theta[1] > 0.0;
+  if (b.n > 0 && !stable_mode && project(theta, b.n)) ++status.projections;
   if (b.n > 0 && theta[b.n - 1] == 0.0) return false;
   for (int j = 0; j < nt; ++j) b.theta(j) = theta[j];
   // Guards: random walk (CONTSID's Kalman-filter adaptation), bounded trace.
@@ -435,6 +470,7 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   if (refine && allow_update) {
     for (std::size_t i = 0; i < blocks.size(); ++i) snapshot[i] = blocks[i].filters;
   }
+  for (auto& b : blocks) b.filters.begin_sample();
   // 1. Instrument input z_k = S_uo(q, t_k) r_k: the noise-free loop with the
   //    known controller and the current model (eq. 29), solved for a biproper
   //    controller. In open loop z = u.
@@ -442,20 +478,23 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   if (cfg.closed_loop) {
     double free = 0.0, D = 0.0;
     for (auto& b : blocks) {
-      b.filters.advance(kZ);
-      free += b.output(b.filters.complete(kZ, 0.0));
+      b.filters.advance_held(kZ);
+      b.xz = b.output(b.filters.complete(kZ, 0.0));  // the free response
+      free += b.xz;
       D += b.feedthrough();
     }
     const double c0 = controller.feedthrough();
     z = (c0 * (s.r - free) + controller.peek(0.0)) / (1.0 + c0 * D);
     controller.step(s.r - (free + D * z));
     for (auto& b : blocks) {
-      b.xz = b.output(b.filters.complete(kZ, z));
+      const double* dz = b.filters.complete(kZ, z);
+      // Strictly proper (m < n + l): the output uses the state alone, not z_k.
+      if (b.m == b.n + b.l) b.xz = b.output(dz);
     }
   }
   double y_hat = 0.0;
   for (auto& b : blocks) {
-    b.xu = b.output(b.filters.step(kU, s.u));
+    b.xu = b.output(b.filters.take(kU, s.u));
     if (!cfg.closed_loop) b.xz = b.xu;
     y_hat += b.xu;
   }
@@ -523,25 +562,26 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   if (update && ++since_update < static_cast<std::uint64_t>(cfg.update_divisor)) update = false;
   if (!update) {
     for (auto& b : blocks) {
-      b.filters.step(kY, y - (y_hat - b.xu));
-      b.filters.step(kX, b.xz);
+      b.filters.take(kY, y - (y_hat - b.xu));
+      b.filters.take(kX, b.xz);
     }
     return flags;
   }
   since_update = 0;
 
   // 4. Algorithm 1: M_l block-coordinate iterations, M_s refinements per block.
+  // Block i's residual output (eq. 15) is y minus the other blocks' outputs at
+  // their latest theta: y - (xu_sum - b.xu), the sum kept up to date below.
+  double xu_sum = y_hat;
   bool healthy = true;
   for (int l = 0; l < cfg.block_iterations && healthy; ++l) {
     for (std::size_t i = 0; i < blocks.size() && healthy; ++i) {
       Block& b = blocks[i];
       if (!refine) {
         // M_l = 1, M_s = 0 (the paper's setting): one update from theta-bar, P-bar in place.
-        double y_tilde = y;
-        for (std::size_t j = 0; j < blocks.size(); ++j)
-          if (j != i) y_tilde -= blocks[j].xu;
-        const double* dy = b.filters.step(kY, y_tilde);
-        const double* dx = b.filters.step(kX, b.xz);
+        const double y_tilde = y - (xu_sum - b.xu);
+        const double* dy = b.filters.take(kY, y_tilde);
+        const double* dx = b.filters.take(kX, b.xz);
         const double* du = b.filters.derivatives(kU);
         const double* dz = cfg.closed_loop ? b.filters.derivatives(kZ) : du;
         b.fill(dy, dx, du, dz);
@@ -549,7 +589,9 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
           healthy = false;
           break;
         }
-        b.xu = b.output(b.filters.derivatives(kU));
+        const double xu = b.output(b.filters.derivatives(kU));
+        xu_sum += xu - b.xu;
+        b.xu = xu;
         continue;
       }
       const ThetaVec theta_bar = b.theta;
@@ -558,20 +600,19 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
       ThetaMat P_iter = P_bar;
       for (int s_it = 0; s_it <= cfg.refinements; ++s_it) {
         // Residual output of this block (eq. 15), other blocks at their latest b.
-        double y_tilde = y;
-        for (std::size_t j = 0; j < blocks.size(); ++j)
-          if (j != i) y_tilde -= blocks[j].xu;
+        const double y_tilde = y - (xu_sum - b.xu);
         if (l > 0 || s_it > 0) {
           // Refinement: the prefilter is the latest iterate; redo this sample.
           b.filters = snapshot[i];
           b.theta = theta_iter;
           rediscretise(b);
-          b.filters.step(kU, s.u);
-          if (cfg.closed_loop) b.filters.step(kZ, z);
+          b.filters.begin_sample();
+          b.filters.take(kU, s.u);
+          if (cfg.closed_loop) b.filters.take(kZ, z);
           b.theta = theta_bar;
         }
-        const double* dy = b.filters.step(kY, y_tilde);
-        const double* dx = b.filters.step(kX, b.xz);
+        const double* dy = b.filters.take(kY, y_tilde);
+        const double* dx = b.filters.take(kX, b.xz);
         const double* du = b.filters.derivatives(kU);
         const double* dz = cfg.closed_loop ? b.filters.derivatives(kZ) : du;
         b.fill(dy, dx, du, dz);
@@ -587,7 +628,9 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
       if (!healthy) break;
       b.theta = theta_iter;
       b.P = P_iter;
-      b.xu = b.output(b.filters.derivatives(kU));  // G_i(theta^{l+1}) u for the next blocks' residuals
+      const double xu = b.output(b.filters.derivatives(kU));  // G_i(theta^{l+1}) u for the next blocks' residuals
+      xu_sum += xu - b.xu;
+      b.xu = xu;
     }
   }
   if (!healthy) {
