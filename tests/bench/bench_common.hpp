@@ -24,6 +24,7 @@ inline Config paper_subset(int K) {
   c.plant->modes.resize(static_cast<std::size_t>(K));
   // load_config fills the estimator's per-submodel lists: one entry per submodel.
   c.estimator.forgetting.resize(static_cast<std::size_t>(K));
+  if (!c.estimator.random_walks.empty()) c.estimator.random_walks.resize(static_cast<std::size_t>(K));
   if (c.estimator.initial_covariance.size() > static_cast<std::size_t>(K))
     c.estimator.initial_covariance.resize(static_cast<std::size_t>(K));
   return c;
