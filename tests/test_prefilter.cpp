@@ -198,6 +198,43 @@ TEST(Prefilter, SecondOrderClosedFormMatchesTheMatrixExponentialInEveryBranch) {
   EXPECT_GT(checked, 200);
 }
 
+TEST(Prefilter, SecondOrderClosedFormStaysExactForStiffOverdampedFilters) {
+  // d2 -> 0 with the damping held: eigenvalues -1/d1 (slow) and -d1/d2 (fast,
+  // down to -3e11 per sample here). e^sigma cosh(w) overflowed to NaN beyond
+  // w ~ 710 (an estimator's mode with a_2 -> 0 then locked its resets on it).
+  // Eigen's matrix exponential loses digits on these matrices (scaling and
+  // squaring at |A T| up to 1e13), so the checks are the semigroup property,
+  // phi(2T) = phi(T)^2 and gamma0(2T) = phi(T) gamma0(T) + gamma0(T), and one
+  // case against a 40-digit reference (mpmath.expm of the augmented matrix).
+  const double T = 0.0993, d1 = 0.0338;
+  int checked = 0;
+  for (int e = 2; e <= 14; ++e) {
+    const double d2 = std::pow(10.0, -e);
+    const SecondOrderDiscretization one = discretize_second_order(1.0, d1, d2, T);
+    const SecondOrderDiscretization two = discretize_second_order(1.0, d1, d2, 2.0 * T);
+    for (int i = 0; i < 2; ++i) {
+      const double g2 = one.phi[i][0] * one.gamma0[0] + one.phi[i][1] * one.gamma0[1] + one.gamma0[i];
+      ASSERT_TRUE(std::isfinite(two.gamma0[i])) << "d2=" << d2;
+      ASSERT_NEAR(two.gamma0[i], g2, 1e-12 * std::max(1.0, std::abs(g2))) << "d2=" << d2 << " i=" << i;
+      for (int j = 0; j < 2; ++j) {
+        const double p2 = one.phi[i][0] * one.phi[0][j] + one.phi[i][1] * one.phi[1][j];
+        ASSERT_TRUE(std::isfinite(two.phi[i][j])) << "d2=" << d2;
+        ASSERT_NEAR(two.phi[i][j], p2, 1e-13 * std::max(1.0, std::abs(p2))) << "d2=" << d2 << " i=" << i << " j=" << j;
+      }
+    }
+    ++checked;
+  }
+  EXPECT_EQ(checked, 13);
+  const SecondOrderDiscretization z = discretize_second_order(1.0, d1, 1e-8, T);
+  const double phi[2][2] = {{0.052977563497461353861, 1.5673972552816308214e-8},
+                            {-1.5673972552816308214, -4.6373105776790106319e-7}};
+  const double gamma0[2] = {0.94702243650253864614, 1.5673972552816308214};
+  for (int i = 0; i < 2; ++i) {
+    for (int j = 0; j < 2; ++j) EXPECT_NEAR(z.phi[i][j], phi[i][j], 1e-15) << i << j;
+    EXPECT_NEAR(z.gamma0[i], gamma0[i], 1e-15) << i;
+  }
+}
+
 TEST(Prefilter, SecondOrderBankMatchesOnePrefilterPerSignalWhileTheDenominatorChanges) {
   // The recursive estimator's mode prefilters: one shared discretisation,
   // re-discretised every sample, against four Prefilters given the same

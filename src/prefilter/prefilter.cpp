@@ -147,22 +147,38 @@ SecondOrderDiscretization discretize_second_order(double d0, double d1, double d
   }
   const double tr = AT.a + AT.d, det = AT.a * AT.d - AT.b * AT.c;
   const double sigma = 0.5 * tr, disc = sigma * sigma - det;  // eigenvalues sigma +- sqrt(disc)
-  const double es = std::exp(sigma);
-  double c1;  // sin(w)/w, sinh(w)/w or 1
-  double ch;  // cos(w), cosh(w) or 1
-  if (disc < -1e-14 * (1.0 + std::abs(det))) {
-    const double w = std::sqrt(-disc);
-    c1 = std::sin(w) / w;  // sin and cos of one argument: one sincos call (GCC)
-    ch = std::cos(w);
-  } else if (disc > 1e-14 * (1.0 + std::abs(det))) {
+  double k0, k1;  // exp(AT) = k0 I + k1 AT
+  if (disc > 1e-14 * (1.0 + std::abs(det)) && disc > 1.0) {
+    // Real eigenvalues at least 2 apart (a stiff, overdamped filter): from the
+    // eigenvalues themselves, k1 = (e^l1 - e^l2)/(l1 - l2) and
+    // k0 = (l1 e^l2 - l2 e^l1)/(l1 - l2). e^sigma cosh(w) would overflow to
+    // 0 x inf = NaN once w is large (a2 -> 0 with the damping held).
+    // The larger-magnitude root without cancellation, the other from l1 l2 = det.
     const double w = std::sqrt(disc);
-    c1 = std::sinh(w) / w;
-    ch = std::cosh(w);
+    const double far = sigma + std::copysign(w, sigma), near = det / far;
+    const double l1 = std::max(far, near), l2 = std::min(far, near);
+    const double e1 = std::exp(l1), e2 = std::exp(l2);
+    k1 = (e1 - e2) / (2.0 * w);
+    k0 = (l1 * e2 - l2 * e1) / (2.0 * w);
   } else {
-    c1 = 1.0;
-    ch = 1.0;
+    const double es = std::exp(sigma);
+    double c1;  // sin(w)/w, sinh(w)/w or 1
+    double ch;  // cos(w), cosh(w) or 1
+    if (disc < -1e-14 * (1.0 + std::abs(det))) {
+      const double w = std::sqrt(-disc);
+      c1 = std::sin(w) / w;  // sin and cos of one argument: one sincos call (GCC)
+      ch = std::cos(w);
+    } else if (disc > 1e-14 * (1.0 + std::abs(det))) {
+      const double w = std::sqrt(disc);
+      c1 = std::sinh(w) / w;
+      ch = std::cosh(w);
+    } else {
+      c1 = 1.0;
+      ch = 1.0;
+    }
+    k1 = es * c1;
+    k0 = es * (ch - sigma * c1);
   }
-  const double k1 = es * c1, k0 = es * (ch - sigma * c1);
   const M2 phi{k0 + k1 * AT.a, k1 * AT.b, k1 * AT.c, k0 + k1 * AT.d};
   // A^{-1} of the companion matrix [[0, 1], [-d0/d2, -d1/d2]] is [[-d1/d0, -d2/d0], [1, 0]].
   const M2 Ainv{-d1 / d0, -d2 / d0, 1.0, 0.0};
