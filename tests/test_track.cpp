@@ -4,11 +4,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -188,6 +190,49 @@ TEST_F(Track, UnwritableOutputIsAnErrorAndLeavesNothing) {
   EXPECT_NE(r.code, 0) << r.output;
   EXPECT_TRUE(contains(r.output, "cannot write")) << r.output;
   EXPECT_EQ(files(), std::vector<std::string>{"d.csv"});
+}
+
+// The record is streamed (read a block of rows at a time while estimating): a
+// long record whose length is no multiple of the blocks gives all its rows,
+// and a malformed row deep in it is named by its line, with nothing written.
+TEST_F(Track, LongStreamedRecordGivesEveryRowAndAMalformedRowDeepInItIsNamed) {
+  const Outcome sim = run("simulate --config " + paper_config() + " --out " + path("d.csv") + " --duration 6000");
+  ASSERT_EQ(sim.code, 0) << sim.output;
+  const Outcome r = track(path("d.csv"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  const Table d = read_table(path("d.csv"));
+  const Table est = read_table(path("est.csv"));
+  ASSERT_EQ(d.data.rows(), 120000);  // 29.3 blocks of 4096 rows
+  ASSERT_EQ(est.data.rows(), 120000);
+  EXPECT_TRUE(est.data.col(0) == d.data.col(d.column("t")));
+  EXPECT_TRUE(contains(r.output, "final estimate at t = 5999.95 s")) << r.output;
+
+  // Line 100001 (data row 99999) gets a u that is no number.
+  std::ifstream in(path("d.csv"));
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::size_t at = 0;
+  for (int line = 1; line < 100001; ++line) at = text.find('\n', at) + 1;
+  const std::size_t u_field = text.find(',', text.find(',', at) + 1) + 1;  // t,r,u,y
+  text.replace(u_field, 0, "0x");
+  write("bad.csv", text);
+  const Outcome bad = track(path("bad.csv"), "est2.csv");
+  EXPECT_EQ(bad.code, 2) << bad.output;
+  EXPECT_TRUE(contains(bad.output, "bad.csv: row 100001, column 'u': not a number (got '0x")) << bad.output;
+  std::vector<std::string> names = files();
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"bad.csv", "d.csv", "est.csv"}));  // no est2.csv, no temporary
+}
+
+TEST_F(Track, EmptyRecordIsBadInputAndWritesNothing) {
+  const Outcome empty = track(write("empty.csv", ""));
+  EXPECT_EQ(empty.code, 2) << empty.output;
+  EXPECT_TRUE(contains(empty.output, "empty.csv: empty file")) << empty.output;
+  const Outcome header = track(write("header.csv", "t,r,u,y\n"));
+  EXPECT_EQ(header.code, 2) << header.output;
+  EXPECT_TRUE(contains(header.output, "header.csv: no data rows")) << header.output;
+  std::vector<std::string> names = files();
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"empty.csv", "header.csv"}));
 }
 
 TEST_F(Track, MissingRequiredOptionIsBadInput) {
