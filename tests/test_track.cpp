@@ -7,7 +7,10 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstring>
+#include <random>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -18,6 +21,7 @@
 #include <gtest/gtest.h>
 
 #include "support.hpp"
+#include "../src/cli/number_format.hpp"
 
 #include "modalwatch/csv.hpp"
 
@@ -233,6 +237,39 @@ TEST_F(Track, EmptyRecordIsBadInputAndWritesNothing) {
   std::vector<std::string> names = files();
   std::sort(names.begin(), names.end());
   EXPECT_EQ(names, (std::vector<std::string>{"empty.csv", "header.csv"}));
+}
+
+// est.csv's standard deviations: write_6g is printf's "%.6g", exactly, on
+// random bit patterns, on typical magnitudes, and next to the rounding and
+// power-of-ten boundaries where its scaled product has to give way.
+TEST(TrackNumberFormat, SixDigitsIsPrintfs) {
+  std::mt19937_64 rng(20261122);
+  long checked = 0, differ = 0;
+  const auto check = [&](double v) {
+    char expected[64], got[64];
+    std::snprintf(expected, sizeof expected, "%.6g", v);
+    char* end = cli::write_6g(got, v);
+    ASSERT_LE(static_cast<std::size_t>(end - got), cli::kNumberChars);
+    *end = '\0';
+    ++checked;
+    if (std::strcmp(expected, got) != 0 && ++differ <= 5) ADD_FAILURE() << expected << " != " << got;
+  };
+  for (int i = 0; i < 400000; ++i) {
+    const std::uint64_t bits = rng();
+    double v;
+    std::memcpy(&v, &bits, sizeof v);
+    check(v);
+  }
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  for (int i = 0; i < 400000; ++i) check(unit(rng) * std::pow(10.0, static_cast<int>(rng() % 30) - 20));
+  for (int p = -320; p <= 310; ++p)
+    for (const double m : {1.0, 9.999995, 9.9999949999, 9.99999500001, 1.000005, 1.0000049999999, 1.234565, 5.0}) {
+      const double v = m * std::pow(10.0, p);
+      for (const double x : {v, std::nextafter(v, 0.0), std::nextafter(v, 1e308), -v}) check(x);
+    }
+  for (int i = 0; i < 200000; ++i) check(i * 1e-6 + 0.5e-6);  // halfway cases, as near as doubles get
+  for (const double v : {0.0, -0.0, std::nan(""), HUGE_VAL, -HUGE_VAL, 5e-324, 1.7976931348623157e308}) check(v);
+  EXPECT_EQ(differ, 0) << "of " << checked;
 }
 
 TEST_F(Track, MissingRequiredOptionIsBadInput) {

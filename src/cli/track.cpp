@@ -4,8 +4,8 @@
 // The record is read leniently (NaN/Inf samples and time gaps are passed on to
 // the estimator, which counts them). A CSV record is streamed: a reader thread
 // parses it a block of rows at a time while the estimation loop runs (an LCM
-// log is read whole first). est.csv is formatted with std::to_chars
-// (shortest round-trip) by two threads, a block of rows at a time into
+// log is read whole first). est.csv is formatted (t and the estimates
+// shortest round-trip, their standard deviations to 6 digits: number_format.hpp) by two threads, a block of rows at a time into
 // preallocated buffers, written in order to a temporary file and renamed at
 // the end, so a failure leaves nothing behind. Progress goes to stderr only when it is a terminal.
 #include <fcntl.h>
@@ -34,6 +34,7 @@
 
 #include "commands.hpp"
 #include "guarded.hpp"
+#include "number_format.hpp"
 #include "records.hpp"
 #include "table.hpp"
 #include "modalwatch/config.hpp"
@@ -228,6 +229,13 @@ class AtomicFile {
   bool committed_ = false;
 };
 
+// How est.csv writes a column (number_format.hpp).
+enum class ColumnFormat {
+  kExact,      // shortest round-trip: t, the estimates, residual_rms
+  kSixDigits,  // "%.6g": the standard deviations
+  kInteger,    // flags, resets
+};
+
 // A block of rows formatted into one preallocated buffer.
 class RowWriter {
  public:
@@ -242,6 +250,10 @@ class RowWriter {
   void clear() { cursor_ = buffer_.get(); }
   void put(double v) {
     cursor_ = std::to_chars(cursor_, cursor_ + kFieldBytes, v).ptr;
+    *cursor_++ = ',';
+  }
+  void put_6g(double v) {
+    cursor_ = write_6g(cursor_, v);
     *cursor_++ = ',';
   }
   void put(std::uint64_t v) {
@@ -259,7 +271,7 @@ class RowWriter {
 
 // The estimation loop stores each row's raw values into blocks; formatter
 // threads format whole blocks and write them in their order. Formatting (about
-// 20 shortest round-trip doubles a row) costs several steps of the estimator:
+// 20 numbers a row, 11 of them shortest round-trip) costs several steps of the estimator:
 // with two formatters it spreads over both cores instead of one thread being
 // the bottleneck while the estimation loop waits.
 class RowPipeline {
@@ -268,9 +280,8 @@ class RowPipeline {
   static constexpr std::size_t kBlocks = 6;
   static constexpr std::size_t kFormatters = 2;
 
-  // Columns [0, integers_from) are written as doubles, the rest as integers.
-  RowPipeline(AtomicFile& file, std::size_t columns, std::size_t integers_from)
-      : file_(file), columns_(columns), integers_from_(integers_from) {
+  RowPipeline(AtomicFile& file, std::vector<ColumnFormat> formats)
+      : file_(file), columns_(formats.size()), formats_(std::move(formats)) {
     storage_.resize(kBlocks);
     for (auto& b : storage_) {
       b.resize(kRowsPerBlock * columns_);
@@ -368,14 +379,26 @@ class RowPipeline {
     writer.clear();
     for (std::size_t r = 0; r < block.count; ++r) {
       const double* row = block.rows + r * columns_;
-      for (std::size_t c = 0; c < integers_from_; ++c) writer.put(row[c]);
-      for (std::size_t c = integers_from_; c < columns_; ++c) writer.put(static_cast<std::uint64_t>(row[c]));
+      for (std::size_t c = 0; c < columns_; ++c) {
+        switch (formats_[c]) {
+          case ColumnFormat::kExact:
+            writer.put(row[c]);
+            break;
+          case ColumnFormat::kSixDigits:
+            writer.put_6g(row[c]);
+            break;
+          case ColumnFormat::kInteger:
+            writer.put(static_cast<std::uint64_t>(row[c]));
+            break;
+        }
+      }
       writer.end_row();
     }
   }
 
   AtomicFile& file_;
-  const std::size_t columns_, integers_from_;
+  const std::size_t columns_;
+  const std::vector<ColumnFormat> formats_;
   std::vector<std::vector<double>> storage_;
   double* current_ = nullptr;
   std::size_t used_ = 0;
@@ -437,11 +460,20 @@ class ProgressBar {
   bool drawn_ = false;
 };
 
-std::vector<std::string> est_columns(const AdditiveModel& model) {
-  std::vector<std::string> columns{"t"};
-  for (const auto& s : model.submodels)
-    for (const char* q : {"_wn", "_zeta", "_gain", "_wn_std", "_zeta_std", "_gain_std"}) columns.push_back(s.name + q);
-  columns.insert(columns.end(), {"residual_rms", "flags", "resets"});
+struct EstColumn {
+  std::string name;
+  ColumnFormat format;
+};
+
+std::vector<EstColumn> est_columns(const AdditiveModel& model) {
+  std::vector<EstColumn> columns{{"t", ColumnFormat::kExact}};
+  for (const auto& s : model.submodels) {
+    for (const char* q : {"_wn", "_zeta", "_gain"}) columns.push_back({s.name + q, ColumnFormat::kExact});
+    for (const char* q : {"_wn_std", "_zeta_std", "_gain_std"}) columns.push_back({s.name + q, ColumnFormat::kSixDigits});
+  }
+  columns.push_back({"residual_rms", ColumnFormat::kExact});
+  columns.push_back({"flags", ColumnFormat::kInteger});
+  columns.push_back({"resets", ColumnFormat::kInteger});
   return columns;
 }
 
@@ -475,12 +507,12 @@ int track(const TrackArgs& args) {
 
     RecursiveEstimator estimator(config.model, settings);
     const int K = estimator.submodels();
-    const std::vector<std::string> columns = est_columns(config.model);
+    const std::vector<EstColumn> columns = est_columns(config.model);
 
     AtomicFile file(args.out);
     {
       std::string header;
-      for (const auto& c : columns) (header += header.empty() ? "" : ",") += c;
+      for (const auto& c : columns) (header += header.empty() ? "" : ",") += c.name;
       header += '\n';
       file.write(header.data(), header.size());
     }
@@ -489,7 +521,9 @@ int track(const TrackArgs& args) {
     double last_t = 0.0;
     ProgressBar progress(args.progress,
                          stream ? static_cast<double>(stream->file_size()) : static_cast<double>(whole.size()));
-    RowPipeline rows(file, columns.size(), columns.size() - 2);  // flags and resets are integers
+    std::vector<ColumnFormat> formats;
+    for (const auto& c : columns) formats.push_back(c.format);
+    RowPipeline rows(file, std::move(formats));
     // One row of estimates per sample (r: nullptr in open loop).
     const auto estimate = [&](const double* t, const double* u, const double* y, const double* r, std::size_t count) {
       for (std::size_t k = 0; k < count; ++k) {
