@@ -13,7 +13,8 @@
 # RT_PRIORITY=N (needs CAP_SYS_NICE or an RLIMIT_RTPRIO of N) runs the daemon with
 # daemon.realtime_priority N and the bench's sender and listener at SCHED_FIFO N+1:
 # the bench stands for the motion controller, which outranks a monitor beside it.
-# RATES (the batch rates tried, samples/s; empty skips that part).
+# RATES (the batch rates tried, samples/s; empty skips that part). DAEMON=path runs
+# another modalwatchd build (an A/B comparison; the bench stays this tree's).
 # MACHINE_SECONDS (10; 0 skips) runs `modalwatch_daemon_bench machine` first: the
 # machine's own wake-up latency and CPU preemption, the floor under the figures.
 #   scripts/daemon_bench.sh            LOOPS="2000 10000" SECONDS_PER_RUN=30 BUILD_DIR=build-release JOBS=2 RT_PRIORITY=0
@@ -60,7 +61,7 @@ thread_ticks() {
 }
 
 start_daemon() {
-  "$build/modalwatchd" --config "$work/bench.yaml" 2> "$work/daemon.log" &
+  "${DAEMON:-$build/modalwatchd}" --config "$work/bench.yaml" 2> "$work/daemon.log" &
   daemon=$!
   sleep 0.5
 }
