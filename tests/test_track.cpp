@@ -187,6 +187,30 @@ TEST_F(Track, WrongSampleRateIsBadInput) {
   EXPECT_EQ(files(), std::vector<std::string>{"slow.csv"});
 }
 
+// A long record at the wrong rate is rejected on its first block of rows, not
+// after the whole record has been estimated; a record that starts right and
+// goes wrong later is still caught by the check at the end.
+TEST_F(Track, WrongSampleRateIsCaughtOnTheFirstBlockOfALongRecord) {
+  std::ostringstream s;
+  s << "t,r,u,y\n";
+  for (int k = 0; k < 100000; ++k) s << k * 0.1 << ",0,0,0\n";
+  const Outcome r = track(write("slow.csv", s.str()));
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_TRUE(contains(r.output, "sample time 0.100000 s (median step of the first 4096 rows)")) << r.output;
+  EXPECT_EQ(files(), std::vector<std::string>{"slow.csv"});
+
+  std::ostringstream late;
+  late << "t,r,u,y\n";
+  for (int k = 0; k < 5000; ++k) late << k * 0.05 << ",0,0,0\n";               // 20 Hz for 5000 rows
+  for (int k = 0; k < 20000; ++k) late << 250.0 + k * 0.1 << ",0,0,0\n";      // then 10 Hz
+  const Outcome r2 = track(write("late.csv", late.str()));
+  EXPECT_EQ(r2.code, 2) << r2.output;
+  EXPECT_TRUE(contains(r2.output, "sample time 0.100000 s (median step)")) << r2.output;
+  std::vector<std::string> left = files();
+  std::sort(left.begin(), left.end());
+  EXPECT_EQ(left, (std::vector<std::string>{"late.csv", "slow.csv"}));
+}
+
 TEST_F(Track, UnwritableOutputIsAnErrorAndLeavesNothing) {
   const Outcome sim = run("simulate --config " + paper_config() + " --out " + path("d.csv") + " --duration 10");
   ASSERT_EQ(sim.code, 0) << sim.output;

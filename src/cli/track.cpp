@@ -51,7 +51,8 @@ using Clock = std::chrono::steady_clock;
 
 // The record's step must be the configured one (gaps aside): at least half of
 // the steps within 1 % of the sample time. Counted as the samples go by (a CSV
-// record is streamed, never held whole); only the message needs all steps.
+// record is streamed, never held whole) and checked after the first block (a
+// wrong rate fails at once) and at the end; only the message needs all steps.
 class SampleTimeCheck {
  public:
   explicit SampleTimeCheck(double T) : T_(T) {}
@@ -62,14 +63,15 @@ class SampleTimeCheck {
   }
   bool passed() const { return samples_ < 3 || 2 * matching_ >= samples_ - 1; }
   // Throws naming the median step of `times` (the record's, read again).
-  [[noreturn]] void fail(const std::string& path, const std::vector<double>& times) const {
+  [[noreturn]] void fail(const std::string& path, const std::vector<double>& times,
+                         const std::string& which = "median step") const {
     std::vector<double> steps;
     for (std::size_t k = 1; k < times.size(); ++k) steps.push_back(times[k] - times[k - 1]);
     if (steps.empty()) throw InputError(path, "column 't': the record changed while it was read");
     const auto mid = steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2);
     std::nth_element(steps.begin(), mid, steps.end());
     throw InputError(path, "column 't': sample time " + std::to_string(*mid) +
-                               " s (median step) does not match sample_rate_hz " + std::to_string(1.0 / T_));
+                               " s (" + which + ") does not match sample_rate_hz " + std::to_string(1.0 / T_));
   }
 
  private:
@@ -550,8 +552,15 @@ int track(const TrackArgs& args) {
     if (stream) {
       {
         BlockReader reader(*stream);
+        bool first_block = true;
         while (const RecordBlock* block = reader.next()) {
           for (const double t : block->t) sample_time.add(t);
+          // A wrong sample_rate_hz shows in the first block already: say so
+          // now rather than after estimating the whole record.
+          if (first_block && !sample_time.passed())
+            sample_time.fail(args.data, block->t,
+                             "median step of the first " + std::to_string(block->size()) + " rows");
+          first_block = false;
           estimate(block->t.data(), block->u.data(), block->y.data(), with_r ? block->r.data() : nullptr,
                    block->size());
           progress.maybe_draw(static_cast<double>(reader.bytes_read()), n);
