@@ -11,11 +11,16 @@
 # on the input held during its fit (SKIP_SECONDS, 10: check the fit's duration
 # in the "warm-up over" line), at two loop rates.
 # RT_PRIORITY=N (needs CAP_SYS_NICE or an RLIMIT_RTPRIO of N) runs the daemon with
-# daemon.realtime_priority N and the bench's sender and listener at SCHED_FIFO N-1.
-#   scripts/daemon_bench.sh            LOOPS="2000 10000" SECONDS_PER_RUN=30 BUILD_DIR=build RT_PRIORITY=0
+# daemon.realtime_priority N and the bench's sender and listener at SCHED_FIFO N+1:
+# the bench stands for the motion controller, which outranks a monitor beside it.
+# RATES (the batch rates tried, samples/s; empty skips that part). DAEMON=path runs
+# another modalwatchd build (an A/B comparison; the bench stays this tree's).
+# MACHINE_SECONDS (10; 0 skips) runs `modalwatch_daemon_bench machine` first: the
+# machine's own wake-up latency and CPU preemption, the floor under the figures.
+#   scripts/daemon_bench.sh            LOOPS="2000 10000" SECONDS_PER_RUN=30 BUILD_DIR=build-release JOBS=2 RT_PRIORITY=0
 set -euo pipefail
 cd "$(dirname "$0")/.."
-build="${BUILD_DIR:-build}"
+build="${BUILD_DIR:-build-release}"
 loops="${LOOPS:-2000 10000}"
 rt="${RT_PRIORITY:-0}"
 skip="${SKIP_SECONDS:-10}"  # the warm-up (5 s), its fit and the catch-up on the input held meanwhile
@@ -23,6 +28,14 @@ run_s="${SECONDS_PER_RUN:-30}"
 work="$(mktemp -d)"
 trap 'kill "${daemon:-}" 2>/dev/null || true; rm -rf "$work"' EXIT
 port=$((7900 + $$ % 90))
+
+# Release, with the benchmark drivers; the same tree scripts/bench.sh uses.
+if ! { cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DMODALWATCH_BENCHMARKS=ON &&
+       cmake --build "$build" -j"${JOBS:-2}" --target modalwatch modalwatchd modalwatch_daemon_bench; } \
+       > "$work/build.log" 2>&1; then
+  cat "$work/build.log"
+  exit 1
+fi
 
 # The drift config on its own port; 10 s of record to cycle.
 sed -e "s#url: udpm://239.255.76.67:7667?ttl=0#url: \"udpm://239.255.76.67:${port}?ttl=0\"#" \
@@ -35,14 +48,20 @@ config_for() {  # loop rate, publish period
   if [ "$rt" -gt 0 ]; then sed -i -e "s#^daemon:#daemon:\n  realtime_priority: $rt#" "$work/bench.yaml"; fi
 }
 bench() {
-  if [ "$rt" -gt 0 ]; then chrt -f $((rt - 1)) "$build/tests/bench/modalwatch_daemon_bench" "$@"
+  if [ "$rt" -gt 0 ]; then chrt -f $((rt + 1)) "$build/tests/bench/modalwatch_daemon_bench" "$@"
   else "$build/tests/bench/modalwatch_daemon_bench" "$@"; fi
 }
 
 cpu_ticks() { awk '{print $14 + $15}' "/proc/$1/stat"; }
+# One line per thread: tid, name, user+system ticks (comm has no spaces here).
+thread_ticks() {
+  for t in /proc/"$1"/task/*; do
+    echo "${t##*/} $(cat "$t/comm") $(awk '{print $14 + $15}' "$t/stat")"
+  done 2>/dev/null
+}
 
 start_daemon() {
-  "$build/modalwatchd" --config "$work/bench.yaml" 2> "$work/daemon.log" &
+  "${DAEMON:-$build/modalwatchd}" --config "$work/bench.yaml" 2> "$work/daemon.log" &
   daemon=$!
   sleep 0.5
 }
@@ -53,25 +72,32 @@ stop_daemon() {
 }
 
 echo "== machine: $(nproc) cores, load average $(cut -d' ' -f1-3 /proc/loadavg); realtime priority ${rt} (0: off)"
+# The floor under every figure below: the machine's own wake-up latency and the
+# time it takes CPUs away, measured without modalwatch (at the bench's priority).
+if [ "${MACHINE_SECONDS:-10}" != 0 ]; then bench machine --seconds "${MACHINE_SECONDS:-10}"; fi
 hz=$(getconf CLK_TCK)
 for loop_hz in $loops; do
   echo "== 4096 Hz, one sample_t per packet, ${run_s} s, loop ${loop_hz} Hz, an estimate every 10 ms"
   config_for "$loop_hz" 0.01
   start_daemon
-  c0=$(cpu_ticks "$daemon"); t0=$(date +%s.%N)
+  c0=$(cpu_ticks "$daemon"); t0=$(date +%s.%N); thread_ticks "$daemon" > "$work/threads0"
   bench latency --config "$work/bench.yaml" --data "$work/record.csv" --rate 4096 \
     --seconds "$run_s" --skip "$skip"
-  c1=$(cpu_ticks "$daemon"); t1=$(date +%s.%N)
+  c1=$(cpu_ticks "$daemon"); t1=$(date +%s.%N); thread_ticks "$daemon" > "$work/threads1"
   awk -v c="$((c1 - c0))" -v hz="$hz" -v a="$t0" -v b="$t1" \
     'BEGIN { printf "  daemon CPU: %.1f %% of one core (user+system over %.1f s, warm-up fit included)\n", 100 * c / hz / (b - a), b - a }'
+  # Per thread (LCM's receive thread is the second "modalwatchd").
+  awk -v hz="$hz" -v a="$t0" -v b="$t1" 'NR == FNR { before[$1] = $3; next }
+    { line = line sprintf(" %s %.1f,", $2, 100 * ($3 - before[$1]) / hz / (b - a)) }
+    END { sub(/,$/, "", line); print "    per thread (%):" line }' "$work/threads0" "$work/threads1"
   echo "  load average now: $(cut -d' ' -f1-3 /proc/loadavg)"
   grep -o "warm-up over.*" "$work/daemon.log" | sed 's/^/  daemon: /' || true
   stop_daemon
 done
 config_for 2000 0.1
 
-echo "== highest sustained batch rate without drops (batches of 256 samples, 3 s per rate)"
-for rate in 50000 100000 150000 200000 300000 400000; do
+[ -n "${RATES-x}" ] && echo "== highest sustained batch rate without drops (batches of 256 samples, 3 s per rate)"
+for rate in ${RATES-50000 100000 150000 200000 300000 400000}; do
   start_daemon
   line=$(bench rate --config "$work/bench.yaml" --data "$work/record.csv" \
            --rate "$rate" --seconds 3 --batch 256 | grep "daemon:")

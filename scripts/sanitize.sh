@@ -20,8 +20,8 @@
 #    ctest as *_NOT_BUILT and do not match the filter.
 #
 # Environment: JOBS (2), ASAN_DIR (build-asan), TSAN_DIR (build-tsan),
-# ASAN_EXCLUDE (MonteCarlo), ASAN_TARGETS (all), ASAN_TESTS (all, a ctest -R regex), TSAN_TARGETS ("test_spsc_ring", space separated),
-# TSAN_TESTS (SpscRing, a ctest -R regex), SKIP_ASAN / SKIP_TSAN (1 to skip),
+# ASAN_EXCLUDE (MonteCarlo), ASAN_TARGETS (all), ASAN_TESTS (all, a ctest -R regex), TSAN_TARGETS ("test_spsc_ring test_doorbell", space separated),
+# TSAN_TESTS (^(SpscRing|Doorbell), a ctest -R regex), SKIP_ASAN / SKIP_TSAN (1 to skip),
 # MODALWATCH_STRESS_ITEMS (items per threaded stress test; the tests pick a
 # smaller default under sanitizers), and ASAN_OPTIONS / UBSAN_OPTIONS /
 # TSAN_OPTIONS to override the defaults below.
@@ -34,8 +34,8 @@ TSAN_DIR=${TSAN_DIR:-build-tsan}
 ASAN_EXCLUDE=${ASAN_EXCLUDE:-MonteCarlo}
 ASAN_TARGETS=${ASAN_TARGETS:-}
 ASAN_TESTS=${ASAN_TESTS:-}
-TSAN_TARGETS=${TSAN_TARGETS:-test_spsc_ring}
-TSAN_TESTS=${TSAN_TESTS:-SpscRing}
+TSAN_TARGETS=${TSAN_TARGETS:-test_spsc_ring test_doorbell}
+TSAN_TESTS=${TSAN_TESTS:-^(SpscRing|Doorbell)}
 SKIP_ASAN=${SKIP_ASAN:-0}
 SKIP_TSAN=${SKIP_TSAN:-0}
 

@@ -337,3 +337,154 @@ TEST_F(CsvTest, TextEntryPointsMatchTheFileReaders) {
   EXPECT_EQ(parse_table("t,u\n0,1\n", "mem").data(0, 1), 1.0);
   EXPECT_EQ(error_of([&] { parse_record(text, "mem.csv"); }), "mem.csv: row 3, column 'u': not a finite number (got 'nan')");
 }
+
+// RecordStream (`modalwatch track`'s reader): the same rows and the same
+// errors as read_record, a block at a time, whatever the block size and
+// wherever the file's 1 MiB reads split a line.
+namespace {
+
+using modalwatch::RecordBlock;
+using modalwatch::RecordStream;
+
+modalwatch::RecordReadOptions stream_options(double sample_time) {
+  modalwatch::RecordReadOptions o;
+  o.allow_nonfinite = true;
+  o.allow_gaps = true;
+  o.sample_time = sample_time;
+  return o;
+}
+
+// All rows of the stream, read max_rows at a time, as a Record.
+modalwatch::Record read_streamed(const std::string& path, std::size_t max_rows, double sample_time,
+                                 std::vector<std::size_t>* sizes = nullptr) {
+  RecordStream stream(path, {}, stream_options(sample_time));
+  std::vector<double> t, u, y, r;
+  RecordBlock block;
+  std::size_t n = 0;
+  while ((n = stream.read(block, max_rows)) > 0) {
+    EXPECT_EQ(n, block.size());
+    EXPECT_LE(n, max_rows);
+    if (sizes != nullptr) sizes->push_back(n);
+    t.insert(t.end(), block.t.begin(), block.t.end());
+    u.insert(u.end(), block.u.begin(), block.u.end());
+    y.insert(y.end(), block.y.begin(), block.y.end());
+    r.insert(r.end(), block.r.begin(), block.r.end());
+  }
+  EXPECT_EQ(stream.read(block, max_rows), 0u);  // stays at the end
+  EXPECT_EQ(stream.bytes_read(), stream.file_size());
+  const auto vec = [](const std::vector<double>& v) {
+    return Eigen::VectorXd(Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size())));
+  };
+  modalwatch::Record rec;
+  rec.t = vec(t);
+  rec.u = vec(u);
+  rec.y = vec(y);
+  if (!r.empty()) rec.r = vec(r);
+  return rec;
+}
+
+// `rows` rows of t = k/1000 and 17-digit u, y, r (about 70 bytes a row).
+std::string long_record_text(int rows) {
+  std::string text = "t,r,u,y\n";
+  char line[160];
+  for (int k = 0; k < rows; ++k) {
+    const double x = std::sin(0.37 * k) * 1.2345678901234567;
+    std::snprintf(line, sizeof line, "%.17g,%.17g,%.17g,%.17g\n", k * 1e-3, -x, x / 3.0, x * 1e-7);
+    text += line;
+  }
+  return text;
+}
+
+}  // namespace
+
+TEST_F(CsvTest, StreamDeliversTheRowsOfReadRecordInBlocksOfAnySize) {
+  const int rows = 40001;  // 2.8 MB: three 1 MiB reads, lines split at their ends
+  const std::string p = file("long.csv", long_record_text(rows));
+  const modalwatch::Record whole = read_record(p, {}, stream_options(1e-3));
+  ASSERT_EQ(whole.size(), rows);
+  for (const std::size_t max_rows : {std::size_t{1}, std::size_t{7}, std::size_t{4096}, std::size_t{100000}}) {
+    std::vector<std::size_t> sizes;
+    const modalwatch::Record streamed = read_streamed(p, max_rows, 1e-3, &sizes);
+    EXPECT_EQ(streamed.t, whole.t) << max_rows;
+    EXPECT_EQ(streamed.u, whole.u) << max_rows;
+    EXPECT_EQ(streamed.y, whole.y) << max_rows;
+    EXPECT_EQ(streamed.r, whole.r) << max_rows;
+    // Full blocks, then the remainder (40001 is a multiple of none of the sizes but 1).
+    ASSERT_EQ(sizes.size(), (rows + max_rows - 1) / max_rows);
+    for (std::size_t i = 0; i + 1 < sizes.size(); ++i) ASSERT_EQ(sizes[i], max_rows);
+    EXPECT_EQ(sizes.back(), rows - (sizes.size() - 1) * max_rows);
+  }
+}
+
+TEST_F(CsvTest, StreamAcceptsWhatReadRecordAccepts) {
+  // BOM, CRLF, padded fields, '+' signs, no final newline; trailing blank lines.
+  const std::string text = "\xEF\xBB\xBFt , u,y\r\n0, +1.5 ,-2\r\n0.1,nan,4E1\r\n0.3,inf,2";
+  const std::string p = file("a.csv", text);
+  const modalwatch::Record whole = read_record(p, {}, stream_options(0.1));
+  const modalwatch::Record streamed = read_streamed(p, 2, 0.1);
+  ASSERT_EQ(streamed.size(), 3);
+  EXPECT_EQ(streamed.t, whole.t);
+  EXPECT_EQ(streamed.y, whole.y);
+  EXPECT_EQ(streamed.u(0), 1.5);
+  EXPECT_TRUE(std::isnan(streamed.u(1)));
+  EXPECT_TRUE(std::isinf(streamed.u(2)));
+  EXPECT_FALSE(streamed.has_reference());
+  EXPECT_EQ(read_streamed(file("b.csv", "t,u,y\n0,1,2\n\n \n\n"), 5, 1.0).size(), 1);
+  // A line longer than the 1 MiB read (a field padded with 3 MB of blanks).
+  const std::string padded = "t,u,y\n0,1,2\n1," + std::string(3 << 20, ' ') + "5,6\n2,7,8\n";
+  const modalwatch::Record wide = read_streamed(file("wide.csv", padded), 10, 1.0);
+  ASSERT_EQ(wide.size(), 3);
+  EXPECT_EQ(wide.u(1), 5.0);
+  EXPECT_EQ(wide.y(2), 8.0);
+}
+
+TEST_F(CsvTest, StreamErrorsNameFileLineAndColumnAsReadRecordDoes) {
+  const auto stream_error = [&](const std::string& name, const std::string& text) {
+    return error_of([&] { read_streamed(file(name, text), 3, 1.0); });
+  };
+  const auto file_error = [&](const std::string& name, const std::string& text) {
+    return error_of([&] { read_record(file(name, text), {}, stream_options(1.0)); });
+  };
+  for (const auto& [name, text] : std::vector<std::pair<std::string, std::string>>{
+           {"empty.csv", ""},
+           {"blank.csv", " \n\r\n\n"},
+           {"bom.csv", "\xEF\xBB\xBF"},
+           {"header.csv", "t,u,y\n"},
+           {"nocol.csv", "t,a,y\n0,0,0\n"},
+           {"dup.csv", "t,u,u\n0,1,2\n"},
+           {"text.csv", "t,u,y\n0,1,2\n1,x,2\n"},
+           {"short.csv", "t,u,y\n0,1,2\n1,2\n"},
+           {"long.csv", "t,u,y\n0,1,2\n1,2,3,4\n"},
+           {"nan_t.csv", "t,u,y\n0,1,2\nnan,2,3\n"},
+           {"back.csv", "t,u,y\n0,1,2\n1,1,2\n2,1,2\n1.5,1,2\n"},
+           {"step.csv", "t,u,y\n0,1,2\n1,1,2\n1.5,1,2\n"},
+           {"hole.csv", "t,u,y\n0,1,2\n1,1,2\n\n2,1,2\n"},
+       }) {
+    const std::string streamed = stream_error(name, text);
+    EXPECT_FALSE(streamed.empty()) << name;
+    EXPECT_EQ(streamed, file_error(name, text)) << name;
+  }
+  EXPECT_CONTAINS(error_of([&] { RecordStream stream(path("missing.csv"), {}, stream_options(1.0)); }),
+                  "missing.csv: cannot open");
+}
+
+TEST_F(CsvTest, StreamNamesAMalformedRowDeepInTheRecordAfterTheRowsBeforeIt) {
+  std::string text = long_record_text(40000);
+  // Row k (0-based) is line k + 2: break line 30002's y.
+  std::size_t at = 0;
+  for (int line = 1; line < 30002; ++line) at = text.find('\n', at) + 1;
+  text.replace(text.rfind(',', text.find('\n', at)) + 1, 1, "x");
+  const std::string p = file("deep.csv", text);
+  RecordStream stream(p, {}, stream_options(1e-3));
+  RecordBlock block;
+  std::size_t rows = 0;
+  std::string message;
+  try {
+    while (const std::size_t n = stream.read(block, 4096)) rows += n;
+  } catch (const InputError& e) {
+    message = e.what();
+  }
+  EXPECT_EQ(rows, 7u * 4096u);  // the blocks wholly before the row
+  EXPECT_CONTAINS(message, "deep.csv: row 30002, column 'y': not a number");
+  EXPECT_EQ(message, error_of([&] { read_record(p, {}, stream_options(1e-3)); }));
+}

@@ -4,11 +4,16 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstring>
+#include <random>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -16,6 +21,7 @@
 #include <gtest/gtest.h>
 
 #include "support.hpp"
+#include "../src/cli/number_format.hpp"
 
 #include "modalwatch/csv.hpp"
 
@@ -181,6 +187,30 @@ TEST_F(Track, WrongSampleRateIsBadInput) {
   EXPECT_EQ(files(), std::vector<std::string>{"slow.csv"});
 }
 
+// A long record at the wrong rate is rejected on its first block of rows, not
+// after the whole record has been estimated; a record that starts right and
+// goes wrong later is still caught by the check at the end.
+TEST_F(Track, WrongSampleRateIsCaughtOnTheFirstBlockOfALongRecord) {
+  std::ostringstream s;
+  s << "t,r,u,y\n";
+  for (int k = 0; k < 100000; ++k) s << k * 0.1 << ",0,0,0\n";
+  const Outcome r = track(write("slow.csv", s.str()));
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_TRUE(contains(r.output, "sample time 0.100000 s (median step of the first 4096 rows)")) << r.output;
+  EXPECT_EQ(files(), std::vector<std::string>{"slow.csv"});
+
+  std::ostringstream late;
+  late << "t,r,u,y\n";
+  for (int k = 0; k < 5000; ++k) late << k * 0.05 << ",0,0,0\n";               // 20 Hz for 5000 rows
+  for (int k = 0; k < 20000; ++k) late << 250.0 + k * 0.1 << ",0,0,0\n";      // then 10 Hz
+  const Outcome r2 = track(write("late.csv", late.str()));
+  EXPECT_EQ(r2.code, 2) << r2.output;
+  EXPECT_TRUE(contains(r2.output, "sample time 0.100000 s (median step)")) << r2.output;
+  std::vector<std::string> left = files();
+  std::sort(left.begin(), left.end());
+  EXPECT_EQ(left, (std::vector<std::string>{"late.csv", "slow.csv"}));
+}
+
 TEST_F(Track, UnwritableOutputIsAnErrorAndLeavesNothing) {
   const Outcome sim = run("simulate --config " + paper_config() + " --out " + path("d.csv") + " --duration 10");
   ASSERT_EQ(sim.code, 0) << sim.output;
@@ -188,6 +218,82 @@ TEST_F(Track, UnwritableOutputIsAnErrorAndLeavesNothing) {
   EXPECT_NE(r.code, 0) << r.output;
   EXPECT_TRUE(contains(r.output, "cannot write")) << r.output;
   EXPECT_EQ(files(), std::vector<std::string>{"d.csv"});
+}
+
+// The record is streamed (read a block of rows at a time while estimating): a
+// long record whose length is no multiple of the blocks gives all its rows,
+// and a malformed row deep in it is named by its line, with nothing written.
+TEST_F(Track, LongStreamedRecordGivesEveryRowAndAMalformedRowDeepInItIsNamed) {
+  const Outcome sim = run("simulate --config " + paper_config() + " --out " + path("d.csv") + " --duration 6000");
+  ASSERT_EQ(sim.code, 0) << sim.output;
+  const Outcome r = track(path("d.csv"));
+  ASSERT_EQ(r.code, 0) << r.output;
+  const Table d = read_table(path("d.csv"));
+  const Table est = read_table(path("est.csv"));
+  ASSERT_EQ(d.data.rows(), 120000);  // 29.3 blocks of 4096 rows
+  ASSERT_EQ(est.data.rows(), 120000);
+  EXPECT_TRUE(est.data.col(0) == d.data.col(d.column("t")));
+  EXPECT_TRUE(contains(r.output, "final estimate at t = 5999.95 s")) << r.output;
+
+  // Line 100001 (data row 99999) gets a u that is no number.
+  std::ifstream in(path("d.csv"));
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::size_t at = 0;
+  for (int line = 1; line < 100001; ++line) at = text.find('\n', at) + 1;
+  const std::size_t u_field = text.find(',', text.find(',', at) + 1) + 1;  // t,r,u,y
+  text.replace(u_field, 0, "0x");
+  write("bad.csv", text);
+  const Outcome bad = track(path("bad.csv"), "est2.csv");
+  EXPECT_EQ(bad.code, 2) << bad.output;
+  EXPECT_TRUE(contains(bad.output, "bad.csv: row 100001, column 'u': not a number (got '0x")) << bad.output;
+  std::vector<std::string> names = files();
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"bad.csv", "d.csv", "est.csv"}));  // no est2.csv, no temporary
+}
+
+TEST_F(Track, EmptyRecordIsBadInputAndWritesNothing) {
+  const Outcome empty = track(write("empty.csv", ""));
+  EXPECT_EQ(empty.code, 2) << empty.output;
+  EXPECT_TRUE(contains(empty.output, "empty.csv: empty file")) << empty.output;
+  const Outcome header = track(write("header.csv", "t,r,u,y\n"));
+  EXPECT_EQ(header.code, 2) << header.output;
+  EXPECT_TRUE(contains(header.output, "header.csv: no data rows")) << header.output;
+  std::vector<std::string> names = files();
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"empty.csv", "header.csv"}));
+}
+
+// est.csv's standard deviations: write_6g is printf's "%.6g", exactly, on
+// random bit patterns, on typical magnitudes, and next to the rounding and
+// power-of-ten boundaries where its scaled product has to give way.
+TEST(TrackNumberFormat, SixDigitsIsPrintfs) {
+  std::mt19937_64 rng(20261122);
+  long checked = 0, differ = 0;
+  const auto check = [&](double v) {
+    char expected[64], got[64];
+    std::snprintf(expected, sizeof expected, "%.6g", v);
+    char* end = cli::write_6g(got, v);
+    ASSERT_LE(static_cast<std::size_t>(end - got), cli::kNumberChars);
+    *end = '\0';
+    ++checked;
+    if (std::strcmp(expected, got) != 0 && ++differ <= 5) ADD_FAILURE() << expected << " != " << got;
+  };
+  for (int i = 0; i < 400000; ++i) {
+    const std::uint64_t bits = rng();
+    double v;
+    std::memcpy(&v, &bits, sizeof v);
+    check(v);
+  }
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  for (int i = 0; i < 400000; ++i) check(unit(rng) * std::pow(10.0, static_cast<int>(rng() % 30) - 20));
+  for (int p = -320; p <= 310; ++p)
+    for (const double m : {1.0, 9.999995, 9.9999949999, 9.99999500001, 1.000005, 1.0000049999999, 1.234565, 5.0}) {
+      const double v = m * std::pow(10.0, p);
+      for (const double x : {v, std::nextafter(v, 0.0), std::nextafter(v, 1e308), -v}) check(x);
+    }
+  for (int i = 0; i < 200000; ++i) check(i * 1e-6 + 0.5e-6);  // halfway cases, as near as doubles get
+  for (const double v : {0.0, -0.0, std::nan(""), HUGE_VAL, -HUGE_VAL, 5e-324, 1.7976931348623157e308}) check(v);
+  EXPECT_EQ(differ, 0) << "of " << checked;
 }
 
 TEST_F(Track, MissingRequiredOptionIsBadInput) {

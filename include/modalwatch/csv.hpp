@@ -1,6 +1,9 @@
 #pragma once
 // CSV records: a header line, then numeric rows. Errors name the row (1-based
 // line number in the file) and the column.
+#include <cstddef>
+#include <cstdint>
+#include <memory>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -43,6 +46,39 @@ Record read_record(const std::string& path, const RecordColumns& columns = {},
                    const RecordReadOptions& options = {});
 Record parse_record(std::string_view text, const std::string& source, const RecordColumns& columns = {},
                     const RecordReadOptions& options = {});
+
+// Rows of a record as a RecordStream delivers them.
+struct RecordBlock {
+  std::vector<double> t, u, y, r;  // r stays empty when the record has no column r
+  std::size_t size() const { return t.size(); }
+};
+
+// A CSV record read a block of rows at a time (large reads parsed in place),
+// so that a long record is never held whole: `modalwatch track` estimates
+// while it reads. The format and checks are read_record's with
+// options.allow_gaps and a nominal options.sample_time (both required: a
+// median step or an evenness check would need the whole record), applied as
+// the rows arrive: the header and columns when the stream is opened, a row's
+// errors when read() reaches it (InputError naming the file, line and column).
+class RecordStream {
+ public:
+  RecordStream(const std::string& path, const RecordColumns& columns, const RecordReadOptions& options);
+  RecordStream(RecordStream&&) noexcept;
+  RecordStream& operator=(RecordStream&&) noexcept;
+  ~RecordStream();
+
+  bool has_reference() const;  // the record has the column r
+  // Replaces the block's rows with the next ones, at most max_rows (> 0);
+  // returns their number, 0 at the end of the record (after at least one row:
+  // a record without rows throws).
+  std::size_t read(RecordBlock& block, std::size_t max_rows);
+  std::uint64_t bytes_read() const;  // of the file, up to the last row read
+  std::uint64_t file_size() const;   // 0 when unknown (a pipe)
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 // Writes atomically (temporary file, then rename), so a failure leaves nothing behind.
 void write_table(const std::string& path, const std::vector<std::string>& columns,

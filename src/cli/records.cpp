@@ -8,10 +8,24 @@
 
 namespace modalwatch::cli {
 
+namespace {
+
+void check_csv_source(const RecordSource& source) {
+  if (!source.channel.empty())
+    throw InputError("--channel", "applies to LCM logs only; " + source.path + " is not one (no LCM sync word)");
+}
+
+}  // namespace
+
+std::optional<RecordStream> open_csv_stream(const RecordSource& source, const RecordReadOptions& options) {
+  if (is_lcm_log(source.path)) return std::nullopt;
+  check_csv_source(source);
+  return RecordStream(source.path, source.columns, options);
+}
+
 Record load_record(const RecordSource& source, const RecordReadOptions& options) {
   if (!is_lcm_log(source.path)) {
-    if (!source.channel.empty())
-      throw InputError("--channel", "applies to LCM logs only; " + source.path + " is not one (no LCM sync word)");
+    check_csv_source(source);
     return read_record(source.path, source.columns, options);
   }
   const RecordColumns csv_default;

@@ -1,6 +1,7 @@
 #pragma once
 // Records for the subcommands: CSV (t,u,y[,r]) or an LCM log written by
 // lcm-logger, told apart by content (the LCM sync word), not by file name.
+#include <optional>
 #include <string>
 
 #include "modalwatch/config.hpp"
@@ -21,6 +22,11 @@ struct RecordSource {
 // the row (CSV) or the byte offset of the event (LCM). For an LCM log a line on
 // stderr says how many samples and which events were skipped.
 Record load_record(const RecordSource& source, const RecordReadOptions& options = {});
+
+// A CSV record opened as a stream of row blocks (header and columns checked),
+// or nothing when `source` is an LCM log (read those whole with load_record).
+// The stream needs options.allow_gaps and options.sample_time (RecordStream).
+std::optional<RecordStream> open_csv_stream(const RecordSource& source, const RecordReadOptions& options);
 
 // A signal file named in a config (`type: csv`): a CSV table as it is, or an LCM
 // log's samples as the columns t, u, y, r (gaps allowed: the config

@@ -2,8 +2,10 @@
 // estimates per input sample.
 //
 // The record is read leniently (NaN/Inf samples and time gaps are passed on to
-// the estimator, which counts them). est.csv is formatted with std::to_chars
-// (shortest round-trip) by two threads, a block of rows at a time into
+// the estimator, which counts them). A CSV record is streamed: a reader thread
+// parses it a block of rows at a time while the estimation loop runs (an LCM
+// log is read whole first). est.csv is formatted (t and the estimates
+// shortest round-trip, their standard deviations to 6 digits: number_format.hpp) by two threads, a block of rows at a time into
 // preallocated buffers, written in order to a temporary file and renamed at
 // the end, so a failure leaves nothing behind. Progress goes to stderr only when it is a terminal.
 #include <fcntl.h>
@@ -24,6 +26,7 @@
 #include <memory>
 #include <mutex>
 #include <numbers>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -31,6 +34,7 @@
 
 #include "commands.hpp"
 #include "guarded.hpp"
+#include "number_format.hpp"
 #include "records.hpp"
 #include "table.hpp"
 #include "modalwatch/config.hpp"
@@ -46,21 +50,141 @@ using Clock = std::chrono::steady_clock;
 
 
 // The record's step must be the configured one (gaps aside): at least half of
-// the steps within 1 % of the sample time.
-void check_sample_time(const std::string& path, const Record& data, double T) {
-  const Eigen::Index n = data.size();
-  if (n < 3) return;
-  Eigen::Index matching = 0;
-  for (Eigen::Index k = 1; k < n; ++k)
-    if (std::abs(data.t(k) - data.t(k - 1) - T) <= 0.01 * T) ++matching;
-  if (2 * matching >= n - 1) return;
-  std::vector<double> steps(static_cast<std::size_t>(n - 1));
-  for (Eigen::Index k = 1; k < n; ++k) steps[static_cast<std::size_t>(k - 1)] = data.t(k) - data.t(k - 1);
-  const auto mid = steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2);
-  std::nth_element(steps.begin(), mid, steps.end());
-  throw InputError(path, "column 't': sample time " + std::to_string(*mid) + " s (median step) does not match sample_rate_hz " +
-                             std::to_string(1.0 / T));
+// the steps within 1 % of the sample time. Counted as the samples go by (a CSV
+// record is streamed, never held whole) and checked after the first block (a
+// wrong rate fails at once) and at the end; only the message needs all steps.
+class SampleTimeCheck {
+ public:
+  explicit SampleTimeCheck(double T) : T_(T) {}
+  void add(double t) {
+    if (samples_ > 0 && std::abs(t - last_ - T_) <= 0.01 * T_) ++matching_;
+    last_ = t;
+    ++samples_;
+  }
+  bool passed() const { return samples_ < 3 || 2 * matching_ >= samples_ - 1; }
+  // Throws naming the median step of `times` (the record's, read again).
+  [[noreturn]] void fail(const std::string& path, const std::vector<double>& times,
+                         const std::string& which = "median step") const {
+    std::vector<double> steps;
+    for (std::size_t k = 1; k < times.size(); ++k) steps.push_back(times[k] - times[k - 1]);
+    if (steps.empty()) throw InputError(path, "column 't': the record changed while it was read");
+    const auto mid = steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2);
+    std::nth_element(steps.begin(), mid, steps.end());
+    throw InputError(path, "column 't': sample time " + std::to_string(*mid) +
+                               " s (" + which + ") does not match sample_rate_hz " + std::to_string(1.0 / T_));
+  }
+
+ private:
+  double T_;
+  double last_ = 0.0;
+  std::uint64_t samples_ = 0, matching_ = 0;
+};
+
+// The times of a CSV record, read again for SampleTimeCheck::fail.
+std::vector<double> record_times(RecordStream stream) {
+  std::vector<double> times;
+  RecordBlock block;
+  while (stream.read(block, 1 << 16) > 0) times.insert(times.end(), block.t.begin(), block.t.end());
+  return times;
 }
+
+// Reads a CSV record on its own thread, a block of rows at a time handed to the
+// estimation loop through a bounded queue, so that reading overlaps estimation
+// and formatting. The blocks are reused; the threads wait on condition
+// variables, never spin (two cores for the reader, the estimation loop and two
+// formatters).
+class BlockReader {
+ public:
+  static constexpr std::size_t kRowsPerBlock = 4096;
+  static constexpr std::size_t kBlocks = 4;
+
+  explicit BlockReader(RecordStream& stream) : stream_(stream), slots_(kBlocks) {
+    for (auto& slot : slots_) free_.push_back(&slot);
+    thread_ = std::thread([this] { run(); });
+  }
+  BlockReader(const BlockReader&) = delete;
+  BlockReader& operator=(const BlockReader&) = delete;
+  ~BlockReader() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    free_cv_.notify_all();
+    thread_.join();
+  }
+
+  // The next block of rows, valid until the next call; nullptr at the end of
+  // the record. A reading error (a malformed row) is rethrown here once the
+  // rows before it have been taken.
+  const RecordBlock* next() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (current_ != nullptr) {
+      free_.push_back(current_);
+      current_ = nullptr;
+      free_cv_.notify_one();
+    }
+    filled_cv_.wait(lock, [this] { return !filled_.empty() || done_; });
+    if (filled_.empty()) {
+      if (error_) std::rethrow_exception(error_);
+      return nullptr;
+    }
+    current_ = filled_.front();
+    filled_.pop_front();
+    return &current_->rows;
+  }
+  // Bytes of the file up to the end of the block last returned (progress).
+  std::uint64_t bytes_read() const { return current_ != nullptr ? current_->bytes_read : 0; }
+
+ private:
+  struct Slot {
+    RecordBlock rows;
+    std::uint64_t bytes_read = 0;
+  };
+
+  void run() {
+    for (;;) {
+      Slot* slot = nullptr;
+      {
+        std::unique_lock<std::mutex> lock(mutex_);
+        free_cv_.wait(lock, [this] { return stop_ || !free_.empty(); });
+        if (stop_) return;
+        slot = free_.back();
+        free_.pop_back();
+      }
+      std::size_t rows = 0;
+      std::exception_ptr error;
+      try {
+        rows = stream_.read(slot->rows, kRowsPerBlock);
+        slot->bytes_read = stream_.bytes_read();
+      } catch (...) {
+        error = std::current_exception();
+      }
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (rows > 0) {
+          filled_.push_back(slot);
+        } else {
+          free_.push_back(slot);
+          error_ = error;
+          done_ = true;
+        }
+      }
+      filled_cv_.notify_one();
+      if (rows == 0) return;
+    }
+  }
+
+  RecordStream& stream_;
+  std::vector<Slot> slots_;
+  Slot* current_ = nullptr;  // the estimation loop's
+  std::mutex mutex_;
+  std::condition_variable filled_cv_, free_cv_;
+  std::deque<Slot*> filled_;
+  std::vector<Slot*> free_;
+  bool done_ = false, stop_ = false;
+  std::exception_ptr error_;
+  std::thread thread_;
+};
 
 // A file written through a temporary `<path>.tmp.<pid>` and renamed by commit();
 // without commit the temporary is removed.
@@ -107,6 +231,13 @@ class AtomicFile {
   bool committed_ = false;
 };
 
+// How est.csv writes a column (number_format.hpp).
+enum class ColumnFormat {
+  kExact,      // shortest round-trip: t, the estimates, residual_rms
+  kSixDigits,  // "%.6g": the standard deviations
+  kInteger,    // flags, resets
+};
+
 // A block of rows formatted into one preallocated buffer.
 class RowWriter {
  public:
@@ -121,6 +252,10 @@ class RowWriter {
   void clear() { cursor_ = buffer_.get(); }
   void put(double v) {
     cursor_ = std::to_chars(cursor_, cursor_ + kFieldBytes, v).ptr;
+    *cursor_++ = ',';
+  }
+  void put_6g(double v) {
+    cursor_ = write_6g(cursor_, v);
     *cursor_++ = ',';
   }
   void put(std::uint64_t v) {
@@ -138,7 +273,7 @@ class RowWriter {
 
 // The estimation loop stores each row's raw values into blocks; formatter
 // threads format whole blocks and write them in their order. Formatting (about
-// 20 shortest round-trip doubles a row) costs several steps of the estimator:
+// 20 numbers a row, 11 of them shortest round-trip) costs several steps of the estimator:
 // with two formatters it spreads over both cores instead of one thread being
 // the bottleneck while the estimation loop waits.
 class RowPipeline {
@@ -147,9 +282,8 @@ class RowPipeline {
   static constexpr std::size_t kBlocks = 6;
   static constexpr std::size_t kFormatters = 2;
 
-  // Columns [0, integers_from) are written as doubles, the rest as integers.
-  RowPipeline(AtomicFile& file, std::size_t columns, std::size_t integers_from)
-      : file_(file), columns_(columns), integers_from_(integers_from) {
+  RowPipeline(AtomicFile& file, std::vector<ColumnFormat> formats)
+      : file_(file), columns_(formats.size()), formats_(std::move(formats)) {
     storage_.resize(kBlocks);
     for (auto& b : storage_) {
       b.resize(kRowsPerBlock * columns_);
@@ -247,14 +381,26 @@ class RowPipeline {
     writer.clear();
     for (std::size_t r = 0; r < block.count; ++r) {
       const double* row = block.rows + r * columns_;
-      for (std::size_t c = 0; c < integers_from_; ++c) writer.put(row[c]);
-      for (std::size_t c = integers_from_; c < columns_; ++c) writer.put(static_cast<std::uint64_t>(row[c]));
+      for (std::size_t c = 0; c < columns_; ++c) {
+        switch (formats_[c]) {
+          case ColumnFormat::kExact:
+            writer.put(row[c]);
+            break;
+          case ColumnFormat::kSixDigits:
+            writer.put_6g(row[c]);
+            break;
+          case ColumnFormat::kInteger:
+            writer.put(static_cast<std::uint64_t>(row[c]));
+            break;
+        }
+      }
       writer.end_row();
     }
   }
 
   AtomicFile& file_;
-  const std::size_t columns_, integers_from_;
+  const std::size_t columns_;
+  const std::vector<ColumnFormat> formats_;
   std::vector<std::vector<double>> storage_;
   double* current_ = nullptr;
   std::size_t used_ = 0;
@@ -275,53 +421,61 @@ class RowPipeline {
 };
 
 // `\r[#####     ] 45% 1.2e6 samples/s` on stderr, at most 10 times a second,
-// only when stderr is a terminal.
+// only when stderr is a terminal. Done and total are in any unit (bytes of a
+// streamed CSV record, samples of an LCM log); the rate is in samples.
 class ProgressBar {
  public:
-  static constexpr std::size_t kCheckEvery = 4096;  // samples between clock reads
+  ProgressBar(bool enabled, double total)
+      : enabled_(enabled && total > 0.0 && ::isatty(2) == 1), total_(total), start_(Clock::now()), last_(start_) {}
 
-  ProgressBar(bool enabled, Eigen::Index total)
-      : enabled_(enabled && total > 0 && ::isatty(2) == 1), total_(total), start_(Clock::now()), last_(start_) {}
-
-  void maybe_draw(Eigen::Index done) {
+  void maybe_draw(double done, std::uint64_t samples) {
     if (!enabled_) return;
     const auto now = Clock::now();
     if (now - last_ < std::chrono::milliseconds(100)) return;
     last_ = now;
-    draw(done, now);
+    draw(done, samples, now);
   }
-  void finish() {
+  void finish(std::uint64_t samples) {
     if (!enabled_ || !drawn_) return;
-    draw(total_, Clock::now());
+    draw(total_, samples, Clock::now());
     std::fputc('\n', stderr);
   }
 
  private:
-  void draw(Eigen::Index done, Clock::time_point now) {
+  void draw(double done, std::uint64_t samples, Clock::time_point now) {
     constexpr int kWidth = 30;
-    const double fraction = static_cast<double>(done) / static_cast<double>(total_);
+    const double fraction = std::min(done / total_, 1.0);
     const int filled = static_cast<int>(fraction * kWidth);
     char bar[kWidth + 1];
     for (int i = 0; i < kWidth; ++i) bar[i] = i < filled ? '#' : ' ';
     bar[kWidth] = '\0';
     const double seconds = std::chrono::duration<double>(now - start_).count();
-    const double rate = seconds > 0.0 ? static_cast<double>(done) / seconds : 0.0;
+    const double rate = seconds > 0.0 ? static_cast<double>(samples) / seconds : 0.0;
     std::fprintf(stderr, "\r[%s] %3d%% %.2g samples/s ", bar, static_cast<int>(fraction * 100.0), rate);
     std::fflush(stderr);
     drawn_ = true;
   }
 
   bool enabled_;
-  Eigen::Index total_;
+  double total_;
   Clock::time_point start_, last_;
   bool drawn_ = false;
 };
 
-std::vector<std::string> est_columns(const AdditiveModel& model) {
-  std::vector<std::string> columns{"t"};
-  for (const auto& s : model.submodels)
-    for (const char* q : {"_wn", "_zeta", "_gain", "_wn_std", "_zeta_std", "_gain_std"}) columns.push_back(s.name + q);
-  columns.insert(columns.end(), {"residual_rms", "flags", "resets"});
+struct EstColumn {
+  std::string name;
+  ColumnFormat format;
+};
+
+std::vector<EstColumn> est_columns(const AdditiveModel& model) {
+  std::vector<EstColumn> columns{{"t", ColumnFormat::kExact}};
+  for (const auto& s : model.submodels) {
+    for (const char* q : {"_wn", "_zeta", "_gain"}) columns.push_back({s.name + q, ColumnFormat::kExact});
+    for (const char* q : {"_wn_std", "_zeta_std", "_gain_std"}) columns.push_back({s.name + q, ColumnFormat::kSixDigits});
+  }
+  columns.push_back({"residual_rms", ColumnFormat::kExact});
+  columns.push_back({"flags", ColumnFormat::kInteger});
+  columns.push_back({"resets", ColumnFormat::kInteger});
   return columns;
 }
 
@@ -340,66 +494,109 @@ int track(const TrackArgs& args) {
     read_options.allow_nonfinite = true;
     read_options.allow_gaps = true;
     read_options.sample_time = config.sample_time;
-    const Record data = load_record({args.data, args.channel, config.closed_loop, {}}, read_options);
-    check_sample_time(args.data, data, config.sample_time);
-    if (config.closed_loop && !data.has_reference())
-      throw InputError(args.data, "closed loop (model.loop) needs a column 'r'");
+    const RecordSource source{args.data, args.channel, config.closed_loop, {}};
+    SampleTimeCheck sample_time(config.sample_time);
+    std::optional<RecordStream> stream = open_csv_stream(source, read_options);  // header and columns checked
+    Record whole;  // an LCM log, read whole
+    if (!stream) {
+      whole = load_record(source, read_options);
+      for (Eigen::Index k = 0; k < whole.size(); ++k) sample_time.add(whole.t(k));
+      if (!sample_time.passed()) sample_time.fail(args.data, std::vector<double>(whole.t.begin(), whole.t.end()));
+    }
+    const bool with_r = stream ? stream->has_reference() : whole.has_reference();
+    if (config.closed_loop && !with_r) throw InputError(args.data, "closed loop (model.loop) needs a column 'r'");
     const auto t_read = Clock::now();
 
     RecursiveEstimator estimator(config.model, settings);
     const int K = estimator.submodels();
-    const std::vector<std::string> columns = est_columns(config.model);
+    const std::vector<EstColumn> columns = est_columns(config.model);
 
     AtomicFile file(args.out);
     {
       std::string header;
-      for (const auto& c : columns) (header += header.empty() ? "" : ",") += c;
+      for (const auto& c : columns) (header += header.empty() ? "" : ",") += c.name;
       header += '\n';
       file.write(header.data(), header.size());
     }
 
-    const Eigen::Index n = data.size();
-    const bool with_r = data.has_reference();
-    const double* t = data.t.data();
-    const double* u = data.u.data();
-    const double* y = data.y.data();
-    const double* r = with_r ? data.r.data() : nullptr;
-    ProgressBar progress(args.progress, n);
-    RowPipeline rows(file, columns.size(), columns.size() - 2);  // flags and resets are integers
-    for (Eigen::Index k = 0; k < n; ++k) {
-      const unsigned flags = estimator.step(Sample{t[k], u[k], y[k], with_r ? r[k] : 0.0});
-      double* row = rows.next_row();
-      *row++ = t[k];
-      for (int i = 0; i < K; ++i) {
-        const ModeEstimate m = estimator.mode(i);
-        row[0] = m.value.wn;
-        row[1] = m.value.zeta;
-        row[2] = m.value.gain;
-        row[3] = m.std.wn;
-        row[4] = m.std.zeta;
-        row[5] = m.std.gain;
-        row += 6;
+    std::uint64_t n = 0;
+    double last_t = 0.0;
+    ProgressBar progress(args.progress,
+                         stream ? static_cast<double>(stream->file_size()) : static_cast<double>(whole.size()));
+    std::vector<ColumnFormat> formats;
+    for (const auto& c : columns) formats.push_back(c.format);
+    RowPipeline rows(file, std::move(formats));
+    // One row of estimates per sample (r: nullptr in open loop).
+    const auto estimate = [&](const double* t, const double* u, const double* y, const double* r, std::size_t count) {
+      for (std::size_t k = 0; k < count; ++k) {
+        const unsigned flags = estimator.step(Sample{t[k], u[k], y[k], r != nullptr ? r[k] : 0.0});
+        double* row = rows.next_row();
+        *row++ = t[k];
+        for (int i = 0; i < K; ++i) {
+          const ModeEstimate m = estimator.mode(i);
+          row[0] = m.value.wn;
+          row[1] = m.value.zeta;
+          row[2] = m.value.gain;
+          row[3] = m.std.wn;
+          row[4] = m.std.zeta;
+          row[5] = m.std.gain;
+          row += 6;
+        }
+        row[0] = estimator.residual_rms();
+        row[1] = static_cast<double>(flags);
+        row[2] = static_cast<double>(estimator.status().resets);
       }
-      row[0] = estimator.residual_rms();
-      row[1] = static_cast<double>(flags);
-      row[2] = static_cast<double>(estimator.status().resets);
-      if ((static_cast<std::size_t>(k) + 1) % ProgressBar::kCheckEvery == 0) progress.maybe_draw(k + 1);
+      n += count;
+      if (count > 0) last_t = t[count - 1];
+    };
+    if (stream) {
+      {
+        BlockReader reader(*stream);
+        bool first_block = true;
+        while (const RecordBlock* block = reader.next()) {
+          for (const double t : block->t) sample_time.add(t);
+          // A wrong sample_rate_hz shows in the first block already: say so
+          // now rather than after estimating the whole record.
+          if (first_block && !sample_time.passed())
+            sample_time.fail(args.data, block->t,
+                             "median step of the first " + std::to_string(block->size()) + " rows");
+          first_block = false;
+          estimate(block->t.data(), block->u.data(), block->y.data(), with_r ? block->r.data() : nullptr,
+                   block->size());
+          progress.maybe_draw(static_cast<double>(reader.bytes_read()), n);
+        }
+      }
+      if (!sample_time.passed())  // nothing written: the temporary file goes
+        sample_time.fail(args.data, record_times(RecordStream(args.data, {}, read_options)));
+    } else {
+      const std::size_t total = static_cast<std::size_t>(whole.size());
+      for (std::size_t k = 0; k < total; k += BlockReader::kRowsPerBlock) {
+        const std::size_t count = std::min(BlockReader::kRowsPerBlock, total - k);
+        estimate(whole.t.data() + k, whole.u.data() + k, whole.y.data() + k, with_r ? whole.r.data() + k : nullptr,
+                 count);
+        progress.maybe_draw(static_cast<double>(k + count), n);
+      }
     }
     rows.finish();
     file.commit();
-    progress.finish();
+    progress.finish(n);
     const auto t_end = Clock::now();
 
     // Summary (stderr) and the final modal table (stdout).
     const EstimatorStatus& st = estimator.status();
     const double total = seconds_between(t_start, t_end), loop = seconds_between(t_read, t_end);
-    std::fprintf(stderr, "modalwatch track: %lld samples at %g Hz (%s loop, %d submodels) -> %s\n",
-                 static_cast<long long>(n), 1.0 / config.sample_time, config.closed_loop ? "closed" : "open", K,
-                 args.out.c_str());
-    std::fprintf(stderr, "  time: %.3f s (read %.3f s, estimate and write %.3f s)\n", total,
-                 seconds_between(t_start, t_read), loop);
-    std::fprintf(stderr, "  samples/s: %.4g end to end, %.4g estimate and write\n",
-                 total > 0.0 ? static_cast<double>(n) / total : 0.0, loop > 0.0 ? static_cast<double>(n) / loop : 0.0);
+    std::fprintf(stderr, "modalwatch track: %llu samples at %g Hz (%s loop, %d submodels) -> %s\n",
+                 static_cast<unsigned long long>(n), 1.0 / config.sample_time, config.closed_loop ? "closed" : "open",
+                 K, args.out.c_str());
+    if (stream)
+      std::fprintf(stderr, "  time: %.3f s (start-up %.3f s, then read, estimate and write together %.3f s)\n", total,
+                   seconds_between(t_start, t_read), loop);
+    else
+      std::fprintf(stderr, "  time: %.3f s (read %.3f s, estimate and write %.3f s)\n", total,
+                   seconds_between(t_start, t_read), loop);
+    std::fprintf(stderr, "  samples/s: %.4g end to end, %.4g after %s\n",
+                 total > 0.0 ? static_cast<double>(n) / total : 0.0, loop > 0.0 ? static_cast<double>(n) / loop : 0.0,
+                 stream ? "start-up" : "reading");
     std::fprintf(stderr, "  samples processed: %llu\n", static_cast<unsigned long long>(st.samples));
     std::fprintf(stderr, "  updates: %llu\n", static_cast<unsigned long long>(st.updates));
     if (st.resets > 0)
@@ -425,8 +622,8 @@ int track(const TrackArgs& args) {
       std::fprintf(stderr, "  warm-up fit: not used (%s; initial model from %s)\n",
                    settings.fit_on_warmup ? "the fit failed" : "fit_on_warmup is off", config.source.c_str());
 
-    std::printf("modalwatch track: %lld samples, final estimate at t = %.6g s\n", static_cast<long long>(n),
-                n > 0 ? data.t(n - 1) : 0.0);
+    std::printf("modalwatch track: %llu samples, final estimate at t = %.6g s\n", static_cast<unsigned long long>(n),
+                last_t);
     {
       std::vector<Eigen::MatrixXd> covariances;
       for (int i = 0; i < estimator.submodels(); ++i) {

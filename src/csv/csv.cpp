@@ -1,8 +1,10 @@
-// CSV records. The whole file is read into memory and parsed in place with
-// std::from_chars: iostream per field is an order of magnitude too slow for
-// records of millions of rows.
+// CSV records. The whole file is read into memory (or, by RecordStream, a
+// large chunk at a time) and parsed in place with std::from_chars: iostream per
+// field is an order of magnitude too slow for records of millions of rows.
 #include "modalwatch/csv.hpp"
 
+#include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -12,6 +14,7 @@
 #include <cstdio>
 #include <cstring>
 #include <memory>
+#include <stdexcept>
 #include <string_view>
 #include <system_error>
 
@@ -127,12 +130,11 @@ class TableParser {
  public:
   // nonfinite_ok[c]: column c may hold nan/inf (records passed on to the
   // estimator, which counts them).
-  TableParser(const std::string& path, const std::vector<std::string>& columns, Eigen::MatrixXd& data,
-              std::vector<bool> nonfinite_ok)
-      : path_(path), columns_(columns), data_(data), nonfinite_ok_(std::move(nonfinite_ok)) {}
+  TableParser(const std::string& path, const std::vector<std::string>& columns, std::vector<bool> nonfinite_ok)
+      : path_(path), columns_(columns), nonfinite_ok_(std::move(nonfinite_ok)) {}
 
-  // Fills row `index` of data from the line with 1-based number `row`.
-  void parse_row(std::string_view line, int row, Eigen::Index index) {
+  // Fills values[0, columns) from the line with 1-based number `row`.
+  void parse_row(std::string_view line, int row, double* values) {
     const std::size_t n = columns_.size();
     std::size_t start = 0;
     for (std::size_t c = 0; c < n; ++c) {
@@ -140,7 +142,7 @@ class TableParser {
       if (comma == std::string_view::npos && c + 1 < n) short_row(row, c + 1);
       const std::size_t end = c + 1 < n ? comma : line.size();
       if (c + 1 == n && comma != std::string_view::npos) long_row(line, row);
-      data_(index, static_cast<Eigen::Index>(c)) = field(line.substr(start, end - start), row, c);
+      values[c] = field(line.substr(start, end - start), row, c);
       start = end + 1;
     }
   }
@@ -171,7 +173,6 @@ class TableParser {
 
   const std::string& path_;
   const std::vector<std::string>& columns_;
-  Eigen::MatrixXd& data_;
   std::vector<bool> nonfinite_ok_;
 };
 
@@ -212,14 +213,17 @@ Table parse_text(std::string_view text, const std::string& path, bool allow_nonf
                     static_cast<Eigen::Index>(table.columns.size()));
   std::vector<bool> nonfinite_ok(table.columns.size(), allow_nonfinite);
   if (const int c = table.column(finite_column); c >= 0) nonfinite_ok[static_cast<std::size_t>(c)] = false;
-  TableParser parser(path, table.columns, table.data, std::move(nonfinite_ok));
+  TableParser parser(path, table.columns, std::move(nonfinite_ok));
+  std::vector<double> values(table.columns.size());
   Eigen::Index rows = 0;
   while (lines.next(line)) {
     if (is_blank(line)) {
       check_trailing_blank(path, lines);
       break;
     }
-    parser.parse_row(line, lines.number(), rows++);
+    parser.parse_row(line, lines.number(), values.data());
+    for (std::size_t c = 0; c < values.size(); ++c) table.data(rows, static_cast<Eigen::Index>(c)) = values[c];
+    ++rows;
   }
   if (rows == 0) throw InputError(path, "no data rows after the header");
   table.data.conservativeResize(rows, Eigen::NoChange);
@@ -236,27 +240,42 @@ Table read_table(const std::string& path) { return parse_table(read_file(path), 
 
 namespace {
 
+int require_column(const std::string& path, const std::vector<std::string>& columns, const std::string& name) {
+  const auto it = std::find(columns.begin(), columns.end(), name);
+  if (it == columns.end())
+    throw InputError(path, "missing column '" + name + "' (available: " + join(columns) + ")");
+  return static_cast<int>(it - columns.begin());
+}
 int require_column(const std::string& path, const Table& table, const std::string& name) {
-  const int c = table.column(name);
-  if (c < 0)
-    throw InputError(path, "missing column '" + name + "' (available: " + join(table.columns) + ")");
-  return c;
+  return require_column(path, table.columns, name);
 }
 
 // Row k of the data is line k + 2 of the file (header on line 1).
 int file_row(Eigen::Index k) { return static_cast<int>(k) + 2; }
 
+// Time at file line `row` after `previous` on the line before.
+void check_increasing(const std::string& path, const std::string& name, int row, double t, double previous) {
+  if (!(t > previous))
+    throw InputError(cell_location(path, row, name), "time does not increase (got " + format_number(t) + " after " +
+                                                         format_number(previous) + ")");
+}
+
 void check_increasing(const std::string& path, const std::string& name, const Eigen::VectorXd& t) {
-  for (Eigen::Index k = 1; k < t.size(); ++k)
-    if (!(t(k) > t(k - 1)))
-      throw InputError(cell_location(path, file_row(k), name),
-                       "time does not increase (got " + format_number(t(k)) + " after " +
-                           format_number(t(k - 1)) + ")");
+  for (Eigen::Index k = 1; k < t.size(); ++k) check_increasing(path, name, file_row(k), t(k), t(k - 1));
 }
 
 [[noreturn]] void bad_step(const std::string& path, const std::string& name, Eigen::Index k,
                            const std::string& what) {
   throw InputError(cell_location(path, file_row(k), name), "uneven sampling: " + what);
+}
+
+// Gaps allowed: the step ending on file line `row` may be longer than the
+// nominal one, never shorter by more than 1 %.
+void check_gap(const std::string& path, const std::string& name, int row, double step, double nominal) {
+  if (step < 0.99 * nominal)
+    throw InputError(cell_location(path, row, name), "uneven sampling: step " + format_number(step) +
+                                                         " is shorter than the nominal step " +
+                                                         format_number(nominal) + " by more than 1 %");
 }
 
 // Every step within 1 % of the mean step.
@@ -285,13 +304,7 @@ double median_step(const Eigen::VectorXd& t) {
 void check_gaps(const std::string& path, const std::string& name, const Eigen::VectorXd& t, double nominal) {
   if (t.size() < 2) return;
   if (!(nominal > 0.0)) nominal = median_step(t);
-  for (Eigen::Index k = 1; k < t.size(); ++k) {
-    const double step = t(k) - t(k - 1);
-    if (step < 0.99 * nominal)
-      bad_step(path, name, k,
-               "step " + format_number(step) + " is shorter than the nominal step " + format_number(nominal) +
-                   " by more than 1 %");
-  }
+  for (Eigen::Index k = 1; k < t.size(); ++k) check_gap(path, name, file_row(k), t(k) - t(k - 1), nominal);
 }
 
 }  // namespace
@@ -317,6 +330,176 @@ Record parse_record(std::string_view text, const std::string& path, const Record
   else
     check_even(path, columns.t, record.t);
   return record;
+}
+
+// The file is read in large chunks into one buffer; a line split by a chunk's
+// end is moved to the front before the next read. Rows are parsed in place by
+// the same TableParser as read_table, and checked as parse_record checks them.
+struct RecordStream::Impl {
+  static constexpr std::size_t kChunk = 1 << 20;
+  static constexpr std::string_view kBlank = " \t\r\n\xEF\xBB\xBF";  // an "empty file" has nothing else
+
+  std::string path;
+  std::string t_name;
+  RecordReadOptions options;
+  int fd = -1;
+  std::uint64_t size = 0;      // of the file, 0 when unknown
+  std::uint64_t consumed = 0;  // bytes before buffer[begin]
+  std::string buffer;
+  std::size_t begin = 0, end = 0;
+  bool eof = false;
+  int line = 0;  // 1-based number of the last line taken
+  std::vector<std::string> columns;
+  std::unique_ptr<TableParser> parser;
+  int ct = -1, cu = -1, cy = -1, cr = -1;
+  std::vector<double> values;
+  std::uint64_t rows = 0;
+  double previous_t = 0.0;
+  bool finished = false;
+
+  ~Impl() {
+    if (fd >= 0) ::close(fd);
+  }
+
+  // Moves the partial line to the front (growing the buffer for a line longer
+  // than it) and reads more behind it.
+  void refill() {
+    if (begin > 0) {
+      std::memmove(buffer.data(), buffer.data() + begin, end - begin);
+      end -= begin;
+      begin = 0;
+    }
+    if (buffer.size() - end < kChunk / 2) buffer.resize(std::max(2 * buffer.size(), end + kChunk));
+    for (;;) {
+      const ssize_t got = ::read(fd, buffer.data() + end, buffer.size() - end);
+      if (got < 0 && errno == EINTR) continue;
+      if (got < 0) throw InputError(path, std::string("cannot read: ") + std::strerror(errno));
+      if (got == 0) eof = true;
+      end += static_cast<std::size_t>(got);
+      return;
+    }
+  }
+
+  // The next line without its '\n' (a final line without one counts); false at the end.
+  bool next_line(std::string_view& out) {
+    for (;;) {
+      const char* first = buffer.data() + begin;
+      if (const void* nl = std::memchr(first, '\n', end - begin)) {
+        const std::size_t length = static_cast<std::size_t>(static_cast<const char*>(nl) - first);
+        out = std::string_view(first, length);
+        begin += length + 1;
+        consumed += length + 1;
+        ++line;
+        return true;
+      }
+      if (eof) {
+        if (begin == end) return false;
+        out = std::string_view(first, end - begin);
+        consumed += end - begin;
+        begin = end;
+        ++line;
+        return true;
+      }
+      refill();
+    }
+  }
+
+  void open() {
+    fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) throw InputError(path, std::string("cannot open: ") + std::strerror(errno));
+    struct stat st {};
+    if (::fstat(fd, &st) == 0 && S_ISREG(st.st_mode)) size = static_cast<std::uint64_t>(st.st_size);
+    buffer.resize(kChunk);
+    while (!eof && end < 3) refill();
+    if (std::string_view(buffer.data(), end).substr(0, 3) == "\xEF\xBB\xBF") begin = consumed = 3;
+  }
+
+  // Whether the rest of the file is blank too (after a blank first line).
+  bool rest_is_blank() {
+    std::string_view rest;
+    while (next_line(rest))
+      if (rest.find_first_not_of(kBlank) != std::string_view::npos) return false;
+    return true;
+  }
+
+  void read_header(const RecordColumns& names) {
+    std::string_view first;
+    if (!next_line(first)) throw InputError(path, "empty file (expected a header line of column names)");
+    const std::string header(first);  // rest_is_blank reads on, over the buffer
+    if (header.find_first_not_of(kBlank) == std::string::npos && rest_is_blank())
+      throw InputError(path, "empty file (expected a header line of column names)");
+    columns = parse_header(path, header);
+    ct = require_column(path, columns, names.t);
+    cu = require_column(path, columns, names.u);
+    cy = require_column(path, columns, names.y);
+    if (const auto it = std::find(columns.begin(), columns.end(), names.r); it != columns.end())
+      cr = static_cast<int>(it - columns.begin());
+    std::vector<bool> nonfinite_ok(columns.size(), options.allow_nonfinite);
+    nonfinite_ok[static_cast<std::size_t>(ct)] = false;
+    parser = std::make_unique<TableParser>(path, columns, std::move(nonfinite_ok));
+    values.resize(columns.size());
+  }
+
+  // Blank lines are accepted only at the end (data row k is file line k + 2).
+  void check_trailing_blank() {
+    const int first_blank = line;
+    std::string_view rest;
+    while (next_line(rest))
+      if (!is_blank(rest)) throw InputError(row_location(path, first_blank), "empty row before more data");
+  }
+};
+
+RecordStream::RecordStream(const std::string& path, const RecordColumns& columns, const RecordReadOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  if (!options.allow_gaps || !(options.sample_time > 0.0))
+    throw std::invalid_argument("RecordStream needs allow_gaps and a nominal sample_time");
+  impl_->path = path;
+  impl_->t_name = columns.t;
+  impl_->options = options;
+  impl_->open();
+  impl_->read_header(columns);
+}
+
+RecordStream::RecordStream(RecordStream&&) noexcept = default;
+RecordStream& RecordStream::operator=(RecordStream&&) noexcept = default;
+RecordStream::~RecordStream() = default;
+
+bool RecordStream::has_reference() const { return impl_->cr >= 0; }
+std::uint64_t RecordStream::bytes_read() const { return impl_->consumed; }
+std::uint64_t RecordStream::file_size() const { return impl_->size; }
+
+std::size_t RecordStream::read(RecordBlock& block, std::size_t max_rows) {
+  Impl& s = *impl_;
+  block.t.clear();
+  block.u.clear();
+  block.y.clear();
+  block.r.clear();
+  std::string_view line;
+  while (block.size() < max_rows && !s.finished) {
+    if (!s.next_line(line)) {
+      s.finished = true;
+      break;
+    }
+    if (is_blank(line)) {
+      s.check_trailing_blank();
+      s.finished = true;
+      break;
+    }
+    s.parser->parse_row(line, s.line, s.values.data());
+    const double t = s.values[static_cast<std::size_t>(s.ct)];
+    if (s.rows > 0) {
+      check_increasing(s.path, s.t_name, s.line, t, s.previous_t);
+      check_gap(s.path, s.t_name, s.line, t - s.previous_t, s.options.sample_time);
+    }
+    s.previous_t = t;
+    ++s.rows;
+    block.t.push_back(t);
+    block.u.push_back(s.values[static_cast<std::size_t>(s.cu)]);
+    block.y.push_back(s.values[static_cast<std::size_t>(s.cy)]);
+    if (s.cr >= 0) block.r.push_back(s.values[static_cast<std::size_t>(s.cr)]);
+  }
+  if (s.finished && s.rows == 0) throw InputError(s.path, "no data rows after the header");
+  return block.size();
 }
 
 namespace {

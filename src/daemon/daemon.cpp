@@ -62,6 +62,7 @@
 #include <modalwatch/heartbeat_t.hpp>
 
 #include "modalwatch/checkpoint.hpp"
+#include "modalwatch/doorbell.hpp"
 #include "modalwatch/error.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/fault_detector.hpp"
@@ -76,12 +77,6 @@ constexpr int kMaxEntries = 3 * kMaxModes;
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Largest batch the subscriber decodes (36 + 24 * 8192 bytes, about 200 kB).
 constexpr int kMaxBatch = 8192;
-// The publisher checks its ring once per loop tick, shortly after the loop has
-// woken (the estimation thread cannot wake it without a system call), and at
-// least this often; when the loop has not finished its tick by then, it looks
-// again every kPublisherPollNs until it has.
-constexpr std::int64_t kPublisherMaxSleepNs = 10'000'000;
-constexpr std::int64_t kPublisherPollNs = 20'000;
 constexpr double kRateLogPeriod = 10.0;  // s
 
 using Fault = modalwatch::fault_status_t;
@@ -317,9 +312,6 @@ struct Daemon::Impl {
   std::thread estimation;
   std::atomic<bool> stop_estimation{false};
   std::int64_t tick_origin_ns = 0, tick_period_ns = 0;  // set before the threads start
-  // The grid index of the tick the loop sleeps until: every tick before it is
-  // done (its snapshots pushed). Read by the publisher; max while no loop runs.
-  std::atomic<std::int64_t> loop_next_tick{std::numeric_limits<std::int64_t>::max()};
   RecursiveEstimator estimator;
   std::optional<FaultDetector> detector;
   std::vector<ModalParameters> det_value, det_std;
@@ -352,8 +344,10 @@ struct Daemon::Impl {
   std::atomic<bool> stop_fitter{false};
   std::atomic<std::int64_t> fit_duration_ns{0};  // for the log
 
-  // ---- output ring: estimation loop -> publisher
+  // ---- output ring: estimation loop -> publisher, and the bell the loop rings
+  // after each push (the publisher sleeps on it between snapshots)
   SpscRing<Snapshot> snapshots;
+  Doorbell publisher_bell;
 
   // ---- publisher thread
   std::thread publisher;
@@ -543,7 +537,7 @@ void Daemon::Impl::estimation_main() noexcept {
   name_this_thread("mw-estimate");
   make_realtime(realtime_priority);
   const std::int64_t period_ns = tick_period_ns;
-  std::int64_t tick = 0;  // ticks at tick_origin_ns + k period_ns, a grid the publisher follows too
+  std::int64_t tick = 0;  // ticks at tick_origin_ns + k period_ns
   for (;;) {
     const bool stopping = stop_estimation.load(std::memory_order_acquire);
     // Final stop (not a pause for a checkpoint or reload): a running warm-up fit
@@ -580,10 +574,8 @@ void Daemon::Impl::estimation_main() noexcept {
       bump(counters.overruns);
       tick = (now - tick_origin_ns) / period_ns + 1;  // the next tick on the grid
     }
-    loop_next_tick.store(tick, std::memory_order_release);
     sleep_until(tick_origin_ns + tick * period_ns);
   }
-  loop_next_tick.store(std::numeric_limits<std::int64_t>::max(), std::memory_order_release);
   if (probe) probe->exiting();
 }
 
@@ -743,7 +735,8 @@ void Daemon::Impl::push_snapshot(int kind, std::int64_t now, bool update_detecto
   snap.reset_reason = st.last_reset_reason;
   bump(counters.snapshots);
   snap.counters = counters.load();
-  if (!snapshots.try_push(snap)) bump(counters.snapshots_dropped);
+  if (snapshots.try_push(snap)) publisher_bell.ring();
+  else bump(counters.snapshots_dropped);
   last_snapshot_ns = now;
 }
 
@@ -782,6 +775,9 @@ void Daemon::Impl::publisher_main() {
   name_this_thread("mw-publish");
   make_realtime(realtime_priority);
   for (;;) {
+    // Read before looking at the ring: a snapshot pushed after the look rings
+    // the bell past `seen`, and the wait below returns at once.
+    const std::uint32_t seen = publisher_bell.rings();
     const bool stopping = stop_publisher.load(std::memory_order_acquire);
     while (const Snapshot* s = snapshots.front()) {
       handle(*s);
@@ -797,21 +793,7 @@ void Daemon::Impl::publisher_main() {
       next_rate_log_ns = now + static_cast<std::int64_t>(kRateLogPeriod * 1e9);
     }
     if (stopping) break;
-    // Just after the loop's next tick (a quarter period, at most 50 us, later).
-    const std::int64_t after = std::min<std::int64_t>(tick_period_ns / 4, 50'000);
-    const std::int64_t t = mono_ns();
-    std::int64_t wake = tick_origin_ns + ((t - after - tick_origin_ns) / tick_period_ns + 1) * tick_period_ns + after;
-    wake = std::min(wake, t + kPublisherMaxSleepNs);
-    sleep_until(wake);
-    // A tick that takes longer than `after` (many samples at once, a detector
-    // update, a preempted loop) would otherwise leave its snapshot for a whole
-    // tick: look again in short steps until the loop has finished the tick.
-    const std::int64_t k = (mono_ns() - tick_origin_ns) / tick_period_ns;
-    const std::int64_t give_up = tick_origin_ns + (k + 1) * tick_period_ns;
-    for (std::int64_t now2 = mono_ns(); loop_next_tick.load(std::memory_order_acquire) <= k && now2 < give_up &&
-                                        !stop_publisher.load(std::memory_order_relaxed);
-         now2 = mono_ns())
-      sleep_until(std::min(now2 + std::min(after, kPublisherPollNs), give_up));
+    publisher_bell.wait_until(seen, std::min(next_heartbeat_ns, next_rate_log_ns));
   }
 }
 
@@ -1073,6 +1055,7 @@ void Daemon::Impl::stop_threads(bool with_subscriber) {
   stop_estimation_thread();
   if (publisher.joinable()) {
     stop_publisher.store(true, std::memory_order_release);
+    publisher_bell.ring();
     publisher.join();
   }
 }

@@ -16,16 +16,30 @@
 //            batches at R samples/s of wall time, the samples on the config's
 //            sample grid (replay R / sample_rate_hz times faster than real
 //            time); prints sent, received, dropped and processed.
+//   machine  --seconds S
+//            the machine's own latency floor, with nothing of modalwatch in it:
+//            on every CPU at once, a thread sleeping to an absolute 500 us grid
+//            measures its wake-up lateness (S/2 s), then a thread spinning on the
+//            clock records every gap over 50 us, time the CPU was taken from it
+//            (interrupts, higher-priority threads, and in a VM the host; S/2 s),
+//            with the steal time /proc/stat counted meanwhile. Run under chrt
+//            like the daemon, these bound what any wake-up on the latency path
+//            can achieve: the path from a sample to its estimate has four.
 #include <lcm/lcm.h>
+#include <pthread.h>
+#include <sched.h>
 #include <sys/prctl.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <mutex>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -105,6 +119,119 @@ void print_stats(const char* what, std::vector<double> v) {
               percentile(v, 1.0));
 }
 
+std::int64_t mono_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+// Steal time of all CPUs so far, in clock ticks (/proc/stat's 8th cpu column).
+long long steal_ticks() {
+  std::ifstream in("/proc/stat");
+  std::string line;
+  std::getline(in, line);
+  std::istringstream fields(line);
+  std::string cpu;
+  long long v[8] = {};
+  fields >> cpu;
+  for (long long& x : v) fields >> x;
+  return v[7];
+}
+
+// One thread per CPU, pinned, all running `body` at once.
+template <class Body>
+void on_every_cpu(int cpus, Body body) {
+  std::vector<std::thread> threads;
+  for (int c = 0; c < cpus; ++c)
+    threads.emplace_back([c, &body] {
+      cpu_set_t set;
+      CPU_ZERO(&set);
+      CPU_SET(c, &set);
+      pthread_setaffinity_np(pthread_self(), sizeof set, &set);
+      prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
+      body(c);
+    });
+  for (auto& t : threads) t.join();
+}
+
+int machine_floor(double seconds) {
+  const int cpus = static_cast<int>(sysconf(_SC_NPROCESSORS_ONLN));
+  const double half = seconds / 2;
+  const long long t0_steal = steal_ticks();
+  const auto t0 = std::chrono::steady_clock::now();
+
+  // 1. Timer wake-ups on a 500 us grid (the daemon's loop and publisher sleep so).
+  constexpr std::int64_t kPeriod = 500'000;
+  std::vector<std::vector<double>> late(static_cast<std::size_t>(cpus));
+  on_every_cpu(cpus, [&](int c) {
+    auto& v = late[static_cast<std::size_t>(c)];
+    const auto n = static_cast<std::size_t>(half * 1e9 / kPeriod);
+    v.reserve(n);
+    std::int64_t next = mono_ns();
+    for (std::size_t i = 0; i < n; ++i) {
+      next += kPeriod;
+      timespec ts{static_cast<time_t>(next / 1'000'000'000), static_cast<long>(next % 1'000'000'000)};
+      while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+      }
+      v.push_back(static_cast<double>(mono_ns() - next) * 1e-3);
+    }
+  });
+  std::vector<double> all;
+  for (const auto& v : late) all.insert(all.end(), v.begin(), v.end());
+  const auto over_1ms = std::count_if(all.begin(), all.end(), [](double x) { return x > 1000.0; });
+  const double p_over = static_cast<double>(over_1ms) / static_cast<double>(all.size());
+  std::printf("machine: %d CPUs, %.0f s per probe\n", cpus, half);
+  std::printf("  timer wake-up lateness (us), %zu wake-ups: p50 %.0f  p99 %.0f  p99.9 %.0f  max %.0f;"
+              " over 1 ms: %.3f %%\n",
+              all.size(), percentile(all, 0.5), percentile(all, 0.99), percentile(all, 0.999), percentile(all, 1.0),
+              100 * p_over);
+  std::printf("    a path of 4 such wake-ups is over 1 ms at least %.2f %% of the time (1 - (1 - p)^4)\n",
+              100 * (1 - std::pow(1 - p_over, 4)));
+
+  // 2. Time taken from a spinning thread. It spins in 500 ms windows with 100 ms
+  // of sleep between them: a SCHED_FIFO thread that spins longer is throttled
+  // by the kernel (sched_rt_runtime_us, 950 ms of every second), which would
+  // show up as 50 ms gaps that no real-time thread of the daemon ever meets.
+  struct Gaps {
+    long long over_50us = 0, over_1ms = 0;
+    double lost_ns = 0, max_us = 0, spun_ns = 0;
+  };
+  std::vector<Gaps> gaps(static_cast<std::size_t>(cpus));
+  on_every_cpu(cpus, [&](int c) {
+    Gaps& g = gaps[static_cast<std::size_t>(c)];
+    const std::int64_t end = mono_ns() + static_cast<std::int64_t>(half * 1e9);
+    for (std::int64_t start = mono_ns(); start < end; start = mono_ns()) {
+      const std::int64_t window_end = std::min(end, start + 500'000'000);
+      std::int64_t prev = start;
+      while (prev < window_end) {
+        const std::int64_t t = mono_ns();
+        const std::int64_t d = t - prev;
+        if (d > 50'000) {
+          ++g.over_50us;
+          g.lost_ns += static_cast<double>(d);
+          g.max_us = std::max(g.max_us, static_cast<double>(d) * 1e-3);
+          if (d > 1'000'000) ++g.over_1ms;
+        }
+        prev = t;
+      }
+      g.spun_ns += static_cast<double>(prev - start);
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+  });
+  for (int c = 0; c < cpus; ++c) {
+    const Gaps& g = gaps[static_cast<std::size_t>(c)];
+    std::printf("  CPU %d taken from a spinning thread: %lld gaps over 50 us, %lld over 1 ms (%.2f per s), longest %.0f us,"
+                " %.2f %% of the time\n",
+                c, g.over_50us, g.over_1ms, static_cast<double>(g.over_1ms) / (g.spun_ns * 1e-9), g.max_us,
+                100 * g.lost_ns / g.spun_ns);
+  }
+  const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("  steal time (the host running something else on our CPUs): %.2f %% of CPU time\n",
+              100.0 * static_cast<double>(steal_ticks() - t0_steal) / static_cast<double>(sysconf(_SC_CLK_TCK)) /
+                  (elapsed * cpus));
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -124,8 +251,11 @@ int main(int argc, char** argv) {
     sub->add_option("--skip", skip, "latency: ignore estimates of the first SKIP s (warm-up fit)");
     sub->add_option("--trace", trace_path, "latency: one CSV line per estimate (utime, send time, arrival; us)");
   }
+  auto* machine = app.add_subcommand("machine", "the machine's own wake-up latency and preemption");
+  machine->add_option("--seconds", seconds);
   CLI11_PARSE(app, argc, argv);
   const std::string mode = app.get_subcommands().front()->get_name();
+  if (mode == "machine") return machine_floor(seconds);
   try {
     const Config config = load_config(config_path);
     RecordReadOptions opts;
