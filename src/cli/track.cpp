@@ -4,10 +4,11 @@
 // The record is read leniently (NaN/Inf samples and time gaps are passed on to
 // the estimator, which counts them). A CSV record is streamed: a reader thread
 // parses it a block of rows at a time while the estimation loop runs (an LCM
-// log is read whole first). est.csv is formatted (t and the estimates
-// shortest round-trip, their standard deviations to 6 digits: number_format.hpp) by two threads, a block of rows at a time into
-// preallocated buffers, written in order to a temporary file and renamed at
-// the end, so a failure leaves nothing behind. Progress goes to stderr only when it is a terminal.
+// log is read whole first). est.csv is formatted by two threads (t and the
+// estimates shortest round-trip, their standard deviations to 6 digits:
+// number_format.hpp), a block of rows at a time into preallocated buffers,
+// written in order to a temporary file and renamed at the end, so a failure
+// leaves nothing behind. Progress goes to stderr only when it is a terminal.
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -273,9 +274,9 @@ class RowWriter {
 
 // The estimation loop stores each row's raw values into blocks; formatter
 // threads format whole blocks and write them in their order. Formatting (about
-// 20 numbers a row, 11 of them shortest round-trip) costs several steps of the estimator:
-// with two formatters it spreads over both cores instead of one thread being
-// the bottleneck while the estimation loop waits.
+// 20 numbers a row, 11 of them shortest round-trip) costs several steps of the
+// estimator: with two formatters it spreads over both cores instead of one
+// thread being the bottleneck while the estimation loop waits.
 class RowPipeline {
  public:
   static constexpr std::size_t kRowsPerBlock = 2048;

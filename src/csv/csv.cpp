@@ -177,7 +177,9 @@ class TableParser {
 };
 
 // Blank lines are accepted only at the end, so that data row k is file line k + 2.
-void check_trailing_blank(const std::string& path, LineReader& lines) {
+// `lines`: a LineReader, or RecordStream's reader (next(line), number()).
+template <class Lines>
+void check_trailing_blank(const std::string& path, Lines& lines) {
   std::string_view line;
   const int first_blank = lines.number();
   while (lines.next(line))
@@ -185,8 +187,12 @@ void check_trailing_blank(const std::string& path, LineReader& lines) {
       throw InputError(row_location(path, first_blank), "empty row before more data");
 }
 
+constexpr std::string_view kBom = "\xEF\xBB\xBF";  // UTF-8 byte order mark
+// A file of nothing but these is "empty".
+constexpr std::string_view kBlankOrBom = " \t\r\n\xEF\xBB\xBF";
+
 std::string_view strip_bom(std::string_view text) {
-  if (text.substr(0, 3) == "\xEF\xBB\xBF") text.remove_prefix(3);
+  if (text.substr(0, kBom.size()) == kBom) text.remove_prefix(kBom.size());
   return text;
 }
 
@@ -205,7 +211,7 @@ Table parse_text(std::string_view text, const std::string& path, bool allow_nonf
                  const std::string& finite_column) {
   LineReader lines(strip_bom(text));
   std::string_view line;
-  if (text.find_first_not_of(" \t\r\n\xEF\xBB\xBF") == std::string_view::npos || !lines.next(line))
+  if (text.find_first_not_of(kBlankOrBom) == std::string_view::npos || !lines.next(line))
     throw InputError(path, "empty file (expected a header line of column names)");
   Table table;
   table.columns = parse_header(path, line);
@@ -337,7 +343,6 @@ Record parse_record(std::string_view text, const std::string& path, const Record
 // the same TableParser as read_table, and checked as parse_record checks them.
 struct RecordStream::Impl {
   static constexpr std::size_t kChunk = 1 << 20;
-  static constexpr std::string_view kBlank = " \t\r\n\xEF\xBB\xBF";  // an "empty file" has nothing else
 
   std::string path;
   std::string t_name;
@@ -411,14 +416,14 @@ struct RecordStream::Impl {
     if (::fstat(fd, &st) == 0 && S_ISREG(st.st_mode)) size = static_cast<std::uint64_t>(st.st_size);
     buffer.resize(kChunk);
     while (!eof && end < 3) refill();
-    if (std::string_view(buffer.data(), end).substr(0, 3) == "\xEF\xBB\xBF") begin = consumed = 3;
+    if (std::string_view(buffer.data(), end).substr(0, kBom.size()) == kBom) begin = consumed = kBom.size();
   }
 
   // Whether the rest of the file is blank too (after a blank first line).
   bool rest_is_blank() {
     std::string_view rest;
     while (next_line(rest))
-      if (rest.find_first_not_of(kBlank) != std::string_view::npos) return false;
+      if (rest.find_first_not_of(kBlankOrBom) != std::string_view::npos) return false;
     return true;
   }
 
@@ -426,7 +431,7 @@ struct RecordStream::Impl {
     std::string_view first;
     if (!next_line(first)) throw InputError(path, "empty file (expected a header line of column names)");
     const std::string header(first);  // rest_is_blank reads on, over the buffer
-    if (header.find_first_not_of(kBlank) == std::string::npos && rest_is_blank())
+    if (header.find_first_not_of(kBlankOrBom) == std::string::npos && rest_is_blank())
       throw InputError(path, "empty file (expected a header line of column names)");
     columns = parse_header(path, header);
     ct = require_column(path, columns, names.t);
@@ -440,13 +445,9 @@ struct RecordStream::Impl {
     values.resize(columns.size());
   }
 
-  // Blank lines are accepted only at the end (data row k is file line k + 2).
-  void check_trailing_blank() {
-    const int first_blank = line;
-    std::string_view rest;
-    while (next_line(rest))
-      if (!is_blank(rest)) throw InputError(row_location(path, first_blank), "empty row before more data");
-  }
+  // The line-reader interface check_trailing_blank takes.
+  bool next(std::string_view& out) { return next_line(out); }
+  int number() const { return line; }
 };
 
 RecordStream::RecordStream(const std::string& path, const RecordColumns& columns, const RecordReadOptions& options)
@@ -481,7 +482,7 @@ std::size_t RecordStream::read(RecordBlock& block, std::size_t max_rows) {
       break;
     }
     if (is_blank(line)) {
-      s.check_trailing_blank();
+      check_trailing_blank(s.path, s);
       s.finished = true;
       break;
     }
