@@ -342,6 +342,7 @@ struct Daemon::Impl {
   WarmupFit fit_job;
   std::thread fitter;
   std::atomic<bool> stop_fitter{false};
+  Doorbell fitter_bell;  // rung with a fit request, and to stop
   std::atomic<std::int64_t> fit_duration_ns{0};  // for the log
 
   // ---- output ring: estimation loop -> publisher, and the bell the loop rings
@@ -647,6 +648,7 @@ void Daemon::Impl::process(const SampleRecord& s) noexcept {
     fit_job = estimator.take_warmup_fit();
     fit_in_flight = true;
     fit_phase.store(fit_requested, std::memory_order_release);
+    fitter_bell.ring();  // once per warm-up
   }
   if (flags & kGap) {
     bump(counters.gaps);
@@ -742,14 +744,16 @@ void Daemon::Impl::push_snapshot(int kind, std::int64_t now, bool update_detecto
 
 // ---------------------------------------------------------------- fitter
 
-// The warm-up fit off the estimation thread (see the top of this file). Polls:
-// waking it would cost the estimation loop a system call; 2 ms is nothing
-// against a fit that takes seconds.
+// The warm-up fit off the estimation thread (see the top of this file). Sleeps
+// on its doorbell, which the loop rings once per warm-up (it used to poll every
+// 2 ms: 500 wake-ups a second for the daemon's whole life).
 void Daemon::Impl::fitter_main() {
   name_this_thread("mw-fit");
-  while (!stop_fitter.load(std::memory_order_acquire)) {
+  for (;;) {
+    const std::uint32_t seen = fitter_bell.rings();
+    if (stop_fitter.load(std::memory_order_acquire)) break;
     if (fit_phase.load(std::memory_order_acquire) != fit_requested) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      fitter_bell.wait_until(seen, std::numeric_limits<std::int64_t>::max());
       continue;
     }
     const std::int64_t t0 = mono_ns();
@@ -1131,6 +1135,7 @@ void Daemon::stop() {
   m.stop_threads(true);  // the loop waits for a running warm-up fit and works off the backlog
   if (m.fitter.joinable()) {
     m.stop_fitter.store(true, std::memory_order_release);
+    m.fitter_bell.ring();
     m.fitter.join();
   }
   m.running = false;
