@@ -54,6 +54,22 @@ TEST_F(Cli, SimulateThenFitPrintsTheModalTableAndWritesAReusableModel) {
   EXPECT_EQ(again.code, 0) << again.output;
 }
 
+// --from keeps the samples before it for the filters, and the seed's four-sine
+// setpoint in steady state (after the ramps, t > 800 s) cannot determine nine
+// parameters: the fit says so and names the parameters left open.
+TEST_F(Cli, FitOfASteadyFourSineWindowSettlesOnItsPastAndWarnsOfTheOpenDirection) {
+  ASSERT_EQ(run("simulate --config " + config("paper-sim.yaml") + " --out " + path("d.csv")).code, 0);
+  const Outcome fit = run("fit --config " + config("paper-sim.yaml") + " --data " + path("d.csv") + " --from 900");
+  ASSERT_EQ(fit.code, 0) << fit.output;
+  for (const char* s : {"modalwatch fit: 2000 samples", "(the 18000 samples before --from run the filters",
+                        "WARNING: the record does not determine every parameter", "mode2        b_0"})
+    EXPECT_TRUE(contains(fit.output, s)) << s << "\n" << fit.output;
+  // The noise std is 0.1: the window fits to it (cut from rest it would not).
+  const auto at = fit.output.find("output-error std: ");
+  ASSERT_NE(at, std::string::npos);
+  EXPECT_NEAR(std::stod(fit.output.substr(at + 18)), 0.1, 0.01) << fit.output;
+}
+
 // Bad records: exit code 2, a message naming row and column, nothing written.
 void expect_rejected(const Cli& t, const std::string& csv_text, const std::string& must_say1,
                      const std::string& must_say2) {

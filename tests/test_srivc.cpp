@@ -464,6 +464,54 @@ TEST(Srivc, ClosedLoopBenchmarkAtSnr10dB) {
 
 // ---------------------------------------------------------------- bad input
 
+// ------------------------------------------------- windows and identifiability
+
+// The paper's own setpoint: four sines, 8 real equations in steady state.
+ExperimentSpec paper_four_sines(double duration, std::uint64_t seed) {
+  ExperimentSpec e = paper_closed_loop(duration, seed);
+  e.excitation = SignalSpec{};
+  e.excitation.kind = SignalSpec::Kind::sum_of_sines;
+  e.excitation.amplitudes = {3.0, 1.0, 1.0, 1.0};
+  e.excitation.frequencies_rad_s = {0.005, 2.0, 5.0, 17.5};
+  return e;
+}
+
+TEST(AdditiveSrivc, WindowOfARunningLoopFitsToTheNoiseLevelWhenItsPastSettlesTheFilters) {
+  const PlantSpec plant = paper_plant(0.01);
+  const auto sim = simulate(plant, paper_four_sines(500.0, 1));
+  const AdditiveModel start = perturbed(truth_of(plant), 0.02);
+  // [300, 500] s with the 300 s before it running the filters and the model only.
+  SrivcOptions settled = closed_loop_options();
+  settled.settle_samples = 6000;
+  const FitResult fit = fit_srivc(sim.record, start, settled);
+  EXPECT_NEAR(fit.noise_variance, 0.01, 0.001);
+  EXPECT_EQ(fit.simulated.size(), sim.record.size());
+  // The same window cut out: the model output starts from rest while the plant
+  // did not, and the fit is three times worse in variance (before the
+  // degenerate-iterate guard it threw "leading coefficient is zero").
+  const FitResult cut = fit_srivc(sim.record.segment(6000, sim.record.size() - 6000), start, closed_loop_options());
+  EXPECT_TRUE(cut.model.beta().allFinite());
+  EXPECT_GT(cut.noise_variance, 3.0 * fit.noise_variance);
+  settled.settle_samples = sim.record.size() - 19;  // 19 samples for 9 parameters
+  EXPECT_THROW(fit_srivc(sim.record, start, settled), std::invalid_argument);
+}
+
+TEST(AdditiveSrivc, FourSineSetpointLeavesTheSeedModelUndeterminedAndSaysWhich) {
+  const PlantSpec plant = paper_plant(0.01);
+  const AdditiveModel start = perturbed(truth_of(plant), 0.02);
+  SrivcOptions o = closed_loop_options();
+  o.settle_samples = 18000;  // [900, 1000] s: steady state
+  const FitResult four = fit_srivc(simulate(plant, paper_four_sines(1000.0, 2)).record, start, o);
+  EXPECT_GT(four.information_condition, FitResult::kPoorlyDetermined);
+  // The open combination trades mode 2's and mode 3's parameters (theta =
+  // [a1, a2, b0] per mode), not mode 1's alone.
+  ASSERT_EQ(four.weakest_direction.size(), 9);
+  EXPECT_GT(four.weakest_direction.segment(3, 6).norm(), 0.9);
+  // The same loop with a PRBS setpoint determines every parameter.
+  const FitResult prbs = fit_srivc(simulate(plant, paper_closed_loop(1000.0, 2)).record, start, o);
+  EXPECT_LT(prbs.information_condition, 1e4);
+}
+
 TEST(Srivc, RejectsRecordWithFewerSamplesThanParameters) {
   const PlantSpec plant = paper_plant(0.0);
   ExperimentSpec e = open_loop_prbs(0.05, 0.5, 1);  // 10 samples for 9 parameters

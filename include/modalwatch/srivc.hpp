@@ -32,6 +32,11 @@ struct SrivcOptions {
   // Closed loop: u = C_d(q)(r - y); the record must carry r.
   bool closed_loop = false;
   DiscreteTransferFunction controller;
+  // Samples at the start of the record that drive the prefilters and the model's
+  // simulation but stay out of the estimate (eq. 8), the output error and the
+  // covariance: a window cut from a running plant, whose model output, started
+  // from rest, needs them to catch up (`modalwatch fit --from`).
+  Eigen::Index settle_samples = 0;
 };
 
 struct FitResult {
@@ -48,6 +53,15 @@ struct FitResult {
   std::string start = "configured";  // which start won: "configured" or "unfactored"
   std::vector<double> change_history;  // relative change of beta per cycle
   Eigen::VectorXd simulated;     // y_hat: the model's output on the record
+  // Identifiability: the condition number of the instruments' correlation
+  // matrix (sum psi_hat psi_hat^T with unit diagonal). A reference with too few
+  // frequencies (n sinusoids give 2n real equations) leaves it singular, and the
+  // covariance above then only describes the determined directions. Above
+  // kPoorlyDetermined the record does not determine every parameter;
+  // weakest_direction (unit length, over beta) is the combination it leaves open.
+  static constexpr double kPoorlyDetermined = 1e8;
+  double information_condition = 0.0;
+  Eigen::VectorXd weakest_direction;
 
   // Covariance block of submodel i.
   Eigen::MatrixXd theta_covariance(int i) const;

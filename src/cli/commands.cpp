@@ -36,11 +36,18 @@ void write_text_atomically(const std::string& path, const std::string& text) {
   }
 }
 
-Record window(const Record& r, const FitArgs& args) {
+// --from/--to. The samples before --from stay in the record: they bring the
+// model's simulation and the prefilters up to the running plant (a model output
+// started from rest at --from would not match y for a few time constants).
+struct Window {
+  Record data;               // the record's start up to --to
+  Eigen::Index settle = 0;   // samples before --from: filters only, not in the estimate
+};
+Window window(const Record& r, const FitArgs& args) {
   Eigen::Index begin = 0, end = r.size();
   if (args.from) while (begin < end && r.t(begin) < *args.from) ++begin;
   if (args.to) while (end > begin && r.t(end - 1) > *args.to) --end;
-  return r.segment(begin, end - begin);
+  return {r.segment(0, end), begin};
 }
 
 
@@ -73,14 +80,41 @@ int simulate(const SimulateArgs& args) {
   });
 }
 
+namespace {
+
+// The instruments' condition, and a warning naming the parameters of the
+// weakest direction when the record leaves some combination undetermined (the
+// +- above then understate it).
+void print_identifiability(const FitResult& result) {
+  std::printf("information condition: %.3g\n", result.information_condition);
+  if (!(result.information_condition > FitResult::kPoorlyDetermined)) return;
+  std::printf("WARNING: the record does not determine every parameter (condition above %.0e): the input\n"
+              "excites too few frequencies for this model (n sinusoids give 2n equations), or the model has\n"
+              "more modes than the data show. The +- above understate the combination it leaves open,\n"
+              "theta = [a_1..a_n, b_0..b_m] (components above 0.1):\n",
+              FitResult::kPoorlyDetermined);
+  const Eigen::VectorXd& v = result.weakest_direction;
+  for (int i = 0, o = 0; i < static_cast<int>(result.model.submodels.size()); ++i) {
+    const Submodel& s = result.model.submodels[i];
+    for (int j = 0; j < s.n_theta(); ++j, ++o) {
+      if (std::abs(v(o)) < 0.1) continue;
+      const bool a = j < s.n;
+      std::printf("  %-12s %s_%d %+.2f\n", s.name.c_str(), a ? "a" : "b", a ? j + 1 : j - s.n, v(o));
+    }
+  }
+}
+
+}  // namespace
+
 int fit(const FitArgs& args) {
   return guarded("fit", [&] {
     const Config config = load_cli_config(args.config);
     const Record full = load_record({args.data, args.channel, config.closed_loop, {}});
-    const Record data = window(full, args);
+    const auto [data, settle] = window(full, args);
+    const Eigen::Index used = data.size() - settle;
     const int nb = config.model.n_beta();
-    if (data.size() < 2 * nb + 2)
-      throw InputError(args.data, std::to_string(data.size()) + " samples (rows) for " + std::to_string(nb) +
+    if (used < 2 * nb + 2)
+      throw InputError(args.data, std::to_string(used) + " samples (rows) for " + std::to_string(nb) +
                                       " parameters: need at least " + std::to_string(2 * nb + 2));
     const double T = data.sample_time();
     if (std::abs(T - config.sample_time) > 0.01 * config.sample_time)
@@ -93,11 +127,15 @@ int fit(const FitArgs& args) {
     options.controller = config.controller;
     options.output_hold = config.output_hold;
     options.max_iterations = args.max_iterations;
+    options.settle_samples = settle;
     const FitResult result = fit_srivc(data, config.model, options);
 
     std::printf("modalwatch fit: %lld samples at %g Hz, %s loop, %zu submodels, %d parameters\n",
-                static_cast<long long>(data.size()), 1.0 / T, config.closed_loop ? "closed" : "open",
+                static_cast<long long>(used), 1.0 / T, config.closed_loop ? "closed" : "open",
                 config.model.submodels.size(), nb);
+    if (settle > 0)
+      std::printf("(the %lld samples before --from run the filters and the model only)\n",
+                  static_cast<long long>(settle));
     std::printf("%s after %d block-coordinate cycles (last change %.2e), %d stability projections\n",
                 result.converged ? "converged" : "NOT converged", result.iterations,
                 result.change_history.empty() ? 0.0 : result.change_history.back(), result.projections);
@@ -107,6 +145,7 @@ int fit(const FitArgs& args) {
     print_modal_table(result.model, covariances);
     std::printf("\nfit on the data: %.2f %%   output-error std: %.4g\n", result.fit_percent,
                 std::sqrt(result.noise_variance));
+    print_identifiability(result);
     if (!args.out.empty()) write_text_atomically(args.out, config_to_yaml(config, result.model));
     return 0;
   });

@@ -2,8 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/QR>
 
 #include "modalwatch/polynomial.hpp"
@@ -157,9 +159,11 @@ Filtered filter_block(const ScaledSubmodel& s, const Eigen::VectorXd& y_tilde, c
 }
 
 // Solves (sum psi phi^T) theta = sum psi y_f with column equilibration.
-Eigen::VectorXd iv_solve(const Filtered& f) {
-  const Eigen::MatrixXd R = f.psi.transpose() * f.phi;
-  const Eigen::VectorXd rhs = f.psi.transpose() * f.y_f;
+// eq. (8) over samples [first, N): the earlier ones only bring the filters up to date.
+Eigen::VectorXd iv_solve(const Filtered& f, Eigen::Index first) {
+  const Eigen::Index used = f.psi.rows() - first;
+  const Eigen::MatrixXd R = f.psi.bottomRows(used).transpose() * f.phi.bottomRows(used);
+  const Eigen::VectorXd rhs = f.psi.bottomRows(used).transpose() * f.y_f.tail(used);
   Eigen::VectorXd colscale = R.colwise().norm().transpose();
   for (auto& c : colscale) c = c > 0.0 ? 1.0 / c : 1.0;
   const Eigen::VectorXd scaled = (R * colscale.asDiagonal()).colPivHouseholderQr().solve(rhs);
@@ -286,8 +290,12 @@ FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const Sriv
   const Eigen::Index N = data.size();
   if (initial.submodels.empty()) throw std::invalid_argument("fit: the model has no submodels");
   for (const auto& s : initial.submodels) s.check();
-  if (N < 2 * initial.n_beta() + 2)
-    throw std::invalid_argument("fit: " + std::to_string(N) + " samples for " + std::to_string(initial.n_beta()) +
+  if (options.settle_samples < 0 || options.settle_samples >= N)
+    throw std::invalid_argument("fit: " + std::to_string(options.settle_samples) + " settling samples of " +
+                                std::to_string(N));
+  if (N - options.settle_samples < 2 * initial.n_beta() + 2)
+    throw std::invalid_argument("fit: " + std::to_string(N - options.settle_samples) + " samples for " +
+                                std::to_string(initial.n_beta()) +
                                 " parameters; need at least " + std::to_string(2 * initial.n_beta() + 2));
   if (options.closed_loop && (!data.has_reference() || options.controller.empty()))
     throw std::invalid_argument("fit: closed loop needs the reference r in the data and a controller");
@@ -312,6 +320,7 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   const double T = data.sample_time();
   const Eigen::VectorXd& u = data.u;
   const Eigen::VectorXd& y = data.y;
+  const Eigen::Index first = options.settle_samples, used = N - first;  // the samples in eq. (8)
 
   FitResult result;
   result.model = initial;
@@ -340,7 +349,7 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
         const Eigen::VectorXd x_hat_z = options.closed_loop ? simulate_scaled(model[i], z, T) : x_hat[i];
         const Filtered f = filter_block(model[i], y_tilde, u, x_hat_z, options.closed_loop ? z : u, T,
                                         options.output_hold);
-        Eigen::VectorXd theta = iv_solve(f);
+        Eigen::VectorXd theta = iv_solve(f, first);
         if (!theta.allFinite()) break;  // singular: keep the previous iterate
         if (damp_step(model[i], theta, options.max_frequency_step)) ++result.damped_steps;
         if (options.stability_projection && model[i].shape->n > 0) {
@@ -350,6 +359,9 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
             ++result.projections;
           }
         }
+        // A p^n coefficient of zero (the projection's roots at infinity, or an
+        // unidentifiable direction) is not a model of this order: keep the previous iterate.
+        if (model[i].shape->n > 0 && !(std::abs(theta(model[i].shape->n - 1)) > 0.0)) break;
         model[i].theta = theta;
         x_hat[i] = simulate_scaled(model[i], u, T);
       }
@@ -367,10 +379,10 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   // Output error, noise variance and fit.
   result.simulated = Eigen::VectorXd::Zero(N);
   for (const auto& x : x_hat) result.simulated += x;
-  const Eigen::VectorXd e = y - result.simulated;
+  const Eigen::VectorXd e = (y - result.simulated).tail(used);
   const int nb = result.model.n_beta();
-  result.noise_variance = e.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, N - nb));
-  result.fit_percent = fit_percent(y, result.simulated);
+  result.noise_variance = e.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, used - nb));
+  result.fit_percent = fit_percent(y.tail(used), result.simulated.tail(used));
 
   // Covariance (IV sandwich): J = sum psi_hat psi^T with psi the output-error
   // gradient (driven by u) and psi_hat the instrument (driven by z); in open loop
@@ -386,12 +398,21 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
     const Filtered g = filter_block(model[i], x_hat[i], u, x_hat[i], u, T, options.output_hold);
     const Filtered gh = filter_block(model[i], xz, z, xz, z, T, options.output_hold);
     Psi.middleCols(o, nt) = g.psi;
-    PsiHat.middleCols(o, nt) = gh.psi;
+    PsiHat.middleCols(o, nt) = gh.psi;  // rows before `first` are dropped below
     D.segment(o, nt) = scaling(*model[i].shape, model[i].ws);
     o += nt;
   }
-  const Eigen::MatrixXd J = PsiHat.transpose() * Psi;
-  const Eigen::MatrixXd S = PsiHat.transpose() * PsiHat;
+  const Eigen::MatrixXd J = PsiHat.bottomRows(used).transpose() * Psi.bottomRows(used);
+  const Eigen::MatrixXd S = PsiHat.bottomRows(used).transpose() * PsiHat.bottomRows(used);
+  {
+    // Correlation form, so that the parameters' units do not enter the condition.
+    const Eigen::VectorXd d = S.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(d.asDiagonal() * S * d.asDiagonal());
+    const Eigen::VectorXd& ev = eig.eigenvalues();  // ascending
+    result.information_condition =
+        eig.info() == Eigen::Success && ev(0) > 0.0 ? ev(nb - 1) / ev(0) : std::numeric_limits<double>::infinity();
+    result.weakest_direction = eig.eigenvectors().col(0);
+  }
   const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(J);
   const Eigen::MatrixXd Jinv = cod.pseudoInverse();
   const Eigen::MatrixXd cov_scaled = result.noise_variance * Jinv * S * Jinv.transpose();
