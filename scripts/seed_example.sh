@@ -14,6 +14,8 @@
 #     scripts/seed_example.sh [DRAWS]        (default 10; BUILD_DIR=build)
 #     NOISE_SEEDS=1,2,3,4 scripts/seed_example.sh 11   # 44 runs
 # Figures, not a test: tests/test_estimator.cpp asserts the shipped config's.
+# What the record itself can determine (the bound for mode 3's wn median):
+# scripts/seed_information.py.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build="${BUILD_DIR:-build}"
