@@ -164,6 +164,7 @@ struct BlockFilters {
 
 struct Block {
   int n = 0, m = 0, l = 0, nt = 0;
+  bool biproper = false;  // m = n + l: the output has a direct feedthrough
   double ws = 1.0, lambda = 1.0;
   double random_walk = 0.0;  // relative std of theta's drift per update (Q, CONTSID's Kalman-filter adaptation)
   ThetaVec scale;  // theta' = scale .* theta (physical)
@@ -216,7 +217,7 @@ struct Block {
     }
   }
   MODALWATCH_HOT double feedthrough() const {
-    return m == n + l ? theta(n + m) / (n > 0 ? theta(n - 1) : 1.0) : 0.0;
+    return biproper ? theta(n + m) / (n > 0 ? theta(n - 1) : 1.0) : 0.0;
   }
 };
 
@@ -384,6 +385,7 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.m = s.m;
     b.l = s.rigid_poles;
     b.nt = s.n_theta();
+    b.biproper = b.m == b.n + b.l;
     b.ws = time_scale(s);
     b.lambda = cfg.forgetting.empty() ? 1.0 : cfg.forgetting[i];
     b.random_walk = cfg.random_walks.empty() ? cfg.random_walk : cfg.random_walks[i];
@@ -407,7 +409,7 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
       }
     }
     b.p_bound = cfg.covariance_bound * b.P.diagonal().cwiseMax(1e-300);
-    b.filters.init(b.a_poly(), b.denominator(), b.ws * T, cfg.output_hold, b.m == b.n + b.l);
+    b.filters.init(b.a_poly(), b.denominator(), b.ws * T, cfg.output_hold, b.biproper);
     b.phi.resize(b.nt);
     b.psi.resize(b.nt);
     blocks.push_back(std::move(b));
@@ -521,15 +523,16 @@ inline bool RecursiveEstimator::Impl::update_block(Block& b, double y_f) {
 template <int N>
 inline bool RecursiveEstimator::Impl::update_block_n(Block& b, double y_f) {
   const int nt = N > 0 ? N : b.nt;
+  // In place: on a false return the caller goes back to the last good state.
   double* P = b.P.data();  // nt x nt, column-major
-  double theta[kMaxTheta];
-  for (int j = 0; j < nt; ++j) theta[j] = b.theta(j);
+  double* theta = b.theta.data();
   if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), b.lambda, y_f)) return false;
   // A mode with a_1, a_2 > 0 is stable: the common case, decided here.
   const bool stable_mode = b.n == 2 && theta[0] > 0.0 && theta[1] > 0.0;
-  if (b.n > 0 && !stable_mode && project(theta, b.n)) ++status.projections;
-  if (b.n > 0 && theta[b.n - 1] == 0.0) return false;
-  for (int j = 0; j < nt; ++j) b.theta(j) = theta[j];
+  if (b.n > 0 && !stable_mode) {
+    if (project(theta, b.n)) ++status.projections;
+    if (theta[b.n - 1] == 0.0) return false;
+  }
   // Guards: random walk (CONTSID's Kalman-filter adaptation), bounded trace.
   // Q is a parameter covariance; P carries theta^2 per output^2 (cov = sigma^2 P).
   if (b.random_walk > 0.0 && e_var > 0.0) {
@@ -598,14 +601,16 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   // 1. Instrument input z_k = S_uo(q, t_k) r_k: the noise-free loop with the
   //    known controller and the current model (eq. 29), solved for a biproper
   //    controller. In open loop z = u.
+  //    With it, each block's output for u at t_k, and y_hat, their sum.
   double z = s.u;
+  double y_hat = 0.0;
   if (cfg.closed_loop) {
     double free = 0.0, D = 0.0;
     for (auto& b : blocks) {
       b.filters.advance_held(kZ);
       b.xz = b.output(b.filters.complete_input(kZ, 0.0));  // the free response
       free += b.xz;
-      D += b.feedthrough();
+      if (b.biproper) D += b.feedthrough();
     }
     const double c0 = controller.feedthrough();
     z = (c0 * (s.r - free) + controller.free_response()) / (1.0 + c0 * D);
@@ -613,14 +618,16 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     for (auto& b : blocks) {
       const double* dz = b.filters.complete_input(kZ, z);
       // Strictly proper (m < n + l): the output uses the state alone, not z_k.
-      if (b.m == b.n + b.l) b.xz = b.output(dz);
+      if (b.biproper) b.xz = b.output(dz);
+      b.xu = b.output(b.filters.take_input(kU, s.u));
+      y_hat += b.xu;
     }
-  }
-  double y_hat = 0.0;
-  for (auto& b : blocks) {
-    b.xu = b.output(b.filters.take_input(kU, s.u));
-    if (!cfg.closed_loop) b.xz = b.xu;
-    y_hat += b.xu;
+  } else {
+    for (auto& b : blocks) {
+      b.xu = b.output(b.filters.take_input(kU, s.u));
+      b.xz = b.xu;
+      y_hat += b.xu;
+    }
   }
   if (!std::isfinite(y_hat) || !std::isfinite(z)) {
     restore_good(kResetNonFiniteModel);
@@ -1189,7 +1196,7 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
       b.p_bound = st.P_bound[i];
       b.good_theta = st.good_theta[i].cwiseProduct(Eigen::VectorXd(b.scale));
       b.good_P = st.good_P[i];
-      b.filters.init(b.a_poly(), b.denominator(), b.ws * next.cfg.sample_time, next.cfg.output_hold, b.m == b.n + b.l);
+      b.filters.init(b.a_poly(), b.denominator(), b.ws * next.cfg.sample_time, next.cfg.output_hold, b.biproper);
     }
     next.buffered = 0;
   } else {
