@@ -339,6 +339,7 @@ struct RecursiveEstimator::Impl {
   MODALWATCH_TARGET_AVX2_FMA unsigned advance_avx2_fma(const Sample& s, bool allow_update);
   MODALWATCH_HOT unsigned advance_body(const Sample& s, bool allow_update);
   bool select_kernel(StepKernel k) noexcept;
+  MODALWATCH_HOT unsigned finish_update();
   MODALWATCH_HOT bool update_block(Block& b, double y_f);
   template <int N>
   MODALWATCH_HOT bool update_block_n(Block& b, double y_f);
@@ -496,14 +497,15 @@ MODALWATCH_HOT bool iv_update(int nt_runtime, double* P, double* theta, const do
   }
   if (!std::isfinite(denom) || std::abs(denom) < 1e-300) return false;
   const double inv_lambda = 1.0 / lambda;
-  double K[kMaxTheta];
+  double K_half[kMaxTheta];  // K / 2 (exact): the symmetric part's 1/2 taken once
   for (int i = 0; i < nt; ++i) {
-    K[i] = Ppsi[i] / denom;
-    theta[i] += K[i] * eps;
+    const double K = Ppsi[i] / denom;
+    theta[i] += K * eps;
+    K_half[i] = 0.5 * K;
   }
   for (int j = 0; j < nt; ++j) {
     for (int i = 0; i <= j; ++i) {
-      const double v = (P[i + j * nt] - 0.5 * (K[i] * w[j] + K[j] * w[i])) * inv_lambda;
+      const double v = (P[i + j * nt] - (K_half[i] * w[j] + K_half[j] * w[i])) * inv_lambda;
       P[i + j * nt] = v;
       P[j + i * nt] = v;
     }
@@ -647,9 +649,21 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   // A run of more than kOutlierRun "outliers" is not outliers but a mismatch
   // (a restart, a changed plant): accept it, or the estimator would lock up.
   constexpr int kOutlierRun = 10;
+  // Nor is a residual at the round-off of y_hat an outlier: on noise-free data
+  // e_var is round-off too, and a residual ten times it would say no more than
+  // how y_hat was rounded (with FMA or without). kRoundOff, relative to the
+  // outputs summed into y_hat, is 10^4 times their round-off and far below any
+  // sensor's resolution (a 24-bit converter resolves 6e-8 of its range).
+  constexpr double kRoundOff = 1e-12;
+  const auto above_round_off = [&] {
+    double sum = 0.0;
+    for (const auto& b : blocks) sum += std::abs(b.xu);
+    return std::abs(e) > kRoundOff * sum;
+  };
   if (!std::isfinite(s.y)) {
     y = y_hat;
-  } else if (e_count > 100 && outlier_run < kOutlierRun && e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var) {
+  } else if (e_count > 100 && outlier_run < kOutlierRun && e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var &&
+             above_round_off()) {
     y = y_hat;
     ++outlier_run;
     ++status.outliers;
@@ -705,26 +719,31 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   // their latest theta: y - (xu_sum - b.xu), the sum kept up to date below.
   double xu_sum = y_hat;
   bool healthy = true;
+  if (!refine) {
+    // M_l = 1, M_s = 0 (the paper's setting): one update per block from
+    // theta-bar, P-bar in place, and the block's prefilters re-discretised for
+    // the next sample (this sample is done with them).
+    for (auto& b : blocks) {
+      const double y_tilde = y - (xu_sum - b.xu);
+      const double* dy = b.filters.take(kY, y_tilde);
+      const double* dx = b.filters.take(kX, b.xz);
+      const double* du = b.filters.derivatives(kU);
+      const double* dz = cfg.closed_loop ? b.filters.derivatives(kZ) : du;
+      b.fill(dy, dx, du, dz);
+      if (!update_block(b, dy[0])) {
+        restore_good(kResetDegenerate);
+        return flags | kReset;
+      }
+      const double xu = b.output(du);
+      xu_sum += xu - b.xu;
+      b.xu = xu;
+      rediscretise(b);
+    }
+    return flags | finish_update();
+  }
   for (int l = 0; l < cfg.block_iterations && healthy; ++l) {
     for (std::size_t i = 0; i < blocks.size() && healthy; ++i) {
       Block& b = blocks[i];
-      if (!refine) {
-        // M_l = 1, M_s = 0 (the paper's setting): one update from theta-bar, P-bar in place.
-        const double y_tilde = y - (xu_sum - b.xu);
-        const double* dy = b.filters.take(kY, y_tilde);
-        const double* dx = b.filters.take(kX, b.xz);
-        const double* du = b.filters.derivatives(kU);
-        const double* dz = cfg.closed_loop ? b.filters.derivatives(kZ) : du;
-        b.fill(dy, dx, du, dz);
-        if (!update_block(b, dy[0])) {
-          healthy = false;
-          break;
-        }
-        const double xu = b.output(b.filters.derivatives(kU));
-        xu_sum += xu - b.xu;
-        b.xu = xu;
-        continue;
-      }
       const ThetaVec theta_bar = b.theta;
       const ThetaMat P_bar = b.P;
       ThetaVec theta_iter = theta_bar;
@@ -769,10 +788,14 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     return flags | kReset;
   }
   for (auto& b : blocks) rediscretise(b);
+  return flags | finish_update();
+}
+
+// After a healthy update of every block: counted, and now and then the last good state.
+inline unsigned RecursiveEstimator::Impl::finish_update() {
   ++status.updates;
-  flags |= kUpdated;
   if (++updates_since_good >= 256 && e_short < 4.0 * e_var) save_good();
-  return flags;
+  return kUpdated;
 }
 
 // The offline part of the initialisation (section 4.7): the fit on the window
