@@ -612,7 +612,7 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
       b.filters.advance_held(kZ);
       b.xz = b.output(b.filters.complete_input(kZ, 0.0));  // the free response
       free += b.xz;
-      if (b.biproper) D += b.feedthrough();
+      D += b.feedthrough();  // 0 unless biproper
     }
     const double c0 = controller.feedthrough();
     z = (c0 * (s.r - free) + controller.free_response()) / (1.0 + c0 * D);
