@@ -9,7 +9,9 @@
 #    reader on 1M rows; track in process).
 # 2. Instructions per sample of step() for K=3 closed loop, M_s=0: callgrind on
 #    step_driver for two step counts N1 < N2, (Ir(N2) - Ir(N1)) / (N2 - N1),
-#    so warm-up, simulation and start-up cancel.
+#    so warm-up, simulation and start-up cancel. For each kernel of step():
+#    avx2_fma (what the estimator picks on a CPU with AVX2 and FMA, and the
+#    target's figure) and portable (x86-64 baseline, every other CPU).
 # 3. `modalwatch track` end to end (CSV in and out) on a simulated 2M-sample
 #    K=3 closed-loop record: samples/s of the wall-clock time.
 #
@@ -48,13 +50,20 @@ echo
 echo "== callgrind: instructions per sample of step(), K=3 closed loop, M_s=0"
 if command -v valgrind >/dev/null; then
   ir() { awk '/^summary:/ {print $2; found=1; exit} END {if (!found) exit 1}' "$1"; }
-  for n in "$N1" "$N2"; do
-    valgrind --tool=callgrind --callgrind-out-file="$WORK/callgrind.$n" "$DRIVER" "$n" >"$WORK/driver.$n" 2>"$WORK/valgrind.$n"
-    echo "  N=$n: Ir $(ir "$WORK/callgrind.$n")   ($(cat "$WORK/driver.$n"))"
+  for kernel in avx2_fma portable; do
+    if ! "$DRIVER" 0 "$kernel" >/dev/null 2>&1; then
+      echo "  $kernel kernel: this CPU cannot run it, skipped"
+      continue
+    fi
+    for n in "$N1" "$N2"; do
+      out="$WORK/callgrind.$kernel.$n"
+      valgrind --tool=callgrind --callgrind-out-file="$out" "$DRIVER" "$n" "$kernel" >"$out.driver" 2>"$out.valgrind"
+      echo "  N=$n: Ir $(ir "$out")   ($(cat "$out.driver"))"
+    done
+    I1=$(ir "$WORK/callgrind.$kernel.$N1")
+    I2=$(ir "$WORK/callgrind.$kernel.$N2")
+    echo "  $kernel kernel: instructions per sample: $(( (I2 - I1) / (N2 - N1) ))   (target <= 2000)"
   done
-  I1=$(ir "$WORK/callgrind.$N1")
-  I2=$(ir "$WORK/callgrind.$N2")
-  echo "  instructions per sample: $(( (I2 - I1) / (N2 - N1) ))   (target <= 2000)"
 else
   echo "  valgrind not installed: skipped"
 fi

@@ -372,6 +372,89 @@ TEST(RecursiveEstimator, GapsDoNotLookLikeDivergence) {
     EXPECT_NEAR(est.mode(i).value.wn / modal_parameters(truth.submodels[i]).wn, 1.0, 0.01) << "mode " << i + 1;
 }
 
+// ------------------------------------------------------------------ step kernels
+
+// step() runs one of two compilations of the same source (portable x86-64, and
+// AVX2 with fused multiply-add where the CPU has it). FMA rounds a b + c once
+// instead of twice, so the two may differ by round-off only: 2^-53 ~ 1.1e-16
+// relative per operation. The recursion carries those differences for its
+// memory (1/(1 - lambda) = 1000 updates) and through P's conditioning, so they
+// grow beyond one ulp: measured 1.3e-14 (seed record), 3e-15 (open loop with
+// refinements), 1e-14 (FOH) at worst over every estimate and std (wn, zeta,
+// gain) and the residual RMS. 1e-12 leaves a factor 75 for other compilers and
+// libm while any real difference in the arithmetic (a term dropped, a wrong
+// coefficient) shows at 1e-6 or more; and the flags must match sample by sample.
+struct KernelRun {
+  const char* name;
+  EstimatorSettings settings;
+  Record record;
+};
+
+void expect_kernels_agree(const AdditiveModel& model, const KernelRun& run_case, double tolerance) {
+  RecursiveEstimator portable(model, run_case.settings), fma(model, run_case.settings);
+  ASSERT_TRUE(portable.set_step_kernel(StepKernel::portable));
+  ASSERT_EQ(portable.step_kernel(), StepKernel::portable);
+  ASSERT_TRUE(fma.set_step_kernel(StepKernel::avx2_fma));
+  ASSERT_EQ(fma.step_kernel(), StepKernel::avx2_fma);
+  const Record& r = run_case.record;
+  const int K = portable.submodels();
+  double worst = 0.0;
+  Eigen::Index worst_k = 0;
+  auto compare = [&](double a, double b, Eigen::Index k) {
+    const double d = std::abs(a - b) / std::max(std::abs(a), 1e-300);
+    if (d > worst) worst = d, worst_k = k;
+  };
+  for (Eigen::Index k = 0; k < r.size(); ++k) {
+    const Sample s{r.t(k), r.u(k), r.y(k), r.has_reference() ? r.r(k) : 0.0};
+    ASSERT_EQ(portable.step(s), fma.step(s)) << run_case.name << ": flags differ at k=" << k;
+    for (int i = 0; i < K; ++i) {
+      const ModeEstimate a = portable.mode(i), b = fma.mode(i);
+      for (auto [x, y] : {std::pair{a.value.wn, b.value.wn}, {a.value.zeta, b.value.zeta}, {a.value.gain, b.value.gain},
+                          {a.std.wn, b.std.wn}, {a.std.zeta, b.std.zeta}, {a.std.gain, b.std.gain}})
+        compare(x, y, k);
+    }
+    compare(portable.residual_rms(), fma.residual_rms(), k);
+  }
+  std::printf("%s: largest relative difference portable vs avx2_fma %.3g (sample %lld)\n", run_case.name, worst,
+              static_cast<long long>(worst_k));
+  EXPECT_LT(worst, tolerance) << run_case.name << " at sample " << worst_k;
+  EXPECT_GT(portable.status().updates, 0u);
+  EXPECT_EQ(portable.status().updates, fma.status().updates) << run_case.name;
+  EXPECT_EQ(portable.status().covariance_clamps, fma.status().covariance_clamps) << run_case.name;
+  EXPECT_EQ(portable.status().outliers, fma.status().outliers) << run_case.name;
+  EXPECT_EQ(portable.status().resets, fma.status().resets) << run_case.name;
+}
+
+TEST(RecursiveEstimator, AvxFmaKernelGivesThePortableEstimatesToRoundOff) {
+  const Config c = paper_config();
+  {
+    RecursiveEstimator probe(c.model, c.estimator);
+    if (!probe.set_step_kernel(StepKernel::avx2_fma))
+      GTEST_SKIP() << "this CPU has no AVX2/FMA: step() runs the portable kernel only";
+    // Chosen at construction where the CPU has it.
+    EXPECT_EQ(RecursiveEstimator(c.model, c.estimator).step_kernel(), StepKernel::avx2_fma);
+  }
+  // The seed's record with the shipped settings: closed loop, random walks, the
+  // P bound clamping, mode filter banks (the path scripts/bench.sh counts).
+  const KernelRun shipped{"paper-sim.yaml, closed loop", c.estimator, simulate(*c.plant, *c.experiment).record};
+  expect_kernels_agree(c.model, shipped, 1e-12);
+  // Open loop, PRBS, warm-up fit, M_l = 2 and M_s = 2 (the refinement path).
+  ExperimentSpec e = *c.experiment;
+  e.closed_loop = false;
+  e.excitation = prbs(1.0);
+  e.duration = 300.0;
+  KernelRun refined{"open loop, M_l = 2, M_s = 2", with_warmup_fit(settings_for(c, {0.999, 0.999, 0.999}, 1000)),
+                    simulate(time_invariant(*c.plant, 0.01), e).record};
+  refined.settings.closed_loop = false;
+  refined.settings.block_iterations = 2;
+  refined.settings.refinements = 2;
+  expect_kernels_agree(c.model, refined, 1e-12);
+  // An interpolated output (FOH): four Prefilters per block, not the bank.
+  KernelRun foh{"closed loop, FOH output", settings_for(c, {0.999, 0.999, 0.999}, 1000), shipped.record.segment(0, 6000)};
+  foh.settings.output_hold = Hold::foh;
+  expect_kernels_agree(c.model, foh, 1e-12);
+}
+
 TEST(RecursiveEstimator, RejectsInconsistentSettings) {
   const Config c = paper_config();
   EXPECT_THROW(RecursiveEstimator(c.model, settings_for(c, {0.999, 1.5, 0.999}, 0)), std::invalid_argument);

@@ -109,6 +109,12 @@ enum StepFlags : unsigned {
   kWarmupFitPending = 1u << 8,
 };
 
+// The instruction set of step()'s arithmetic (RecursiveEstimator::set_step_kernel).
+enum class StepKernel {
+  portable,  // the build's target (x86-64 baseline by default)
+  avx2_fma,  // x86-64 with AVX2 and fused multiply-add
+};
+
 struct ModeEstimate {
   ModalParameters value;
   ModalParameters std;
@@ -210,6 +216,14 @@ class RecursiveEstimator {
   bool warmup_fit_pending() const noexcept;
   WarmupFit take_warmup_fit();
   void apply_warmup_fit(WarmupFit&& job);
+
+  // step() runs one of two compilations of the same arithmetic: AVX2 with fused
+  // multiply-add where the CPU has it (chosen at construction), else portable.
+  // Their estimates differ by round-off only; set_step_kernel() picks one, for
+  // estimates that are bit-identical across machines or to compare the two.
+  // Returns false, and changes nothing, for a kernel this CPU cannot run.
+  StepKernel step_kernel() const noexcept;
+  bool set_step_kernel(StepKernel kernel) noexcept;
 
   int submodels() const;
   // Current estimate of submodel i in physical units (allocates: call outside the hot path

@@ -67,11 +67,16 @@ class SecondOrderFilterBank {
   // Keeps the states (the parameters change only at sampling instants).
   // Unchecked: d0 != 0, d2 != 0, T > 0 (discretize_second_order).
   void set_denominator(double d0, double d1, double d2, double T) noexcept {
+    set_denominator(d0, d1, d2, discretize_second_order(d0, d1, d2, T));
+  }
+  // The same with disc = discretize_second_order(d0, d1, d2, T) computed by the
+  // caller (the estimator inlines it into its per-sample path).
+  void set_denominator(double d0, double d1, double d2, const SecondOrderDiscretization& disc) noexcept {
     d_[0] = d0;
     d_[1] = d1;
     d_[2] = d2;
     inv_d2_ = 1.0 / d2;
-    disc_ = discretize_second_order(d0, d1, d2, T);
+    disc_ = disc;
   }
   void reset() noexcept {
     for (int i = 0; i < kSignals; ++i) {
@@ -107,6 +112,16 @@ class SecondOrderFilterBank {
     out[0] = x0_[i];
     out[1] = x1_[i];
     out[2] = (w - d_[0] * x0_[i] - d_[1] * x1_[i]) * inv_d2_;
+    w_prev_[i] = w;
+    return out;
+  }
+  // complete(i, w) but for the top derivative (derivatives(i)[2] is left as it
+  // was): for a signal whose use needs only [w_f, p w_f], such as u and the
+  // instrument input z of a mode whose B has degree < 2.
+  const double* complete_state(int i, double w) noexcept {
+    double* out = out_[i];
+    out[0] = x0_[i];
+    out[1] = x1_[i];
     w_prev_[i] = w;
     return out;
   }

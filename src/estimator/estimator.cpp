@@ -16,9 +16,35 @@
 #include "modalwatch/polynomial.hpp"
 #include "modalwatch/record.hpp"
 #include "modalwatch/srivc.hpp"
+#include "../prefilter/second_order.hpp"
+
+// The per-sample path (advance() and everything inlined into it: the filter
+// bank, the discretisation, eqs. 23-25 and the guards) is compiled twice: for
+// the build's target (portable x86-64 by default) and, on x86-64, for AVX2 with
+// fused multiply-add, where GCC contracts a * b + c into one instruction. Each
+// estimator picks one at construction (no per-call dispatch, no global state).
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define MODALWATCH_HAVE_AVX2_FMA 1
+#define MODALWATCH_TARGET_AVX2_FMA [[gnu::target("avx2,fma")]]
+#else
+#define MODALWATCH_HAVE_AVX2_FMA 0
+#define MODALWATCH_TARGET_AVX2_FMA
+#endif
+// Functions of the per-sample path: inlined into both compilations of it.
+#define MODALWATCH_HOT [[gnu::always_inline]] inline
 
 namespace modalwatch {
 namespace {
+
+// Whether this CPU (and its operating system) runs the AVX2+FMA compilation.
+bool cpu_has_avx2_fma() noexcept {
+#if MODALWATCH_HAVE_AVX2_FMA
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+#else
+  return false;
+#endif
+}
 
 // theta_i has at most n + m + 1 <= 2 kMaxFilterOrder + 1 entries; fixed capacity
 // keeps step() free of heap allocation.
@@ -83,11 +109,15 @@ enum Channel { kY = 0, kX = 1, kU = 2, kZ = 3 };
 // Otherwise four Prefilters (rigid-body submodels, FOH output, other orders).
 struct BlockFilters {
   bool shared = false;
+  // The block's output B/(p^l A) w uses p^N w_f of u and z only when biproper
+  // (m = n + l); the shared bank leaves it out otherwise.
+  bool input_top = true;
   SecondOrderFilterBank mode;
   Prefilter f[4];
 
-  void init(const FilterVector& a, const FilterVector& den, double T, Hold output_hold) {
+  void init(const FilterVector& a, const FilterVector& den, double T, Hold output_hold, bool biproper) {
     shared = a.size() == 3 && den.size() == 3 && output_hold == Hold::zoh;
+    input_top = biproper || !shared;
     if (shared) {
       if (a(2) == 0.0) throw std::invalid_argument("discretize: leading coefficient is zero");
       mode = SecondOrderFilterBank{};
@@ -113,19 +143,28 @@ struct BlockFilters {
   // derivatives at t_k for w_k (Prefilter::step for those that waited).
   // advance_held(c) + complete(c, w) is take() split for the instrument input,
   // whose w_k is solved for after its free response is known.
-  void begin_sample() {
+  MODALWATCH_HOT void begin_sample() {
     if (shared) mode.advance_all();
   }
-  const double* take(Channel c, double w) { return shared ? mode.complete(c, w) : f[c].step(w).data(); }
-  void advance_held(Channel c) {
+  MODALWATCH_HOT const double* take(Channel c, double w) { return shared ? mode.complete(c, w) : f[c].step(w).data(); }
+  MODALWATCH_HOT void advance_held(Channel c) {
     if (!shared) f[c].advance();
   }
-  const double* complete(Channel c, double w) { return shared ? mode.complete(c, w) : f[c].complete(w).data(); }
-  const double* derivatives(Channel c) const { return shared ? mode.derivatives(c) : f[c].derivatives().data(); }
+  MODALWATCH_HOT const double* complete(Channel c, double w) { return shared ? mode.complete(c, w) : f[c].complete(w).data(); }
+  // take() and complete() for the input channels kU and kZ, whose derivatives
+  // the block uses up to p^m only (fill(), output()).
+  MODALWATCH_HOT const double* take_input(Channel c, double w) {
+    return input_top ? take(c, w) : mode.complete_state(c, w);
+  }
+  MODALWATCH_HOT const double* complete_input(Channel c, double w) {
+    return input_top ? complete(c, w) : mode.complete_state(c, w);
+  }
+  MODALWATCH_HOT const double* derivatives(Channel c) const { return shared ? mode.derivatives(c) : f[c].derivatives().data(); }
 };
 
 struct Block {
   int n = 0, m = 0, l = 0, nt = 0;
+  bool biproper = false;  // m = n + l: the output has a direct feedthrough
   double ws = 1.0, lambda = 1.0;
   double random_walk = 0.0;  // relative std of theta's drift per update (Q, CONTSID's Kalman-filter adaptation)
   ThetaVec scale;  // theta' = scale .* theta (physical)
@@ -150,7 +189,7 @@ struct Block {
     return c;
   }
   // B/(p^l A) w from the filter's derivatives d = [w_f, p w_f, ...].
-  double output(const double* d) const {
+  MODALWATCH_HOT double output(const double* d) const {
     if (m == 0) return theta(n) * d[0];  // a mode's B = b0 (the common case)
     double s = 0.0;
     for (int j = 0; j <= m; ++j) s += theta(n + j) * d[j];
@@ -158,7 +197,7 @@ struct Block {
   }
   // Regressor (eqs. 19, 33) and instrument (eqs. 20, 29, 32) from the filtered
   // residual output dy, auxiliary output dx, input du and instrument input dz.
-  void fill(const double* dy, const double* dx, const double* du, const double* dz) {
+  MODALWATCH_HOT void fill(const double* dy, const double* dx, const double* du, const double* dz) {
     if (n == 2 && m == 0) {  // a mode (the common case), without the loops
       phi(0) = -dy[1];
       phi(1) = -dy[2];
@@ -177,8 +216,51 @@ struct Block {
       psi(n + j) = dz[j];
     }
   }
-  double feedthrough() const {
-    return m == n + l ? theta(n + m) / (n > 0 ? theta(n - 1) : 1.0) : 0.0;
+  MODALWATCH_HOT double feedthrough() const {
+    return biproper ? theta(n + m) / (n > 0 ? theta(n - 1) : 1.0) : 0.0;
+  }
+};
+
+// The known controller C_d(q) of the instrument's loop (eqs. 9, 29), run as
+// DiscreteTransferFunction runs it (DF2T, the same arithmetic) but on
+// fixed-size storage inlined into the per-sample path: configured controllers
+// are of low order. Above kMaxOrder the DiscreteTransferFunction itself runs.
+struct LoopController {
+  static constexpr int kMaxOrder = 8;
+  int order = 0;  // na; -1: above kMaxOrder
+  double num[kMaxOrder + 1] = {}, den[kMaxOrder + 1] = {};  // aligned, normalised by a_0
+  double state[kMaxOrder] = {};
+  DiscreteTransferFunction general;
+
+  void init(const DiscreteTransferFunction& c) {
+    general = c;
+    general.reset();
+    const int na = c.empty() ? 0 : static_cast<int>(c.denominator().size()) - 1;
+    order = na <= kMaxOrder ? na : -1;
+    for (int i = 0; i <= std::min(na, kMaxOrder); ++i) {
+      num[i] = c.numerator()[i];
+      den[i] = c.denominator()[i];
+    }
+    reset();
+  }
+  void reset() {
+    std::fill(std::begin(state), std::end(state), 0.0);
+    general.reset();
+  }
+  double feedthrough() const { return order >= 0 ? num[0] : general.feedthrough(); }
+  // The output at t_k for e_k = 0 (the state's contribution): DiscreteTransferFunction::peek(0).
+  MODALWATCH_HOT double free_response() const {
+    if (order < 0) return general.peek(0.0);
+    return order > 0 ? state[0] : 0.0;
+  }
+  // DiscreteTransferFunction::step(e): z_i <- z_{i+1} + b_{i+1} e - a_{i+1} y, z_n = 0.
+  MODALWATCH_HOT void step(double e) {
+    if (order < 0) {
+      general.step(e);
+      return;
+    }
+    const double y = num[0] * e + free_response();
+    for (int i = 0; i < order; ++i) state[i] = (i + 1 < order ? state[i + 1] : 0.0) + num[i + 1] * e - den[i + 1] * y;
   }
 };
 
@@ -206,7 +288,7 @@ struct RecursiveEstimator::Impl {
   std::shared_ptr<const WarmupFit::Context> fit_context;  // immutable, shared with the jobs
   std::vector<Block> blocks;
   std::vector<BlockFilters> snapshot;  // filters at t_{k-1}, for refinements
-  DiscreteTransferFunction controller;
+  LoopController controller;
   EstimatorStatus status;
 
   // Warm-up window, preallocated; a WarmupFit job holds it while it runs.
@@ -235,9 +317,15 @@ struct RecursiveEstimator::Impl {
   double pow_short = 0.0, pow_ref = 0.0, pow_alpha = 0.0, pow_ref_alpha = 0.0;
   std::uint64_t pow_count = 0;
 
+  // The per-sample path, one compilation per instruction set (see the top of
+  // this file), chosen once: advance() calls through kernel.
+  using Kernel = unsigned (Impl::*)(const Sample&, bool);
+  Kernel kernel = &Impl::advance_portable;
+  StepKernel kernel_id = StepKernel::portable;
+
   void build(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>* fit_covariance, double fit_sigma2,
              double y_var);
-  void rediscretise(Block& b);
+  MODALWATCH_HOT void rediscretise(Block& b);
   void rediscretise_prefilters(Block& b, double Ts);
   void allocate_window() {
     for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) w->resize(cfg.warmup_samples);
@@ -246,17 +334,23 @@ struct RecursiveEstimator::Impl {
   void restart_filters();
   void save_good();
   void restore_good(const char* reason);
-  unsigned advance(const Sample& s, bool allow_update);
-  bool update_block(Block& b, double y_f);
+  unsigned advance(const Sample& s, bool allow_update) { return (this->*kernel)(s, allow_update); }
+  unsigned advance_portable(const Sample& s, bool allow_update);
+  MODALWATCH_TARGET_AVX2_FMA unsigned advance_avx2_fma(const Sample& s, bool allow_update);
+  MODALWATCH_HOT unsigned advance_body(const Sample& s, bool allow_update);
+  bool select_kernel(StepKernel k) noexcept;
+  MODALWATCH_HOT unsigned finish_update();
+  MODALWATCH_HOT bool update_block(Block& b, double y_f);
   template <int N>
-  bool update_block_n(Block& b, double y_f);
+  MODALWATCH_HOT bool update_block_n(Block& b, double y_f);
   void finish_warmup(const WarmupFit& fit);
 };
 
-void RecursiveEstimator::Impl::rediscretise(Block& b) {
+inline void RecursiveEstimator::Impl::rediscretise(Block& b) {
   const double Ts = b.ws * cfg.sample_time;
   if (b.filters.shared) {  // a mode, ZOH: A = 1 + a1 p + a2 p^2 for all four
-    b.filters.mode.set_denominator(1.0, b.theta(0), b.theta(1), Ts);
+    const double a1 = b.theta(0), a2 = b.theta(1);
+    b.filters.mode.set_denominator(1.0, a1, a2, detail::discretize_second_order_inline(1.0, a1, a2, Ts));
     return;
   }
   rediscretise_prefilters(b, Ts);
@@ -292,6 +386,7 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.m = s.m;
     b.l = s.rigid_poles;
     b.nt = s.n_theta();
+    b.biproper = b.m == b.n + b.l;
     b.ws = time_scale(s);
     b.lambda = cfg.forgetting.empty() ? 1.0 : cfg.forgetting[i];
     b.random_walk = cfg.random_walks.empty() ? cfg.random_walk : cfg.random_walks[i];
@@ -315,14 +410,13 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
       }
     }
     b.p_bound = cfg.covariance_bound * b.P.diagonal().cwiseMax(1e-300);
-    b.filters.init(b.a_poly(), b.denominator(), b.ws * T, cfg.output_hold);
+    b.filters.init(b.a_poly(), b.denominator(), b.ws * T, cfg.output_hold, b.biproper);
     b.phi.resize(b.nt);
     b.psi.resize(b.nt);
     blocks.push_back(std::move(b));
   }
   snapshot.resize(blocks.size());
-  controller = cfg.controller;
-  controller.reset();
+  controller.init(cfg.controller);
   save_good();
 }
 
@@ -384,7 +478,7 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
 // compile time so that the loops unroll (N = 3: a mode, the common case); N = 0
 // takes nt at run time.
 template <int N>
-bool iv_update(int nt_runtime, double* P, double* theta, const double* phi, const double* psi, double lambda,
+MODALWATCH_HOT bool iv_update(int nt_runtime, double* P, double* theta, const double* phi, const double* psi, double lambda,
                double y_f) {
   const int nt = N > 0 ? N : nt_runtime;
   double Ppsi[kMaxTheta], w[kMaxTheta];
@@ -403,14 +497,15 @@ bool iv_update(int nt_runtime, double* P, double* theta, const double* phi, cons
   }
   if (!std::isfinite(denom) || std::abs(denom) < 1e-300) return false;
   const double inv_lambda = 1.0 / lambda;
-  double K[kMaxTheta];
+  double K_half[kMaxTheta];  // K / 2 (exact): the symmetric part's 1/2 taken once
   for (int i = 0; i < nt; ++i) {
-    K[i] = Ppsi[i] / denom;
-    theta[i] += K[i] * eps;
+    const double K = Ppsi[i] / denom;
+    theta[i] += K * eps;
+    K_half[i] = 0.5 * K;
   }
   for (int j = 0; j < nt; ++j) {
     for (int i = 0; i <= j; ++i) {
-      const double v = (P[i + j * nt] - 0.5 * (K[i] * w[j] + K[j] * w[i])) * inv_lambda;
+      const double v = (P[i + j * nt] - (K_half[i] * w[j] + K_half[j] * w[i])) * inv_lambda;
       P[i + j * nt] = v;
       P[j + i * nt] = v;
     }
@@ -420,7 +515,7 @@ bool iv_update(int nt_runtime, double* P, double* theta, const double* phi, cons
 
 // One block's update from theta-bar(t_{k-1}), P-bar(t_{k-1}); the filtered
 // regressor phi and instrument psi are already in b.
-bool RecursiveEstimator::Impl::update_block(Block& b, double y_f) {
+inline bool RecursiveEstimator::Impl::update_block(Block& b, double y_f) {
   return b.nt == 3 ? update_block_n<3>(b, y_f) : update_block_n<0>(b, y_f);
 }
 
@@ -428,33 +523,39 @@ bool RecursiveEstimator::Impl::update_block(Block& b, double y_f) {
 // nt = 3 Eigen's dynamic-size copies and row/column operations cost more than
 // the arithmetic.
 template <int N>
-bool RecursiveEstimator::Impl::update_block_n(Block& b, double y_f) {
+inline bool RecursiveEstimator::Impl::update_block_n(Block& b, double y_f) {
   const int nt = N > 0 ? N : b.nt;
+  // In place: on a false return the caller goes back to the last good state.
   double* P = b.P.data();  // nt x nt, column-major
-  double theta[kMaxTheta];
-  for (int j = 0; j < nt; ++j) theta[j] = b.theta(j);
+  double* theta = b.theta.data();
   if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), b.lambda, y_f)) return false;
   // A mode with a_1, a_2 > 0 is stable: the common case, decided here.
   const bool stable_mode = b.n == 2 && theta[0] > 0.0 && theta[1] > 0.0;
-  if (b.n > 0 && !stable_mode && project(theta, b.n)) ++status.projections;
-  if (b.n > 0 && theta[b.n - 1] == 0.0) return false;
-  for (int j = 0; j < nt; ++j) b.theta(j) = theta[j];
+  if (b.n > 0 && !stable_mode) {
+    if (project(theta, b.n)) ++status.projections;
+    if (theta[b.n - 1] == 0.0) return false;
+  }
   // Guards: random walk (CONTSID's Kalman-filter adaptation), bounded trace.
   // Q is a parameter covariance; P carries theta^2 per output^2 (cov = sigma^2 P).
-  if (b.random_walk > 0.0 && e_var > 0.0)
-    for (int j = 0; j < nt; ++j) {
-      const double q = b.random_walk * theta[j];
-      P[j + j * nt] += q * q / e_var;
-    }
+  if (b.random_walk > 0.0 && e_var > 0.0) {
+    const double q2 = b.random_walk * b.random_walk / e_var;  // Q_jj = q2 theta_j^2
+    for (int j = 0; j < nt; ++j) P[j + j * nt] += q2 * theta[j] * theta[j];
+  }
   // Per-direction bound: D P D with D = diag(min(1, sqrt(bound/P_jj))) keeps P
   // symmetric positive definite while stopping wind-up in unexcited directions.
+  // P is symmetric here, so D_jj scales row j and mirrors it into column j, and
+  // P_jj becomes D_jj^2 P_jj = bound_j.
   bool clamped = false;
   const double* bound = b.p_bound.data();
   for (int j = 0; j < nt; ++j) {
     if (P[j + j * nt] > bound[j]) {
       const double f = std::sqrt(bound[j] / P[j + j * nt]);
-      for (int k = 0; k < nt; ++k) P[j + k * nt] *= f;  // row j
-      for (int k = 0; k < nt; ++k) P[k + j * nt] *= f;  // column j
+      for (int k = 0; k < nt; ++k) {
+        if (k == j) continue;
+        P[j + k * nt] *= f;
+        P[k + j * nt] = P[j + k * nt];
+      }
+      P[j + j * nt] = bound[j];
       clamped = true;
     }
   }
@@ -464,7 +565,35 @@ bool RecursiveEstimator::Impl::update_block_n(Block& b, double y_f) {
   return std::isfinite(trace);
 }
 
-unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
+bool RecursiveEstimator::Impl::select_kernel(StepKernel k) noexcept {
+  switch (k) {
+    case StepKernel::portable:
+      kernel = &Impl::advance_portable;
+      break;
+    case StepKernel::avx2_fma:
+#if MODALWATCH_HAVE_AVX2_FMA
+      if (!cpu_has_avx2_fma()) return false;
+      kernel = &Impl::advance_avx2_fma;
+      break;
+#else
+      return false;
+#endif
+  }
+  kernel_id = k;
+  return true;
+}
+
+unsigned RecursiveEstimator::Impl::advance_portable(const Sample& s, bool allow_update) {
+  return advance_body(s, allow_update);
+}
+
+#if MODALWATCH_HAVE_AVX2_FMA
+unsigned RecursiveEstimator::Impl::advance_avx2_fma(const Sample& s, bool allow_update) {
+  return advance_body(s, allow_update);
+}
+#endif
+
+inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool allow_update) {
   unsigned flags = 0;
   const bool refine = cfg.refinements > 0 || cfg.block_iterations > 1;
   if (refine && allow_update) {
@@ -474,29 +603,33 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   // 1. Instrument input z_k = S_uo(q, t_k) r_k: the noise-free loop with the
   //    known controller and the current model (eq. 29), solved for a biproper
   //    controller. In open loop z = u.
+  //    With it, each block's output for u at t_k, and y_hat, their sum.
   double z = s.u;
+  double y_hat = 0.0;
   if (cfg.closed_loop) {
     double free = 0.0, D = 0.0;
     for (auto& b : blocks) {
       b.filters.advance_held(kZ);
-      b.xz = b.output(b.filters.complete(kZ, 0.0));  // the free response
+      b.xz = b.output(b.filters.complete_input(kZ, 0.0));  // the free response
       free += b.xz;
-      D += b.feedthrough();
+      D += b.feedthrough();  // 0 unless biproper
     }
     const double c0 = controller.feedthrough();
-    z = (c0 * (s.r - free) + controller.peek(0.0)) / (1.0 + c0 * D);
+    z = (c0 * (s.r - free) + controller.free_response()) / (1.0 + c0 * D);
     controller.step(s.r - (free + D * z));
     for (auto& b : blocks) {
-      const double* dz = b.filters.complete(kZ, z);
+      const double* dz = b.filters.complete_input(kZ, z);
       // Strictly proper (m < n + l): the output uses the state alone, not z_k.
-      if (b.m == b.n + b.l) b.xz = b.output(dz);
+      if (b.biproper) b.xz = b.output(dz);
+      b.xu = b.output(b.filters.take_input(kU, s.u));
+      y_hat += b.xu;
     }
-  }
-  double y_hat = 0.0;
-  for (auto& b : blocks) {
-    b.xu = b.output(b.filters.take(kU, s.u));
-    if (!cfg.closed_loop) b.xz = b.xu;
-    y_hat += b.xu;
+  } else {
+    for (auto& b : blocks) {
+      b.xu = b.output(b.filters.take_input(kU, s.u));
+      b.xz = b.xu;
+      y_hat += b.xu;
+    }
   }
   if (!std::isfinite(y_hat) || !std::isfinite(z)) {
     restore_good(kResetNonFiniteModel);
@@ -516,9 +649,21 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   // A run of more than kOutlierRun "outliers" is not outliers but a mismatch
   // (a restart, a changed plant): accept it, or the estimator would lock up.
   constexpr int kOutlierRun = 10;
+  // Nor is a residual at the round-off of y_hat an outlier: on noise-free data
+  // e_var is round-off too, and a residual ten times it would say no more than
+  // how y_hat was rounded (with FMA or without). kRoundOff, relative to the
+  // outputs summed into y_hat, is 10^4 times their round-off and far below any
+  // sensor's resolution (a 24-bit converter resolves 6e-8 of its range).
+  constexpr double kRoundOff = 1e-12;
+  const auto above_round_off = [&] {
+    double sum = 0.0;
+    for (const auto& b : blocks) sum += std::abs(b.xu);
+    return std::abs(e) > kRoundOff * sum;
+  };
   if (!std::isfinite(s.y)) {
     y = y_hat;
-  } else if (e_count > 100 && outlier_run < kOutlierRun && e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var) {
+  } else if (e_count > 100 && outlier_run < kOutlierRun && e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var &&
+             above_round_off()) {
     y = y_hat;
     ++outlier_run;
     ++status.outliers;
@@ -574,26 +719,31 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
   // their latest theta: y - (xu_sum - b.xu), the sum kept up to date below.
   double xu_sum = y_hat;
   bool healthy = true;
+  if (!refine) {
+    // M_l = 1, M_s = 0 (the paper's setting): one update per block from
+    // theta-bar, P-bar in place, and the block's prefilters re-discretised for
+    // the next sample (this sample is done with them).
+    for (auto& b : blocks) {
+      const double y_tilde = y - (xu_sum - b.xu);
+      const double* dy = b.filters.take(kY, y_tilde);
+      const double* dx = b.filters.take(kX, b.xz);
+      const double* du = b.filters.derivatives(kU);
+      const double* dz = cfg.closed_loop ? b.filters.derivatives(kZ) : du;
+      b.fill(dy, dx, du, dz);
+      if (!update_block(b, dy[0])) {
+        restore_good(kResetDegenerate);
+        return flags | kReset;
+      }
+      const double xu = b.output(du);
+      xu_sum += xu - b.xu;
+      b.xu = xu;
+      rediscretise(b);
+    }
+    return flags | finish_update();
+  }
   for (int l = 0; l < cfg.block_iterations && healthy; ++l) {
     for (std::size_t i = 0; i < blocks.size() && healthy; ++i) {
       Block& b = blocks[i];
-      if (!refine) {
-        // M_l = 1, M_s = 0 (the paper's setting): one update from theta-bar, P-bar in place.
-        const double y_tilde = y - (xu_sum - b.xu);
-        const double* dy = b.filters.take(kY, y_tilde);
-        const double* dx = b.filters.take(kX, b.xz);
-        const double* du = b.filters.derivatives(kU);
-        const double* dz = cfg.closed_loop ? b.filters.derivatives(kZ) : du;
-        b.fill(dy, dx, du, dz);
-        if (!update_block(b, dy[0])) {
-          healthy = false;
-          break;
-        }
-        const double xu = b.output(b.filters.derivatives(kU));
-        xu_sum += xu - b.xu;
-        b.xu = xu;
-        continue;
-      }
       const ThetaVec theta_bar = b.theta;
       const ThetaMat P_bar = b.P;
       ThetaVec theta_iter = theta_bar;
@@ -607,8 +757,8 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
           b.theta = theta_iter;
           rediscretise(b);
           b.filters.begin_sample();
-          b.filters.take(kU, s.u);
-          if (cfg.closed_loop) b.filters.take(kZ, z);
+          b.filters.take_input(kU, s.u);
+          if (cfg.closed_loop) b.filters.take_input(kZ, z);
           b.theta = theta_bar;
         }
         const double* dy = b.filters.take(kY, y_tilde);
@@ -638,10 +788,14 @@ unsigned RecursiveEstimator::Impl::advance(const Sample& s, bool allow_update) {
     return flags | kReset;
   }
   for (auto& b : blocks) rediscretise(b);
+  return flags | finish_update();
+}
+
+// After a healthy update of every block: counted, and now and then the last good state.
+inline unsigned RecursiveEstimator::Impl::finish_update() {
   ++status.updates;
-  flags |= kUpdated;
   if (++updates_since_good >= 256 && e_short < 4.0 * e_var) save_good();
-  return flags;
+  return kUpdated;
 }
 
 // The offline part of the initialisation (section 4.7): the fit on the window
@@ -744,6 +898,7 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
   Impl& m = *impl_;
   m.cfg = settings;
   m.initial = initial;
+  m.select_kernel(StepKernel::avx2_fma);  // where the CPU has it; else portable
   if (!(settings.sample_time > 0.0)) throw std::invalid_argument("estimator: sample_time must be > 0");
   if (initial.submodels.empty()) throw std::invalid_argument("estimator: no submodels");
   for (const auto& s : initial.submodels) {
@@ -901,6 +1056,9 @@ void RecursiveEstimator::apply_warmup_fit(WarmupFit&& job) {
     throw;
   }
 }
+
+StepKernel RecursiveEstimator::step_kernel() const noexcept { return impl_->kernel_id; }
+bool RecursiveEstimator::set_step_kernel(StepKernel kernel) noexcept { return impl_->select_kernel(kernel); }
 
 int RecursiveEstimator::submodels() const { return static_cast<int>(impl_->initial.submodels.size()); }
 
@@ -1061,7 +1219,7 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
       b.p_bound = st.P_bound[i];
       b.good_theta = st.good_theta[i].cwiseProduct(Eigen::VectorXd(b.scale));
       b.good_P = st.good_P[i];
-      b.filters.init(b.a_poly(), b.denominator(), b.ws * next.cfg.sample_time, next.cfg.output_hold);
+      b.filters.init(b.a_poly(), b.denominator(), b.ws * next.cfg.sample_time, next.cfg.output_hold, b.biproper);
     }
     next.buffered = 0;
   } else {

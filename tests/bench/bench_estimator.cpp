@@ -3,7 +3,8 @@
 // builds Release and runs this, callgrind on step_driver and track on a
 // 2M-sample record.
 //
-//   BM_Step/K/closed/Ms     step() after warm-up; items_per_second = samples/s
+//   BM_Step/K/closed/Ms/fma step() after warm-up; items_per_second = samples/s (fma 1: the
+//                           AVX2+FMA kernel, 0: portable)
 //   BM_ReadRecord           the lenient CSV reader on a 1M-row record
 //   BM_Track                `modalwatch track` end to end (CSV in and out), in process
 #include <fcntl.h>
@@ -46,6 +47,11 @@ void BM_Step(benchmark::State& state) {
   s.warmup_samples = kWarmup;
   const Record& r = record(K, closed);
   RecursiveEstimator est(config.model, s);
+  // fma 1: the AVX2+FMA kernel (what the estimator picks where the CPU has it), 0: portable.
+  if (!est.set_step_kernel(state.range(3) != 0 ? StepKernel::avx2_fma : StepKernel::portable)) {
+    state.SkipWithError("this CPU cannot run the AVX2+FMA kernel");
+    return;
+  }
   Feeder feed(r, kWarmup);
   for (int k = 0; k < kWarmup + 100; ++k) est.step(feed.next());
   for (auto _ : state) {
@@ -59,8 +65,8 @@ void BM_Step(benchmark::State& state) {
   state.counters["warmup_fit"] = st.warmup_fit_used ? 1.0 : 0.0;
 }
 BENCHMARK(BM_Step)
-    ->ArgNames({"K", "closed", "Ms"})
-    ->ArgsProduct({{2, 3}, {0, 1}, {0, 2}})
+    ->ArgNames({"K", "closed", "Ms", "fma"})
+    ->ArgsProduct({{2, 3}, {0, 1}, {0, 2}, {1, 0}})
     ->Unit(benchmark::kNanosecond);
 
 // Files for the reader and track benchmarks, removed at exit.

@@ -1,0 +1,129 @@
+#pragma once
+// discretize_second_order (include/modalwatch/prefilter.hpp) as an inline
+// function, for the recursive estimator's per-sample path: it re-discretises
+// every mode at every update and is compiled once per instruction set
+// (src/estimator/estimator.cpp: portable and AVX2+FMA), which needs the body
+// where it is called. Internal to modalwatch_core, not a public header.
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+
+#include "modalwatch/prefilter.hpp"
+
+namespace modalwatch::detail {
+
+// 2x2 matrices as four scalars: the per-sample re-discretisation of a mode runs
+// in the recursive estimator's inner loop, where dynamic-size Eigen costs more
+// than the arithmetic.
+struct M2 {
+  double a, b, c, d;  // [[a, b], [c, d]]
+};
+
+// 1/k! and 1e-18 k! for k = 0..39: the series below without divisions.
+struct FactorialTables {
+  double inverse[40];
+  double tolerance[40];
+};
+constexpr FactorialTables factorial_tables() {
+  FactorialTables t{};
+  double f = 1.0;
+  for (int k = 0; k < 40; ++k) {
+    if (k > 0) f *= k;
+    t.inverse[k] = 1.0 / f;
+    t.tolerance[k] = 1e-18 * f;
+  }
+  return t;
+}
+inline constexpr FactorialTables kFactorial = factorial_tables();
+
+// The length of phi's series, sum_{k <= J} (AT)^k/k!, by quarter binade of
+// |AT| < 2: for |AT| = 2^-i (1 + f) with q = floor(4 f), the J at the interval's
+// top, u = 2^-i (1 + (q + 1)/4), whose next term, u^(J+1)/(J+1)!, is below 1e-18
+// (the term count then costs one table look-up instead of a loop, and is never
+// more than a quarter binade's worth above what |AT| itself needs).
+struct SeriesLengths {
+  int last_term[64 * 4];
+};
+constexpr SeriesLengths series_lengths() {
+  SeriesLengths t{};
+  double binade = 1.0;  // 2^-i
+  for (int i = 0; i < 64; ++i) {
+    for (int q = 0; q < 4; ++q) {
+      const double top = binade * (1.0 + (q + 1) / 4.0);
+      int J = 0;
+      for (double power = top; J < 34 && power >= kFactorial.tolerance[J + 1]; power *= top) ++J;
+      t.last_term[4 * i + q] = J;
+    }
+    binade *= 0.5;
+  }
+  return t;
+}
+inline constexpr SeriesLengths kSeriesLength = series_lengths();
+// Index of |AT| in (0, 2) into SeriesLengths: 4 i + q from the exponent and the
+// top two mantissa bits (below 2^-63 the last entry, which over-covers).
+inline int series_index(double norm) {
+  const std::uint64_t bits = std::bit_cast<std::uint64_t>(norm);
+  const int i = 1023 - static_cast<int>((bits >> 52) & 0x7ff);  // norm in [2^-i, 2^(1-i)): i >= 0
+  return i > 63 ? 4 * 63 + 3 : 4 * i + static_cast<int>((bits >> 50) & 3);
+}
+
+// The branch for |A T| >= 2 (exp and sincos of the eigenvalues), out of line in
+// prefilter.cpp: the estimator's modes stay below (normalised time, |A T| ~ w T).
+SecondOrderDiscretization discretize_second_order_closed_form(double d0, double d1, double d2, double T) noexcept;
+
+// N = 2, d_0 != 0. For |A T| < 2 the Taylor series of exp(A T) and of the
+// input integrals (below 1 the A^{-1} forms would cancel; up to 2 the series is
+// still exact to round-off and costs less than exp and sincos); above, the
+// closed form. B = [0, 1/d2].
+[[gnu::always_inline]] inline SecondOrderDiscretization discretize_second_order_inline(double d0, double d1, double d2,
+                                                                                      double T) noexcept {
+  const double bB = 1.0 / d2;
+  const M2 AT{0.0, T, -d0 / d2 * T, -d1 / d2 * T};
+  const double norm = std::max(std::abs(AT.b), std::abs(AT.c) + std::abs(AT.d));
+  if (!(norm < 2.0)) return discretize_second_order_closed_form(d0, d1, d2, T);
+  SecondOrderDiscretization z;
+  // Taylor: phi = sum (AT)^k/k!, Psi0 = sum (AT)^k/(k+1)!, Psi1 = sum (AT)^k/(k+2)!,
+  // phi's terms while |AT|^k/k! >= 1e-18 (J <= 25). Only the second
+  // columns are needed (B = e2/d2), in Horner form: s1 = Psi1 e2, then
+  // s0 = Psi0 e2 = e2 + AT s1 and phi e2 = e2 + AT s0; the first column of phi
+  // from phi = c0 I + c1 AT (Cayley-Hamilton): c1 = phi_01/T, c0 = phi_11 - c1 AT_11.
+  // Up to |AT| = 2 the terms stay below 2 and their sum below e^2, so the
+  // series is as accurate as the closed form and cheaper than its
+  // exp and sincos (the estimator's fastest mode sits at |AT| ~ 1.2).
+  const int J = kSeriesLength.last_term[series_index(norm)];  // phi's last term (AT)^J/J!
+  // Psi1's last term (AT)^K/(K+2)!. The first components of the columns start
+  // at order |AT| (gamma0_0, gamma1_0 ~ T^2): K = J + 1 keeps them accurate
+  // relative to themselves, not only to the largest entry.
+  //
+  // Horner: (v0, v1) <- AT (v0, v1) + e2/(k+2)! for k = K-1..0 from
+  // (0, 1/(K+2)!). As AT's first row is [0, T], v0 is always T times the
+  // previous v1, so v1 alone follows the two-term recurrence
+  //   u_k = (AT_10 T) u_{k+2} + AT_11 u_{k+1} + 1/(k+2)!,  u_K = 1/(K+2)!, u_{K+1} = 0,
+  // and s1 = (T u_1, u_0). K is rounded up to a multiple of 4 (the extra
+  // terms are below 1e-18) so that the steps go four at a time.
+  const int K = (J + 4) & ~3;
+  const double cb = AT.c * AT.b;
+  double u2 = 0.0, u1 = kFactorial.inverse[K + 2];  // u_{k+2}, u_{k+1}
+  for (int k = K - 1; k > 0; k -= 4) {
+    u2 = cb * u2 + AT.d * u1 + kFactorial.inverse[k + 2];  // u_k
+    u1 = cb * u1 + AT.d * u2 + kFactorial.inverse[k + 1];  // u_{k-1}
+    u2 = cb * u2 + AT.d * u1 + kFactorial.inverse[k];      // u_{k-2}
+    u1 = cb * u1 + AT.d * u2 + kFactorial.inverse[k - 1];  // u_{k-3}
+  }
+  const double v0 = AT.b * u2, v1 = u1;  // s1 = Psi1 e2
+  const double s0 = AT.b * v1, s1 = 1.0 + AT.c * v0 + AT.d * v1;  // Psi0 e2
+  const double p01 = AT.b * s1, p11 = 1.0 + AT.c * s0 + AT.d * s1;  // phi e2
+  const double c1 = p01 / AT.b, c0 = p11 - c1 * AT.d;
+  z.phi[0][0] = c0;
+  z.phi[0][1] = p01;
+  z.phi[1][0] = c1 * AT.c;
+  z.phi[1][1] = p11;
+  z.gamma0[0] = T * s0 * bB;
+  z.gamma0[1] = T * s1 * bB;
+  z.gamma1[0] = T * v0 * bB;
+  z.gamma1[1] = T * v1 * bB;
+  return z;
+}
+
+}  // namespace modalwatch::detail
