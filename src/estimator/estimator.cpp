@@ -259,8 +259,10 @@ struct LoopController {
       general.step(e);
       return;
     }
-    const double y = num[0] * e + free_response();
-    for (int i = 0; i < order; ++i) state[i] = (i + 1 < order ? state[i + 1] : 0.0) + num[i + 1] * e - den[i + 1] * y;
+    if (order == 0) return;
+    const double y = num[0] * e + state[0];
+    for (int i = 0; i + 1 < order; ++i) state[i] = state[i + 1] + num[i + 1] * e - den[i + 1] * y;
+    state[order - 1] = num[order] * e - den[order] * y;
   }
 };
 
