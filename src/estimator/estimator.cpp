@@ -235,12 +235,15 @@ struct LoopController {
   void init(const DiscreteTransferFunction& c) {
     general = c;
     general.reset();
+    std::fill(std::begin(num), std::end(num), 0.0);  // no controller (open loop): C_d = 0
+    std::fill(std::begin(den), std::end(den), 0.0);
     const int na = c.empty() ? 0 : static_cast<int>(c.denominator().size()) - 1;
     order = na <= kMaxOrder ? na : -1;
-    for (int i = 0; i <= std::min(na, kMaxOrder); ++i) {
-      num[i] = c.numerator()[i];
-      den[i] = c.denominator()[i];
-    }
+    if (!c.empty())
+      for (int i = 0; i <= std::min(na, kMaxOrder); ++i) {
+        num[i] = c.numerator()[i];
+        den[i] = c.denominator()[i];
+      }
     reset();
   }
   void reset() {
