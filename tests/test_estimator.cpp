@@ -175,6 +175,24 @@ TEST(RecursiveEstimator, NoiseFreeDataTakeAWrongStartToTheTruthWithAnInterpolate
   expect_noise_free_open_loop_corrects_a_wrong_start(Hold::foh);
 }
 
+// Open loop needs no controller: the estimator's copy of C_d is then empty.
+TEST(RecursiveEstimator, OpenLoopRunsWithoutAController) {
+  const Config c = paper_config();
+  ExperimentSpec e = *c.experiment;
+  e.closed_loop = false;
+  e.excitation = prbs(1.0);
+  e.duration = 100.0;
+  const auto sim = simulate(time_invariant(*c.plant, 0.0), e);
+  EstimatorSettings s = settings_for(c, {0.999, 0.999, 0.999}, 0);
+  s.closed_loop = false;
+  s.controller = DiscreteTransferFunction{};
+  RecursiveEstimator est(true_model(c), s);
+  run(est, sim.record);
+  EXPECT_EQ(est.status().updates, static_cast<std::uint64_t>(sim.record.size()));
+  for (int i = 0; i < 3; ++i)
+    EXPECT_NEAR(est.mode(i).value.wn / modal_parameters(c.plant->modes[i].submodel).wn, 1.0, 1e-9) << "mode " << i + 1;
+}
+
 // ------------------------------------------------------------------ acceptance 4
 
 TEST(RecursiveEstimator, WithLambdaOneConvergesToTheOfflineAdditiveSrivcEstimate) {

@@ -312,6 +312,40 @@ TEST(Prefilter, SecondOrderBankAdvancingAllSignalsAtOnceMatchesOnePrefilterPerSi
   EXPECT_LT(worst, 1e-12);
 }
 
+TEST(Prefilter, SecondOrderBankCompleteStateGivesTheStateAndKeepsTheFilterOnTrack) {
+  // The estimator's u and z of a mode (B = b0) need [w_f, p w_f] only:
+  // complete_state() leaves p^2 w_f out but must hold the input as complete()
+  // does, so that the state at the next sample is the same. Signals 0 and 1 take
+  // complete(), 2 and 3 complete_state(), all against one Prefilter each, with
+  // the discretisation handed in (the estimator's set_denominator overload).
+  const double T = 0.05;
+  const int n = 2000;
+  auto denominator = [&](int k) { return mode_denominator(0.5 + 24.5 * k / n, 0.02 + 0.3 * k / n); };
+  std::vector<Prefilter> reference;
+  for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i) reference.emplace_back(denominator(0), T, Hold::zoh);
+  SecondOrderFilterBank bank;
+  const Eigen::VectorXd d_start = denominator(0);
+  bank.set_denominator(d_start(0), d_start(1), d_start(2), discretize_second_order(d_start(0), d_start(1), d_start(2), T));
+  double worst = 0.0;
+  for (int k = 0; k < n; ++k) {
+    bank.advance_all();
+    for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i) {
+      const double w = std::sin(0.31 * k * (i + 1)) + 0.3 * i;
+      const double* got = i < 2 ? bank.complete(i, w) : bank.complete_state(i, w);
+      const FilterVector& want = reference[i].step(w);
+      for (int j = 0; j <= (i < 2 ? 2 : 1); ++j) {
+        const double scale = 1.0 + std::abs(want(j));
+        ASSERT_NEAR(got[j], want(j), 1e-12 * scale) << "k=" << k << " signal " << i << " derivative " << j;
+        worst = std::max(worst, std::abs(got[j] - want(j)) / scale);
+      }
+    }
+    const Eigen::VectorXd d = denominator(k + 1);
+    bank.set_denominator(d(0), d(1), d(2), discretize_second_order(d(0), d(1), d(2), T));
+    for (auto& f : reference) f.set_denominator(d);
+  }
+  EXPECT_LT(worst, 1e-12);
+}
+
 TEST(Prefilter, RigidBodyDoubleIntegratorIsExact) {
   Eigen::VectorXd d(3);
   d << 0.0, 0.0, 1.0;  // 1/p^2

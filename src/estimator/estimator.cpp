@@ -235,12 +235,15 @@ struct LoopController {
   void init(const DiscreteTransferFunction& c) {
     general = c;
     general.reset();
+    std::fill(std::begin(num), std::end(num), 0.0);  // no controller (open loop): C_d = 0
+    std::fill(std::begin(den), std::end(den), 0.0);
     const int na = c.empty() ? 0 : static_cast<int>(c.denominator().size()) - 1;
     order = na <= kMaxOrder ? na : -1;
-    for (int i = 0; i <= std::min(na, kMaxOrder); ++i) {
-      num[i] = c.numerator()[i];
-      den[i] = c.denominator()[i];
-    }
+    if (!c.empty())
+      for (int i = 0; i <= std::min(na, kMaxOrder); ++i) {
+        num[i] = c.numerator()[i];
+        den[i] = c.denominator()[i];
+      }
     reset();
   }
   void reset() {
@@ -259,8 +262,10 @@ struct LoopController {
       general.step(e);
       return;
     }
-    const double y = num[0] * e + free_response();
-    for (int i = 0; i < order; ++i) state[i] = (i + 1 < order ? state[i + 1] : 0.0) + num[i + 1] * e - den[i + 1] * y;
+    if (order == 0) return;
+    const double y = num[0] * e + state[0];
+    for (int i = 0; i + 1 < order; ++i) state[i] = state[i + 1] + num[i + 1] * e - den[i + 1] * y;
+    state[order - 1] = num[order] * e - den[order] * y;
   }
 };
 

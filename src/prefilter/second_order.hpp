@@ -100,12 +100,19 @@ SecondOrderDiscretization discretize_second_order_closed_form(double d0, double 
   // (0, 1/(K+2)!). As AT's first row is [0, T], v0 is always T times the
   // previous v1, so v1 alone follows the two-term recurrence
   //   u_k = (AT_10 T) u_{k+2} + AT_11 u_{k+1} + 1/(k+2)!,  u_K = 1/(K+2)!, u_{K+1} = 0,
-  // and s1 = (T u_1, u_0). K is rounded up to a multiple of 4 (the extra
-  // terms are below 1e-18) so that the steps go four at a time.
-  const int K = (J + 4) & ~3;
+  // and s1 = (T u_1, u_0). K is rounded up to even (the extra term is below
+  // 1e-18) so that the steps go two at a time, and after the first two when
+  // K = 2 mod 4, four at a time.
+  const int K = (J + 2) & ~1;
   const double cb = AT.c * AT.b;
   double u2 = 0.0, u1 = kFactorial.inverse[K + 2];  // u_{k+2}, u_{k+1}
-  for (int k = K - 1; k > 0; k -= 4) {
+  int k = K - 1;
+  if (K & 2) {
+    u2 = cb * u2 + AT.d * u1 + kFactorial.inverse[k + 2];  // u_k
+    u1 = cb * u1 + AT.d * u2 + kFactorial.inverse[k + 1];  // u_{k-1}
+    k -= 2;
+  }
+  for (; k > 0; k -= 4) {
     u2 = cb * u2 + AT.d * u1 + kFactorial.inverse[k + 2];  // u_k
     u1 = cb * u1 + AT.d * u2 + kFactorial.inverse[k + 1];  // u_{k-1}
     u2 = cb * u2 + AT.d * u1 + kFactorial.inverse[k];      // u_{k-2}
