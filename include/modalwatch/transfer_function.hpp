@@ -19,16 +19,33 @@ class DiscreteTransferFunction {
   DiscreteTransferFunction(std::vector<double> numerator, std::vector<double> denominator);
 
   // Output at t_k for input e_k (direct form II transposed; biproper allowed).
-  double step(double e);
+  // Inline, like peek() and feedthrough(): the recursive estimator runs the
+  // controller of its instrument loop (eq. 29) at every sample.
+  double step(double e) {
+    if (den_.empty()) return 0.0;
+    const double y = peek(e);
+    const std::size_t n = z_.size();
+    if (n == 0) return y;
+    double* z = z_.data();
+    const double* b = num_.data();
+    const double* a = den_.data();
+    // DF2T: z_i <- z_{i+1} + b_{i+1} e - a_{i+1} y, with z_n = 0.
+    for (std::size_t i = 0; i + 1 < n; ++i) z[i] = z[i + 1] + b[i + 1] * e - a[i + 1] * y;
+    z[n - 1] = b[n] * e - a[n] * y;
+    return y;
+  }
   void reset();
   bool empty() const { return den_.empty(); }
 
   // The output if the input at t_k were e, without advancing the state: lets a
   // closed loop with a biproper controller and a strictly proper plant be solved
   // sample by sample.
-  double peek(double e) const;
+  double peek(double e) const {
+    if (den_.empty()) return 0.0;
+    return num_[0] * e + (z_.empty() ? 0.0 : z_[0]);
+  }
   // Direct feedthrough b_0 / a_0 (after alignment of degrees).
-  double feedthrough() const;
+  double feedthrough() const { return num_.empty() ? 0.0 : num_[0]; }
 
   std::complex<double> response(double w, double T) const;  // C_d(e^{j w T})
   const std::vector<double>& numerator() const { return num_; }

@@ -221,54 +221,6 @@ struct Block {
   }
 };
 
-// The known controller C_d(q) of the instrument's loop (eqs. 9, 29), run as
-// DiscreteTransferFunction runs it (DF2T, the same arithmetic) but on
-// fixed-size storage inlined into the per-sample path: configured controllers
-// are of low order. Above kMaxOrder the DiscreteTransferFunction itself runs.
-struct LoopController {
-  static constexpr int kMaxOrder = 8;
-  int order = 0;  // na; -1: above kMaxOrder
-  double num[kMaxOrder + 1] = {}, den[kMaxOrder + 1] = {};  // aligned, normalised by a_0
-  double state[kMaxOrder] = {};
-  DiscreteTransferFunction general;
-
-  void init(const DiscreteTransferFunction& c) {
-    general = c;
-    general.reset();
-    std::fill(std::begin(num), std::end(num), 0.0);  // no controller (open loop): C_d = 0
-    std::fill(std::begin(den), std::end(den), 0.0);
-    const int na = c.empty() ? 0 : static_cast<int>(c.denominator().size()) - 1;
-    order = na <= kMaxOrder ? na : -1;
-    if (!c.empty())
-      for (int i = 0; i <= std::min(na, kMaxOrder); ++i) {
-        num[i] = c.numerator()[i];
-        den[i] = c.denominator()[i];
-      }
-    reset();
-  }
-  void reset() {
-    std::fill(std::begin(state), std::end(state), 0.0);
-    general.reset();
-  }
-  double feedthrough() const { return order >= 0 ? num[0] : general.feedthrough(); }
-  // The output at t_k for e_k = 0 (the state's contribution): DiscreteTransferFunction::peek(0).
-  MODALWATCH_HOT double free_response() const {
-    if (order < 0) return general.peek(0.0);
-    return order > 0 ? state[0] : 0.0;
-  }
-  // DiscreteTransferFunction::step(e): z_i <- z_{i+1} + b_{i+1} e - a_{i+1} y, z_n = 0.
-  MODALWATCH_HOT void step(double e) {
-    if (order < 0) {
-      general.step(e);
-      return;
-    }
-    if (order == 0) return;
-    const double y = num[0] * e + state[0];
-    for (int i = 0; i + 1 < order; ++i) state[i] = state[i + 1] + num[i + 1] * e - den[i + 1] * y;
-    state[order - 1] = num[order] * e - den[order] * y;
-  }
-};
-
 }  // namespace
 
 const std::vector<const char*>& reset_reasons() {
@@ -293,7 +245,7 @@ struct RecursiveEstimator::Impl {
   std::shared_ptr<const WarmupFit::Context> fit_context;  // immutable, shared with the jobs
   std::vector<Block> blocks;
   std::vector<BlockFilters> snapshot;  // filters at t_{k-1}, for refinements
-  LoopController controller;
+  DiscreteTransferFunction controller;  // C_d(q) of the instrument's loop (eqs. 9, 29)
   EstimatorStatus status;
 
   // Warm-up window, preallocated; a WarmupFit job holds it while it runs.
@@ -421,7 +373,8 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     blocks.push_back(std::move(b));
   }
   snapshot.resize(blocks.size());
-  controller.init(cfg.controller);
+  controller = cfg.controller;
+  controller.reset();
   save_good();
 }
 
@@ -620,7 +573,7 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
       D += b.feedthrough();  // 0 unless biproper
     }
     const double c0 = controller.feedthrough();
-    z = (c0 * (s.r - free) + controller.free_response()) / (1.0 + c0 * D);
+    z = (c0 * (s.r - free) + controller.peek(0.0)) / (1.0 + c0 * D);
     controller.step(s.r - (free + D * z));
     for (auto& b : blocks) {
       const double* dz = b.filters.complete_input(kZ, z);

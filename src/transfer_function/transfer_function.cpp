@@ -67,26 +67,7 @@ DiscreteTransferFunction::DiscreteTransferFunction(std::vector<double> numerator
   z_.assign(den_.size() - 1, 0.0);
 }
 
-double DiscreteTransferFunction::peek(double e) const {
-  if (den_.empty()) return 0.0;
-  return num_[0] * e + (z_.empty() ? 0.0 : z_[0]);
-}
-
-double DiscreteTransferFunction::step(double e) {
-  if (den_.empty()) return 0.0;
-  const double y = peek(e);
-  const std::size_t n = z_.size();
-  // DF2T: z_i <- z_{i+1} + b_{i+1} e - a_{i+1} y, with z_n = 0.
-  for (std::size_t i = 0; i < n; ++i) {
-    const double next = i + 1 < n ? z_[i + 1] : 0.0;
-    z_[i] = next + num_[i + 1] * e - den_[i + 1] * y;
-  }
-  return y;
-}
-
 void DiscreteTransferFunction::reset() { std::fill(z_.begin(), z_.end(), 0.0); }
-
-double DiscreteTransferFunction::feedthrough() const { return num_.empty() ? 0.0 : num_[0]; }
 
 std::complex<double> DiscreteTransferFunction::response(double w, double T) const {
   if (den_.empty()) return 0.0;
