@@ -21,9 +21,9 @@
 
 #include "support.hpp"
 
-#include "modalwatch/config.hpp"
-#include "modalwatch/csv.hpp"
-#include "modalwatch/messages.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/io/csv.hpp"
+#include "modalwatch/io/messages.hpp"
 
 namespace modalwatch::test_support {
 

@@ -11,7 +11,7 @@
 #include <gtest/gtest.h>
 
 #include "allocation_counter.hpp"
-#include "modalwatch/config.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/simulator.hpp"
 

@@ -19,8 +19,8 @@
 
 #include "support.hpp"
 
-#include "modalwatch/checkpoint.hpp"
-#include "modalwatch/config.hpp"
+#include "modalwatch/io/checkpoint.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/error.hpp"
 #include "modalwatch/simulator.hpp"
 

@@ -11,8 +11,8 @@
 
 #include "support.hpp"
 
-#include "modalwatch/config.hpp"
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/io/csv.hpp"
 
 namespace fs = std::filesystem;
 

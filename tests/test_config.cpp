@@ -14,7 +14,7 @@
 
 #include "support.hpp"
 
-#include "modalwatch/config.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/error.hpp"
 
 namespace fs = std::filesystem;

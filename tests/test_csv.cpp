@@ -14,7 +14,7 @@
 
 #include "support.hpp"
 
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/csv.hpp"
 #include "modalwatch/error.hpp"
 
 namespace fs = std::filesystem;

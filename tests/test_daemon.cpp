@@ -35,8 +35,8 @@
 
 #include "daemon_support.hpp"
 
-#include "modalwatch/checkpoint.hpp"
-#include "modalwatch/daemon.hpp"
+#include "modalwatch/io/checkpoint.hpp"
+#include "modalwatch/daemon/daemon.hpp"
 
 using namespace modalwatch;
 using namespace modalwatch::test_support;
@@ -310,7 +310,7 @@ TEST_F(DaemonInProcess, SurvivesBadInputAndCountsIt) {
   rx.subscribe(lcm, c.lcm);
   const Record& rec = data.record;
   const auto sample = [&](Eigen::Index k, std::int64_t utime_shift = 0) {
-    SampleRecord s;
+    StampedSample s;
     s.utime = kUtime0 + utime_shift + std::llround(rec.t(k) * 1e6);
     s.seq = k;
     s.u = rec.u(k);
@@ -344,7 +344,7 @@ TEST_F(DaemonInProcess, SurvivesBadInputAndCountsIt) {
   }
   // Non-finite samples (each consumes its seq).
   for (int i = 0; i < 5; ++i, ++k) {
-    SampleRecord s = sample(k);
+    StampedSample s = sample(k);
     (i % 2 ? s.u : s.y) = i == 4 ? std::numeric_limits<double>::infinity() : std::nan("");
     send(c.lcm.samples_channel, encode_sample(s));
   }

@@ -13,7 +13,7 @@
 #include "allocation_counter.hpp"
 #include "daemon_support.hpp"
 
-#include "modalwatch/daemon.hpp"
+#include "modalwatch/daemon/daemon.hpp"
 
 using namespace modalwatch;
 using namespace modalwatch::test_support;
@@ -70,7 +70,7 @@ TEST(DaemonAllocation, NoneOnTheEstimationThreadAfterStartUp) {
     ASSERT_TRUE(wait_for([&] { return probe.started.load(); }, 20.0)) << "the warm-up never ended";
     // Bad input after the warm-up: NaN, a duplicate, reordering.
     for (int i = 0; i < 3; ++i) {
-      SampleRecord s{kUtime0 + std::llround(rec.t(mid + i) * 1e6), mid + i, rec.u(mid + i), std::nan(""), rec.r(mid + i)};
+      StampedSample s{kUtime0 + std::llround(rec.t(mid + i) * 1e6), mid + i, rec.u(mid + i), std::nan(""), rec.r(mid + i)};
       const auto bytes = encode_sample(s);
       lcm_publish(lcm, c.lcm.samples_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
       if (i == 1) lcm_publish(lcm, c.lcm.samples_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));

@@ -14,8 +14,8 @@
 
 #include <gtest/gtest.h>
 
-#include "modalwatch/config.hpp"
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/io/csv.hpp"
 #include "modalwatch/diagnose.hpp"
 #include "modalwatch/simulator.hpp"
 #include "support.hpp"

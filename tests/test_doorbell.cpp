@@ -2,7 +2,7 @@
 // waiter is woken, and the daemon's pattern (ring after a ring push, the
 // publisher sleeping between snapshots) moves every item with no wait running
 // into its deadline. The threaded tests also run under TSan (.ci/run).
-#include "modalwatch/doorbell.hpp"
+#include "daemon/doorbell.hpp"
 
 #include <gtest/gtest.h>
 
@@ -10,7 +10,7 @@
 #include <cstdint>
 #include <thread>
 
-#include "modalwatch/spsc_ring.hpp"
+#include "daemon/spsc_ring.hpp"
 
 namespace {
 

@@ -15,7 +15,7 @@
 
 #include "support.hpp"
 
-#include "modalwatch/config.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/prefilter.hpp"
 #include "modalwatch/transfer_function.hpp"

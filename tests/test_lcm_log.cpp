@@ -20,10 +20,10 @@
 
 #include "support.hpp"
 
-#include "modalwatch/config.hpp"
-#include "modalwatch/csv.hpp"
-#include "modalwatch/lcm_log.hpp"
-#include "modalwatch/messages.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/io/csv.hpp"
+#include "modalwatch/io/lcm_log.hpp"
+#include "modalwatch/io/messages.hpp"
 #include "modalwatch/simulator.hpp"
 
 namespace modalwatch {
@@ -65,7 +65,7 @@ class LcmLog : public ScratchDir {
     const std::string other = "not samples";
     for (Eigen::Index k = 0; k < rec.size(); k += batch) {
       const Eigen::Index n = std::min<Eigen::Index>(batch, rec.size() - k);
-      std::vector<SampleRecord> s(static_cast<std::size_t>(n));
+      std::vector<StampedSample> s(static_cast<std::size_t>(n));
       for (Eigen::Index i = 0; i < n; ++i)
         s[i] = {kStart + std::llround(rec.t(k + i) * 1e6), k + i, rec.u(k + i), rec.y(k + i), rec.r(k + i)};
       const auto msg = batch == 1 ? encode_sample(s[0]) : encode_batch(s, 0.05);
@@ -281,13 +281,13 @@ TEST_F(LcmLog, SimulateReadsItsExcitationFromALogAsFromCsv) {
 // ------------------------------------------------------------------ replay
 
 struct Received {
-  std::vector<SampleRecord> samples;
+  std::vector<StampedSample> samples;
   std::uint64_t packets = 0, bad = 0;
 };
 
 void on_message(const lcm_recv_buf_t* rbuf, const char*, void* user) {
   auto* r = static_cast<Received*>(user);
-  SampleRecord buf[256];
+  StampedSample buf[256];
   int n = 0;
   if (decode_samples(rbuf->data, static_cast<int>(rbuf->data_size), true, buf, 256, n) != DecodeResult::ok) {
     ++r->bad;
@@ -339,7 +339,7 @@ TEST_F(LcmLog, ReplayPublishesEverySampleExactlyOverUdpMulticast) {
     EXPECT_EQ(got.bad, 0u);
     ASSERT_EQ(got.samples.size(), 2000u) << "batch " << batch << ": " << got.packets << " packets received";
     for (std::size_t k = 0; k < got.samples.size(); ++k) {
-      const SampleRecord& s = got.samples[k];
+      const StampedSample& s = got.samples[k];
       ASSERT_EQ(s.seq, static_cast<std::int64_t>(k));
       ASSERT_EQ(s.utime, kStart + static_cast<std::int64_t>(k) * 50000) << k;
       ASSERT_EQ(s.u, csv.u(static_cast<Eigen::Index>(k))) << k;

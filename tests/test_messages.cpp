@@ -1,6 +1,6 @@
 // Input messages: lcm-gen types, the non-allocating decoder, the encoders, and
 // one real in-process LCM round trip (memq://, one lcm::LCM instance, no mock).
-#include "modalwatch/messages.hpp"
+#include "modalwatch/io/messages.hpp"
 
 #include <gtest/gtest.h>
 
@@ -39,9 +39,9 @@ void put_i32(Bytes& b, int off, std::int32_t v) { put_u(b, off, std::bit_cast<st
 void put_i64(Bytes& b, int off, std::int64_t v) { put_u(b, off, std::bit_cast<std::uint64_t>(v), 8); }
 void put_f64(Bytes& b, int off, double v) { put_u(b, off, std::bit_cast<std::uint64_t>(v), 8); }
 
-std::vector<SampleRecord> make_samples(int n, std::int64_t utime0, std::int64_t seq0,
+std::vector<StampedSample> make_samples(int n, std::int64_t utime0, std::int64_t seq0,
                                        double period) {
-  std::vector<SampleRecord> s(static_cast<std::size_t>(n));
+  std::vector<StampedSample> s(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) {
     auto& x = s[static_cast<std::size_t>(i)];
     x.utime = utime0 + std::llround(i * period * 1e6);
@@ -55,7 +55,7 @@ std::vector<SampleRecord> make_samples(int n, std::int64_t utime0, std::int64_t 
 
 struct Decoded {
   DecodeResult result = DecodeResult::ok;
-  std::vector<SampleRecord> samples;
+  std::vector<StampedSample> samples;
 };
 
 enum class Kind { sample, batch, any };
@@ -63,7 +63,7 @@ enum class Kind { sample, batch, any };
 Decoded decode(const Bytes& b, Kind kind, int capacity = 256, bool closed_loop = true,
                int size = -1) {
   Decoded d;
-  d.samples.assign(static_cast<std::size_t>(capacity), SampleRecord{});
+  d.samples.assign(static_cast<std::size_t>(capacity), StampedSample{});
   const int n = size < 0 ? static_cast<int>(b.size()) : size;
   int n_out = -1;
   switch (kind) {
@@ -85,7 +85,7 @@ Decoded decode(const Bytes& b, Kind kind, int capacity = 256, bool closed_loop =
   return d;
 }
 
-void expect_same(const SampleRecord& a, const SampleRecord& b) {
+void expect_same(const StampedSample& a, const StampedSample& b) {
   EXPECT_EQ(a.utime, b.utime);
   EXPECT_EQ(a.seq, b.seq);
   EXPECT_EQ(a.u, b.u);
@@ -125,7 +125,7 @@ TEST(Messages, GeneratedTypesHaveDistinctFingerprintsAndExpectedSizes) {
 }
 
 TEST(Messages, SampleRoundTrip) {
-  SampleRecord s{123456789, 42, 1.25, -3.5, kNaN};
+  StampedSample s{123456789, 42, 1.25, -3.5, kNaN};
   const Bytes b = encode_sample(s);
   ASSERT_EQ(static_cast<int>(b.size()), kSampleWireSize);
   for (Kind k : {Kind::sample, Kind::any}) {
@@ -244,7 +244,7 @@ TEST(Messages, EveryTruncatedPrefixIsRejected) {
   EXPECT_EQ(decode(longer, Kind::any).result, DecodeResult::trailing_bytes);
   // Null data.
   int n_out = -1;
-  SampleRecord out[1];
+  StampedSample out[1];
   EXPECT_EQ(decode_samples(nullptr, 0, true, out, 1, n_out), DecodeResult::truncated);
   EXPECT_EQ(n_out, 0);
 }
@@ -280,7 +280,7 @@ TEST(Messages, CountMustBeWithinCapacityAndMatchThePacket) {
   // A huge count with a huge capacity must not read past the packet.
   Bytes huge = b;
   put_i32(huge, kCount, std::numeric_limits<std::int32_t>::max());
-  std::vector<SampleRecord> out(1);
+  std::vector<StampedSample> out(1);
   int n_out = -1;
   EXPECT_EQ(decode_batch(huge.data(), static_cast<int>(huge.size()), true, out.data(),
                          std::numeric_limits<int>::max(), n_out),
@@ -312,7 +312,7 @@ TEST(Messages, PeriodUtimeAndSeqAreValidated) {
 TEST(Messages, RandomBytesNeverCrash) {
   std::mt19937_64 rng(20261122);
   const int capacity = 64;
-  std::vector<SampleRecord> out(capacity);
+  std::vector<StampedSample> out(capacity);
   int accepted = 0;
   int fingerprinted = 0;
   for (int iter = 0; iter < 10'000; ++iter) {
@@ -378,8 +378,8 @@ TEST(Messages, RandomBytesNeverCrash) {
 // subscriber decodes them exactly as the daemon's LCM thread will.
 namespace {
 struct Collector {
-  std::vector<SampleRecord> samples;
-  std::vector<SampleRecord> buffer = std::vector<SampleRecord>(256);
+  std::vector<StampedSample> samples;
+  std::vector<StampedSample> buffer = std::vector<StampedSample>(256);
   int packets = 0;
   int ok = 0;
   int wrong_fingerprint = 0;
@@ -413,7 +413,7 @@ TEST(MessagesLcm, MemqPublishSubscribeThreeBatches) {
   const double period = 1.0 / 1024.0;
   const auto all = make_samples(3 * 32, 1'000'000, 1, period);
   for (int k = 0; k < 3; ++k) {
-    const std::span<const SampleRecord> slice(all.data() + 32 * k, 32);
+    const std::span<const StampedSample> slice(all.data() + 32 * k, 32);
     const Bytes b = encode_batch(slice, period);
     ASSERT_EQ(lc.publish("MODALWATCH_SAMPLES", b.data(), static_cast<unsigned>(b.size())), 0);
   }

@@ -14,7 +14,7 @@
 #include <gtest/gtest.h>
 #include <unsupported/Eigen/MatrixFunctions>
 
-#include "modalwatch/config.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/simulator.hpp"
 
 namespace modalwatch {

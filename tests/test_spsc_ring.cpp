@@ -4,7 +4,7 @@
 //
 // Stress size: MODALWATCH_STRESS_ITEMS (environment) if set, else 10 million,
 // scaled down automatically under TSan and ASan.
-#include "modalwatch/spsc_ring.hpp"
+#include "daemon/spsc_ring.hpp"
 
 #include <gtest/gtest.h>
 

@@ -23,7 +23,7 @@
 #include "support.hpp"
 #include "../src/cli/number_format.hpp"
 
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/csv.hpp"
 
 namespace fs = std::filesystem;
 

@@ -30,6 +30,7 @@
 #include <Eigen/Core>
 
 #include "modalwatch/model.hpp"
+#include "modalwatch/record.hpp"
 #include "modalwatch/prefilter.hpp"
 #include "modalwatch/transfer_function.hpp"
 
@@ -71,10 +72,8 @@ struct EstimatorSettings {
   double residual_window = 0.0;    // s, residual RMS window (0: 1/(1 - min lambda) samples)
   double low_excitation_ratio = 0.05;  // input power below this fraction of its reference: no update
   double low_excitation_window = 0.0;  // s (0: one period of the slowest mode)
-};
 
-struct Sample {
-  double t = 0.0, u = 0.0, y = 0.0, r = 0.0;
+  bool operator==(const EstimatorSettings& other) const;
 };
 
 struct EstimatorStatus {

@@ -29,6 +29,7 @@ struct FaultThresholds {
   double hold_time = 2.0;      // s past the thresholds before the flag rises
   double clear_fraction = 0.5; // hysteresis: falls below this fraction of both thresholds
   double clear_time = 2.0;     // s below before it falls
+  bool operator==(const FaultThresholds&) const = default;
 };
 
 struct ModeBaseline {
@@ -44,6 +45,7 @@ struct FaultDetectorSettings {
   double learn_window = 30.0;  // s
   // Per quantity (wn, zeta, gain); zeta is noisier, so it usually gets looser limits.
   std::array<FaultThresholds, kQuantities> thresholds{};
+  bool operator==(const FaultDetectorSettings&) const = default;
 };
 
 // The detector's view of one quantity of one mode.

@@ -23,6 +23,7 @@ struct ModalParameters {
   double gain = 0.0;  // DC gain (b0), output units per input unit
 
   double hz() const;  // wn / (2 pi)
+  bool operator==(const ModalParameters&) const = default;
 };
 
 struct Submodel {
@@ -50,6 +51,8 @@ struct Submodel {
   bool is_mode() const { return n == 2 && m == 0 && rigid_poles == 0; }
   // Throws std::invalid_argument when the sizes do not match n, m.
   void check() const;
+  // Same name, orders and coefficients.
+  bool operator==(const Submodel& other) const;
 };
 
 // A resonant mode b0 / (p^2/wn^2 + 2 zeta/wn p + 1).
@@ -80,6 +83,7 @@ struct AdditiveModel {
   // Offset of theta_i inside beta.
   int offset(int i) const;
   std::complex<double> response(double w) const;
+  bool operator==(const AdditiveModel&) const = default;
 };
 
 }  // namespace modalwatch

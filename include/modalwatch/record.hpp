@@ -1,8 +1,14 @@
 #pragma once
-// A sampled input/output record: t, u, y and, in closed loop, the reference r.
+// Sampled input/output data: one sample, and a record of many. t, u, y and, in
+// closed loop, the reference r.
 #include <Eigen/Core>
 
 namespace modalwatch {
+
+// One sample as the recursive estimator takes it (t in s).
+struct Sample {
+  double t = 0.0, u = 0.0, y = 0.0, r = 0.0;
+};
 
 struct Record {
   Eigen::VectorXd t;  // s, strictly increasing, equidistant

@@ -41,6 +41,8 @@ struct SignalSpec {
   std::string csv_channel;  // LCM log: the channel of the samples (empty: the only one)
 
   std::uint64_t seed = 1;  // random phases (multisine)
+
+  bool operator==(const SignalSpec&) const = default;
 };
 
 // The signal at the instants t. Kind::csv throws std::invalid_argument here:

@@ -22,6 +22,7 @@ namespace modalwatch {
 struct Trajectory {
   std::vector<std::pair<double, double>> points;
   double at(double t, double base) const;
+  bool operator==(const Trajectory&) const = default;
 };
 
 struct PlantMode {
@@ -31,6 +32,7 @@ struct PlantMode {
   bool resonant = true;   // trajectories apply to (wn, zeta, gain)
   ModalParameters modal;  // nominal values when resonant
   Trajectory wn, zeta, gain;
+  bool operator==(const PlantMode&) const = default;
 };
 
 // Effects a model of modes alone does not describe; `modalwatch diagnose` is
@@ -45,6 +47,7 @@ struct PlantEffects {
   int input_delay = 0;         // samples: the plant sees u_{k-d}
   double coulomb = 0.0;        // Fc: plant input u - Fc sign(v)
   double cubic = 0.0;          // c: plant input u - c y^3 (cubic stiffness)
+  bool operator==(const PlantEffects&) const = default;
 };
 
 struct PlantSpec {
@@ -54,6 +57,7 @@ struct PlantSpec {
   double noise_variance = 0.0;
   std::optional<double> snr_db;
   PlantEffects effects;  // none by default
+  bool operator==(const PlantSpec&) const = default;
 };
 
 struct ExperimentSpec {
@@ -66,6 +70,8 @@ struct ExperimentSpec {
   // Samples of the excitation when it comes from a file (SignalSpec::Kind::csv),
   // already on the time grid.
   Eigen::VectorXd excitation_samples;
+
+  bool operator==(const ExperimentSpec& other) const;
 };
 
 struct SimulationResult {

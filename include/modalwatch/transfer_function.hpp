@@ -48,6 +48,11 @@ class DiscreteTransferFunction {
   double feedthrough() const { return num_.empty() ? 0.0 : num_[0]; }
 
   std::complex<double> response(double w, double T) const;  // C_d(e^{j w T})
+  // The same filter (coefficients); the states may differ.
+  bool operator==(const DiscreteTransferFunction& other) const {
+    return num_ == other.num_ && den_ == other.den_;
+  }
+
   const std::vector<double>& numerator() const { return num_; }
   const std::vector<double>& denominator() const { return den_; }
 

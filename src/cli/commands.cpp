@@ -10,31 +10,16 @@
 #include <numbers>
 #include <stdexcept>
 
-#include "modalwatch/config.hpp"
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/io/csv.hpp"
 #include "modalwatch/error.hpp"
+#include "modalwatch/io/atomic_file.hpp"
 #include "modalwatch/simulator.hpp"
 #include "modalwatch/srivc.hpp"
 
 namespace modalwatch::cli {
 namespace {
 
-
-void write_text_atomically(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    out << text;
-    if (!out.flush()) {
-      std::remove(tmp.c_str());
-      throw InputError(path, "cannot write");
-    }
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    throw InputError(path, "cannot write");
-  }
-}
 
 // --from/--to. The samples before --from stay in the record: they bring the
 // model's simulation and the prefilters up to the running plant (a model output
@@ -146,7 +131,7 @@ int fit(const FitArgs& args) {
     std::printf("\nfit on the data: %.2f %%   output-error std: %.4g\n", result.fit_percent,
                 std::sqrt(result.noise_variance));
     print_identifiability(result);
-    if (!args.out.empty()) write_text_atomically(args.out, config_to_yaml(config, result.model));
+    if (!args.out.empty()) write_file_atomically(args.out, config_to_yaml(config, result.model));
     return 0;
   });
 }

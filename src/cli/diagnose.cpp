@@ -14,10 +14,11 @@
 #include "records.hpp"
 #include "guarded.hpp"
 
-#include "modalwatch/config.hpp"
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/io/csv.hpp"
 #include "modalwatch/diagnose.hpp"
 #include "modalwatch/error.hpp"
+#include "modalwatch/io/atomic_file.hpp"
 
 namespace modalwatch::cli {
 namespace {
@@ -67,12 +68,6 @@ std::vector<EffectKind> parse_effects(const std::string& list) {
                                         "' (allowed: mode, rigid_body, offset, drift, delay, coulomb, cubic)");
   }
   return out;
-}
-
-void write_text(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out << text;
-  if (!out.flush()) throw InputError(path, "cannot write");
 }
 
 std::string params_text(const EffectParams& params) {
@@ -309,20 +304,20 @@ int diagnose(const DiagnoseArgs& args) {
     const DiagnoseResult r = diagnose(est, val, config.model, loop, options);
 
     std::filesystem::create_directories(args.report);
-    write_text(args.report + "/summary.json", summary_json(r));
+    write_file_atomically(args.report + "/summary.json", summary_json(r));
     write_tables(args.report, r, val, lead_in);
     std::string yaml = config_to_yaml(config, r.steps.back().model.linear);
     const std::string eff = effects_comment(r.steps.back().model.effects);
     if (!eff.empty())
       yaml += "\n# Effects fitted by `modalwatch diagnose` that fit, track and the daemon do not carry:\n" + eff;
-    write_text(args.report + "/model.yaml", yaml);
+    write_file_atomically(args.report + "/model.yaml", yaml);
     bool plots = false;
     if (!args.plot_script.empty()) {
       const std::string cmd = "/usr/bin/python3 '" + args.plot_script + "' '" + args.report + "'";
       plots = std::system(cmd.c_str()) == 0;
       if (!plots) std::fprintf(stderr, "modalwatch diagnose: plots failed (%s)\n", cmd.c_str());
     }
-    write_text(args.report + "/report.md", report_md(r, args, config, est.size(), val.size() - options.validation_lead_in, plots));
+    write_file_atomically(args.report + "/report.md", report_md(r, args, config, est.size(), val.size() - options.validation_lead_in, plots));
 
     std::printf("%-4s %-11s %-44s %12s %12s %8s %10s\n", "step", "effect", "parameters", "est. RMS", "val. RMS",
                 "fit %", "whiteness");

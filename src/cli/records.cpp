@@ -4,7 +4,7 @@
 #include <cstdio>
 
 #include "modalwatch/error.hpp"
-#include "modalwatch/lcm_log.hpp"
+#include "modalwatch/io/lcm_log.hpp"
 
 namespace modalwatch::cli {
 

@@ -4,8 +4,8 @@
 #include <optional>
 #include <string>
 
-#include "modalwatch/config.hpp"
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/io/csv.hpp"
 #include "modalwatch/record.hpp"
 
 namespace modalwatch::cli {

@@ -14,9 +14,9 @@
 #include "guarded.hpp"
 #include "records.hpp"
 
-#include "modalwatch/config.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/error.hpp"
-#include "modalwatch/messages.hpp"
+#include "modalwatch/io/messages.hpp"
 
 namespace modalwatch::cli {
 namespace {
@@ -69,7 +69,7 @@ int replay(const ReplayArgs& args) {
     const double T = config.sample_time;
     const Eigen::Index N = rec.size();
 
-    std::vector<SampleRecord> buf(static_cast<std::size_t>(args.batch));
+    std::vector<StampedSample> buf(static_cast<std::size_t>(args.batch));
     timespec t0{};
     clock_gettime(CLOCK_MONOTONIC, &t0);
     const auto wall0 = std::chrono::steady_clock::now();
@@ -84,7 +84,7 @@ int replay(const ReplayArgs& args) {
       // A packet leaves when its last sample has been taken.
       if (args.speed > 0.0) sleep_until(t0, (rec.t(k + count - 1) - rec.t(0)) / args.speed);
       for (Eigen::Index i = 0; i < count; ++i) {
-        SampleRecord& s = buf[static_cast<std::size_t>(i)];
+        StampedSample& s = buf[static_cast<std::size_t>(i)];
         s.utime = offset + std::llround(rec.t(k + i) * 1e6);
         s.seq = k + i;  // sequence numbers from 0
         s.u = rec.u(k + i);
@@ -93,7 +93,7 @@ int replay(const ReplayArgs& args) {
       }
       // A batch carries the configured period; its samples' utimes follow from it.
       const std::vector<std::uint8_t> msg =
-          batched ? encode_batch(std::span<const SampleRecord>(buf.data(), static_cast<std::size_t>(count)), T)
+          batched ? encode_batch(std::span<const StampedSample>(buf.data(), static_cast<std::size_t>(count)), T)
                   : encode_sample(buf[0]);
       if (lcm_publish(lcm.get(), channel.c_str(), msg.data(), static_cast<unsigned>(msg.size())) != 0)
         throw std::runtime_error("LCM publish on '" + channel + "' failed (" + url + ")");

@@ -38,9 +38,10 @@
 #include "number_format.hpp"
 #include "records.hpp"
 #include "table.hpp"
-#include "modalwatch/config.hpp"
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/io/csv.hpp"
 #include "modalwatch/error.hpp"
+#include "modalwatch/io/atomic_file.hpp"
 #include "modalwatch/estimator.hpp"
 
 namespace modalwatch::cli {
@@ -185,51 +186,6 @@ class BlockReader {
   bool done_ = false, stop_ = false;
   std::exception_ptr error_;
   std::thread thread_;
-};
-
-// A file written through a temporary `<path>.tmp.<pid>` and renamed by commit();
-// without commit the temporary is removed.
-class AtomicFile {
- public:
-  explicit AtomicFile(std::string path) : path_(std::move(path)), tmp_(path_ + ".tmp." + std::to_string(::getpid())) {
-    fd_ = ::open(tmp_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (fd_ < 0) throw InputError(path_, std::string("cannot write: ") + std::strerror(errno));
-  }
-  AtomicFile(const AtomicFile&) = delete;
-  AtomicFile& operator=(const AtomicFile&) = delete;
-  ~AtomicFile() {
-    if (fd_ >= 0) ::close(fd_);
-    if (!committed_) ::unlink(tmp_.c_str());
-  }
-
-  void write(const char* data, std::size_t size) {
-    while (size > 0) {
-      const ssize_t n = ::write(fd_, data, size);
-      if (n < 0) {
-        if (errno == EINTR) continue;
-        fail("cannot write");
-      }
-      data += n;
-      size -= static_cast<std::size_t>(n);
-    }
-  }
-
-  void commit() {
-    const int fd = fd_;
-    fd_ = -1;
-    if (::close(fd) != 0) fail("cannot write");
-    if (std::rename(tmp_.c_str(), path_.c_str()) != 0) fail("cannot rename the temporary file");
-    committed_ = true;
-  }
-
- private:
-  [[noreturn]] void fail(const char* what) const {
-    throw InputError(path_, std::string(what) + ": " + std::strerror(errno));
-  }
-
-  std::string path_, tmp_;
-  int fd_ = -1;
-  bool committed_ = false;
 };
 
 // How est.csv writes a column (number_format.hpp).

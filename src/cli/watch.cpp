@@ -14,7 +14,7 @@
 #include "commands.hpp"
 #include "guarded.hpp"
 #include "records.hpp"
-#include "modalwatch/config.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/error.hpp"
 
 namespace modalwatch::cli {

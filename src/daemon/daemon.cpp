@@ -30,7 +30,7 @@
 //   fit_phase, release/acquire), the loop works the backlog off through the
 //   usual input policy, within half of each tick, then continues live. The
 //   estimates equal those of `modalwatch track`, which runs the same fit inline.
-#include "modalwatch/daemon.hpp"
+#include "modalwatch/daemon/daemon.hpp"
 
 #include <lcm/lcm.h>
 #include <pthread.h>
@@ -61,13 +61,13 @@
 #include <modalwatch/fault_status_t.hpp>
 #include <modalwatch/heartbeat_t.hpp>
 
-#include "modalwatch/checkpoint.hpp"
-#include "modalwatch/doorbell.hpp"
+#include "modalwatch/io/checkpoint.hpp"
+#include "doorbell.hpp"
 #include "modalwatch/error.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/fault_detector.hpp"
-#include "modalwatch/messages.hpp"
-#include "modalwatch/spsc_ring.hpp"
+#include "modalwatch/io/messages.hpp"
+#include "spsc_ring.hpp"
 
 namespace modalwatch {
 namespace {
@@ -149,7 +149,7 @@ const char* quantity_name(int q) {
 }
 
 
-bool finite(const SampleRecord& s) { return std::isfinite(s.u) && std::isfinite(s.y) && std::isfinite(s.r); }
+bool finite(const StampedSample& s) { return std::isfinite(s.u) && std::isfinite(s.y) && std::isfinite(s.r); }
 
 // Everything the loop tells the publisher: fixed size, trivially copyable.
 struct Snapshot {
@@ -300,13 +300,13 @@ struct Daemon::Impl {
   std::atomic<bool> stop_subscriber{false};
   lcm_subscription_t* sub_samples = nullptr;
   lcm_subscription_t* sub_batches = nullptr;
-  std::vector<SampleRecord> decode_buffer;
+  std::vector<StampedSample> decode_buffer;
   bool closed_loop = false;  // a copy: reload() rewrites `config` while this thread runs
   int realtime_priority = 0;  // daemon.realtime_priority, for every thread (not reloaded)
   std::atomic<int> last_decode_error{0};
 
   // ---- input ring: subscriber -> estimation loop
-  SpscRing<SampleRecord> samples;
+  SpscRing<StampedSample> samples;
 
   // ---- estimation thread (the only thread touching these while it runs)
   std::thread estimation;
@@ -333,7 +333,7 @@ struct Daemon::Impl {
   // status and holds the input in `backlog`, a FIFO preallocated at start-up.
   bool fit_in_flight = false;
   EstimatorStatus status_before_fit;
-  std::vector<SampleRecord> backlog;
+  std::vector<StampedSample> backlog;
   std::size_t backlog_head = 0, backlog_size = 0;
 
   // ---- the warm-up fit: estimation loop -> fitter thread and back
@@ -376,8 +376,8 @@ struct Daemon::Impl {
   // estimation
   void estimation_main() noexcept;
   void drain(std::int64_t now) noexcept;
-  void process(const SampleRecord& s) noexcept;
-  void hold(const SampleRecord& s) noexcept;
+  void process(const StampedSample& s) noexcept;
+  void hold(const StampedSample& s) noexcept;
   void catch_up(std::int64_t deadline_ns) noexcept;
   void push_snapshot(int kind, std::int64_t now, bool update_detector) noexcept;
   void fitter_main();
@@ -584,7 +584,7 @@ void Daemon::Impl::drain(std::int64_t now) noexcept {
   const std::size_t limit = samples.capacity();
   std::size_t n = 0;
   while (n < limit) {
-    const SampleRecord* s = samples.front();
+    const StampedSample* s = samples.front();
     if (!s) break;
     if (fit_in_flight || backlog_size > 0) hold(*s);  // behind the backlog, in order
     else process(*s);
@@ -595,7 +595,7 @@ void Daemon::Impl::drain(std::int64_t now) noexcept {
 }
 
 // A sample that arrives while the warm-up fit runs or the backlog is worked off.
-void Daemon::Impl::hold(const SampleRecord& s) noexcept {
+void Daemon::Impl::hold(const StampedSample& s) noexcept {
   if (backlog_size == backlog.size()) {  // daemon.warmup_backlog too small for this fit
     bump(counters.held_dropped);
     bump(counters.samples_dropped);
@@ -617,7 +617,7 @@ void Daemon::Impl::catch_up(std::int64_t deadline_ns) noexcept {
   }
 }
 
-void Daemon::Impl::process(const SampleRecord& s) noexcept {
+void Daemon::Impl::process(const StampedSample& s) noexcept {
   if (have_seq && s.seq <= last_seq && !(have_ref_time && s.utime > last_utime + gap_us)) {
     bump(s.seq == last_seq ? counters.samples_duplicate : counters.samples_out_of_order);
     return;

@@ -17,8 +17,8 @@
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
-#include "modalwatch/config.hpp"
-#include "modalwatch/daemon.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/daemon/daemon.hpp"
 #include "modalwatch/error.hpp"
 
 namespace {

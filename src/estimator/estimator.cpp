@@ -223,6 +223,28 @@ struct Block {
 
 }  // namespace
 
+bool EstimatorSettings::operator==(const EstimatorSettings& o) const {
+  const auto same_covariances = [&] {
+    if (initial_covariance.size() != o.initial_covariance.size()) return false;
+    for (std::size_t i = 0; i < initial_covariance.size(); ++i)
+      if (initial_covariance[i].size() != o.initial_covariance[i].size() ||
+          initial_covariance[i] != o.initial_covariance[i])
+        return false;
+    return true;
+  };
+  return sample_time == o.sample_time && closed_loop == o.closed_loop && controller == o.controller &&
+         output_hold == o.output_hold && block_iterations == o.block_iterations &&
+         refinements == o.refinements && update_divisor == o.update_divisor && forgetting == o.forgetting &&
+         warmup_samples == o.warmup_samples && fit_on_warmup == o.fit_on_warmup &&
+         warmup_iterations == o.warmup_iterations && defer_warmup_fit == o.defer_warmup_fit &&
+         same_covariances() && initial_covariance_relative == o.initial_covariance_relative &&
+         random_walk == o.random_walk && random_walks == o.random_walks &&
+         covariance_bound == o.covariance_bound && divergence_ratio == o.divergence_ratio &&
+         gap_factor == o.gap_factor && outlier_sigma == o.outlier_sigma &&
+         residual_window == o.residual_window && low_excitation_ratio == o.low_excitation_ratio &&
+         low_excitation_window == o.low_excitation_window;
+}
+
 const std::vector<const char*>& reset_reasons() {
   static const std::vector<const char*> reasons = {kResetNonFiniteModel, kResetUnstableLoop, kResetDiverged,
                                                    kResetDegenerate};

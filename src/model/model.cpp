@@ -162,4 +162,9 @@ std::complex<double> AdditiveModel::response(double w) const {
   return g;
 }
 
+bool Submodel::operator==(const Submodel& other) const {
+  return name == other.name && n == other.n && m == other.m && rigid_poles == other.rigid_poles &&
+         a.size() == other.a.size() && b.size() == other.b.size() && a == other.a && b == other.b;
+}
+
 }  // namespace modalwatch

@@ -324,4 +324,11 @@ AdditiveModel plant_model_at(const PlantSpec& plant, double t) {
   return model;
 }
 
+bool ExperimentSpec::operator==(const ExperimentSpec& other) const {
+  return sample_time == other.sample_time && duration == other.duration && seed == other.seed &&
+         closed_loop == other.closed_loop && controller == other.controller && excitation == other.excitation &&
+         excitation_samples.size() == other.excitation_samples.size() &&
+         excitation_samples == other.excitation_samples;
+}
+
 }  // namespace modalwatch

@@ -5,7 +5,7 @@
 #include <cstdint>
 #include <string>
 
-#include "modalwatch/config.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/simulator.hpp"
 

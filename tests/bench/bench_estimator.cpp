@@ -20,7 +20,7 @@
 
 #include "bench_common.hpp"
 #include "commands.hpp"
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/csv.hpp"
 
 namespace modalwatch::bench {
 namespace {

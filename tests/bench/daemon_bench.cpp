@@ -49,10 +49,10 @@
 #include <modalwatch/estimates_t.hpp>
 #include <modalwatch/fault_status_t.hpp>
 
-#include "modalwatch/config.hpp"
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/io/csv.hpp"
 #include "modalwatch/error.hpp"
-#include "modalwatch/messages.hpp"
+#include "modalwatch/io/messages.hpp"
 
 namespace {
 
@@ -282,7 +282,7 @@ int main(int argc, char** argv) {
       const double grid = mode == "latency" ? period : config.sample_time;     // utime
       const int per_packet = mode == "latency" ? 1 : batch;
       const std::int64_t start_us = realtime_us() + 10'000;
-      std::vector<SampleRecord> buf(static_cast<std::size_t>(per_packet));
+      std::vector<StampedSample> buf(static_cast<std::size_t>(per_packet));
       std::vector<std::int64_t> sent_us(static_cast<std::size_t>(total), 0);  // wall clock after lcm_publish
       for (long long k = 0; k < total; k += per_packet) {
         const int m = static_cast<int>(std::min<long long>(per_packet, total - k));
@@ -297,7 +297,7 @@ int main(int argc, char** argv) {
           s.r = rec.has_reference() ? rec.r(j) : 0.0;
         }
         const auto bytes = m == 1 && mode == "latency" ? encode_sample(buf[0])
-                                                       : encode_batch(std::span<const SampleRecord>(buf.data(), m), grid);
+                                                       : encode_batch(std::span<const StampedSample>(buf.data(), m), grid);
         if (m == 1 && mode == "latency")
           lcm_publish(lcm, config.lcm.samples_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
         else

@@ -8,7 +8,7 @@
 #include <cstdlib>
 #include <span>
 
-#include "modalwatch/checkpoint.hpp"
+#include "modalwatch/io/checkpoint.hpp"
 #include "modalwatch/error.hpp"
 
 using namespace modalwatch;

@@ -4,7 +4,7 @@
 #include <cstdlib>
 #include <string_view>
 
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/csv.hpp"
 #include "modalwatch/error.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

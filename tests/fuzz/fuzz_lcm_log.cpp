@@ -7,7 +7,7 @@
 #include <span>
 
 #include "modalwatch/error.hpp"
-#include "modalwatch/lcm_log.hpp"
+#include "modalwatch/io/lcm_log.hpp"
 
 using namespace modalwatch;
 

@@ -8,18 +8,18 @@
 #include <span>
 #include <vector>
 
-#include "modalwatch/messages.hpp"
+#include "modalwatch/io/messages.hpp"
 
 namespace {
 constexpr int kCapacity = 4096;
-modalwatch::SampleRecord first[kCapacity];
-modalwatch::SampleRecord second[kCapacity];
+modalwatch::StampedSample first[kCapacity];
+modalwatch::StampedSample second[kCapacity];
 
 void check(bool ok) {
   if (!ok) std::abort();
 }
 
-bool same(const modalwatch::SampleRecord& a, const modalwatch::SampleRecord& b) {
+bool same(const modalwatch::StampedSample& a, const modalwatch::StampedSample& b) {
   // Bitwise for u, y, r: NaN payloads must survive the round trip as well.
   return a.utime == b.utime && a.seq == b.seq && std::memcmp(&a.u, &b.u, sizeof a.u) == 0 &&
          std::memcmp(&a.y, &b.y, sizeof a.y) == 0 && std::memcmp(&a.r, &b.r, sizeof a.r) == 0;
@@ -54,7 +54,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       for (int i = 16; i < 24; ++i) bits = bits << 8 | data[i];
       double period = 0.0;
       std::memcpy(&period, &bits, sizeof period);
-      again = encode_batch(std::span<const SampleRecord>(first, static_cast<std::size_t>(count)), period);
+      again = encode_batch(std::span<const StampedSample>(first, static_cast<std::size_t>(count)), period);
     }
     int count2 = -1;
     check(decode_samples(again.data(), static_cast<int>(again.size()), closed_loop, second, kCapacity, count2) ==

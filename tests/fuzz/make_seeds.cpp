@@ -10,8 +10,8 @@
 #include <string>
 #include <vector>
 
-#include "modalwatch/checkpoint.hpp"
-#include "modalwatch/messages.hpp"
+#include "modalwatch/io/checkpoint.hpp"
+#include "modalwatch/io/messages.hpp"
 
 using namespace modalwatch;
 
@@ -44,9 +44,9 @@ int main(int argc, char** argv) {
   const std::string url = "file://" + (dir / "lcm_log" / "samples.lcm").string() + "?mode=w";
   lcm_t* lcm = lcm_create(url.c_str());
   if (!lcm) return 1;
-  std::vector<SampleRecord> batch;
+  std::vector<StampedSample> batch;
   for (int k = 0; k < 12; ++k) {
-    const SampleRecord r{1000000 + 50000 * k, k, 0.1 * k, -0.2 * k, 0.3};
+    const StampedSample r{1000000 + 50000 * k, k, 0.1 * k, -0.2 * k, 0.3};
     const auto msg = encode_sample(r);
     lcm_publish(lcm, "MODALWATCH_SAMPLES", msg.data(), static_cast<unsigned>(msg.size()));
     batch.push_back({r.utime + 1000000, k + 100, r.u, r.y, r.r});

@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "modalwatch/config.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/model.hpp"
 

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/csv.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/fault_detector.hpp"
 #include "modalwatch/model.hpp"
@@ -22,6 +22,7 @@ namespace modalwatch {
 struct SubmodelSettings {
   double forgetting = 1.0;  // lambda in (0, 1], eq. (13)
   std::optional<double> random_walk;  // this submodel's Q (else estimator.random_walk)
+  bool operator==(const SubmodelSettings&) const = default;
 };
 
 // The `lcm:` section: where the daemon listens and publishes, and where `replay`
@@ -33,6 +34,7 @@ struct LcmSettings {
   std::string estimates_channel = "MODALWATCH_ESTIMATES";        // estimates_t out
   std::string fault_status_channel = "MODALWATCH_FAULT_STATUS";  // fault_status_t out
   std::string heartbeat_channel = "MODALWATCH_HEARTBEAT";        // heartbeat_t out
+  bool operator==(const LcmSettings&) const = default;
 };
 
 // The `daemon:` section: rates, input policy, ring sizes, checkpoint, logging.
@@ -48,6 +50,7 @@ struct DaemonSettings {
   std::string checkpoint_path;     // empty: no checkpoint (relative paths: to the config file)
   double checkpoint_period = 60.0; // s (wall clock) between periodic checkpoints
   std::string log_level = "info";  // spdlog level name
+  bool operator==(const DaemonSettings&) const = default;
 };
 
 // The `faults:` section: the fault detector (baselines, thresholds per quantity).
@@ -56,6 +59,7 @@ struct FaultSettings {
   std::array<FaultThresholds, kQuantities> thresholds{};
   // Per submodel (config order): a configured baseline, or none (learned).
   std::vector<std::optional<ModalParameters>> baselines;
+  bool operator==(const FaultSettings&) const = default;
 };
 
 struct Config {
@@ -78,6 +82,9 @@ struct Config {
   // into estimator.gap_factor (= gap_time / sample_time): one gap rule for
   // track and the daemon.
   FaultSettings faults;
+
+  // Every setting equal (`source`, the file name, included).
+  bool operator==(const Config&) const = default;
 };
 
 // Reads a file that the config names as a signal (`type: csv` under

@@ -2,7 +2,7 @@
 // modalwatchd's engine (DESIGN.md, "Data flow in the daemon"): three threads
 // joined by two lock-free SPSC rings.
 //
-//   LCM subscriber ──SampleRecord──► SpscRing ──► estimation loop ──Snapshot──► SpscRing ──► publisher
+//   LCM subscriber ──StampedSample──► SpscRing ──► estimation loop ──Snapshot──► SpscRing ──► publisher
 //   (lcm_handle, decode,                          (fixed rate, input policy,                (estimates_t,
 //    validate, never blocks)                       RecursiveEstimator::step,                 fault_status_t,
 //                                                  FaultDetector per publish period)         heartbeat_t, logs)
@@ -32,7 +32,7 @@
 #include <memory>
 #include <string>
 
-#include "modalwatch/config.hpp"
+#include "modalwatch/io/config.hpp"
 
 extern "C" {
 typedef struct _lcm_t lcm_t;

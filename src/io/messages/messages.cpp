@@ -1,4 +1,4 @@
-#include "modalwatch/messages.hpp"
+#include "modalwatch/io/messages.hpp"
 
 #include <bit>
 #include <cmath>
@@ -70,7 +70,7 @@ const char* to_string(DecodeResult r) {
 std::int64_t sample_fingerprint() { return sample_t::getHash(); }
 std::int64_t batch_fingerprint() { return sample_batch_t::getHash(); }
 
-DecodeResult decode_sample(const void* data, int size, bool closed_loop, SampleRecord* out,
+DecodeResult decode_sample(const void* data, int size, bool closed_loop, StampedSample* out,
                            int capacity, int& n_out) {
   n_out = 0;
   if (data == nullptr || size < 8) return fail(DecodeResult::truncated, n_out);
@@ -78,7 +78,7 @@ DecodeResult decode_sample(const void* data, int size, bool closed_loop, SampleR
   if (size < kSampleWireSize) return fail(DecodeResult::truncated, n_out);
   if (size > kSampleWireSize) return fail(DecodeResult::trailing_bytes, n_out);
   if (capacity < 1 || out == nullptr) return fail(DecodeResult::bad_count, n_out);
-  SampleRecord s;
+  StampedSample s;
   s.utime = get_i64(data, 8);
   s.seq = get_i64(data, 16);
   s.u = get_f64(data, 24);
@@ -90,7 +90,7 @@ DecodeResult decode_sample(const void* data, int size, bool closed_loop, SampleR
   return DecodeResult::ok;
 }
 
-DecodeResult decode_batch(const void* data, int size, bool closed_loop, SampleRecord* out,
+DecodeResult decode_batch(const void* data, int size, bool closed_loop, StampedSample* out,
                           int capacity, int& n_out) {
   n_out = 0;
   if (data == nullptr || size < 8) return fail(DecodeResult::truncated, n_out);
@@ -118,7 +118,7 @@ DecodeResult decode_batch(const void* data, int size, bool closed_loop, SampleRe
   const int y0 = u0 + 8 * count;
   const int r0 = y0 + 8 * count;
   for (int i = 0; i < count; ++i) {
-    SampleRecord& s = out[i];
+    StampedSample& s = out[i];
     s.utime = utime + std::llround(static_cast<double>(i) * period * 1e6);
     s.seq = first_seq + i;
     s.u = get_f64(data, u0 + 8 * i);
@@ -129,7 +129,7 @@ DecodeResult decode_batch(const void* data, int size, bool closed_loop, SampleRe
   return DecodeResult::ok;
 }
 
-DecodeResult decode_samples(const void* data, int size, bool closed_loop, SampleRecord* out,
+DecodeResult decode_samples(const void* data, int size, bool closed_loop, StampedSample* out,
                             int capacity, int& n_out) {
   n_out = 0;
   if (data == nullptr || size < 8) return fail(DecodeResult::truncated, n_out);
@@ -139,7 +139,7 @@ DecodeResult decode_samples(const void* data, int size, bool closed_loop, Sample
   return fail(DecodeResult::wrong_fingerprint, n_out);
 }
 
-std::vector<std::uint8_t> encode_sample(const SampleRecord& s) {
+std::vector<std::uint8_t> encode_sample(const StampedSample& s) {
   sample_t msg;
   msg.utime = s.utime;
   msg.seq = s.seq;
@@ -149,7 +149,7 @@ std::vector<std::uint8_t> encode_sample(const SampleRecord& s) {
   return encode_message(msg);
 }
 
-std::vector<std::uint8_t> encode_batch(std::span<const SampleRecord> samples,
+std::vector<std::uint8_t> encode_batch(std::span<const StampedSample> samples,
                                        double sample_period) {
   if (samples.empty()) throw std::invalid_argument("encode_batch: empty slice");
   if (samples.size() > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max() / 24))
@@ -161,7 +161,7 @@ std::vector<std::uint8_t> encode_batch(std::span<const SampleRecord> samples,
   msg.u.reserve(samples.size());
   msg.y.reserve(samples.size());
   msg.r.reserve(samples.size());
-  for (const SampleRecord& s : samples) {
+  for (const StampedSample& s : samples) {
     msg.u.push_back(s.u);
     msg.y.push_back(s.y);
     msg.r.push_back(s.r);

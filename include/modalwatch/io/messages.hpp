@@ -37,15 +37,15 @@
 namespace modalwatch {
 
 // One sample, as pushed into the SPSC ring from the LCM thread.
-struct SampleRecord {
+struct StampedSample {
   std::int64_t utime = 0;  // us, sample time (controller clock)
   std::int64_t seq = 0;    // sequence number
   double u = 0.0;          // plant input
   double y = 0.0;          // measured output
   double r = 0.0;          // reference (0 in open loop)
 };
-static_assert(std::is_trivially_copyable_v<SampleRecord>);
-static_assert(sizeof(SampleRecord) == 40);
+static_assert(std::is_trivially_copyable_v<StampedSample>);
+static_assert(sizeof(StampedSample) == 40);
 
 enum class DecodeResult : int {
   ok = 0,
@@ -69,22 +69,22 @@ constexpr int kSampleWireSize = 8 + 8 + 8 + 3 * 8;
 constexpr int batch_wire_size(int count) { return 8 + 8 + 8 + 8 + 4 + 3 * 8 * count; }
 
 // A sample_t packet into out[0] (capacity >= 1 required, else bad_count).
-DecodeResult decode_sample(const void* data, int size, bool closed_loop, SampleRecord* out,
+DecodeResult decode_sample(const void* data, int size, bool closed_loop, StampedSample* out,
                            int capacity, int& n_out);
 // A sample_batch_t packet into out[0..count). Sample i gets
 // utime = utime + llround(i * sample_period * 1e6), seq = first_seq + i.
-DecodeResult decode_batch(const void* data, int size, bool closed_loop, SampleRecord* out,
+DecodeResult decode_batch(const void* data, int size, bool closed_loop, StampedSample* out,
                           int capacity, int& n_out);
 // Either of the two, chosen by fingerprint.
-DecodeResult decode_samples(const void* data, int size, bool closed_loop, SampleRecord* out,
+DecodeResult decode_samples(const void* data, int size, bool closed_loop, StampedSample* out,
                             int capacity, int& n_out);
 
 // Encoders (allocate; not for the real-time path).
-std::vector<std::uint8_t> encode_sample(const SampleRecord& s);
+std::vector<std::uint8_t> encode_sample(const StampedSample& s);
 // A batch from records: utime and first_seq from samples[0] (the other
 // records' utime and seq are implied by sample_period and not checked).
 // Requires a non-empty slice.
-std::vector<std::uint8_t> encode_batch(std::span<const SampleRecord> samples,
+std::vector<std::uint8_t> encode_batch(std::span<const StampedSample> samples,
                                        double sample_period);
 // Samples [begin, begin + count) of a Record as a batch:
 // utime = utime_offset + llround(rec.t(begin) * 1e6), sample_period =

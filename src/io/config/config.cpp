@@ -2,7 +2,7 @@
 // read through Value/Map, which know the file, the line and the dotted key
 // path, so that any rejection names all three: a config error must be fixable
 // from the message alone.
-#include "modalwatch/config.hpp"
+#include "modalwatch/io/config.hpp"
 
 #include <yaml-cpp/yaml.h>
 
@@ -22,7 +22,7 @@
 #include <string_view>
 #include <system_error>
 
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/csv.hpp"
 #include "modalwatch/error.hpp"
 
 namespace modalwatch {

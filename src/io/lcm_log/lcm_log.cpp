@@ -1,4 +1,4 @@
-#include "modalwatch/lcm_log.hpp"
+#include "modalwatch/io/lcm_log.hpp"
 
 #include <algorithm>
 #include <cerrno>
@@ -6,7 +6,7 @@
 #include <fstream>
 
 #include "modalwatch/error.hpp"
-#include "modalwatch/messages.hpp"
+#include "modalwatch/io/messages.hpp"
 
 namespace modalwatch {
 namespace {
@@ -39,7 +39,7 @@ LcmLogRecord parse_lcm_log(std::span<const std::uint8_t> bytes, const std::strin
   LcmLogRecord out;
   std::vector<std::int64_t> utime, seq;
   std::vector<double> u, y, r;
-  std::vector<SampleRecord> buf;
+  std::vector<StampedSample> buf;
   std::size_t pos = 0;
   while (pos < bytes.size()) {
     const std::size_t at = pos;
@@ -94,7 +94,7 @@ LcmLogRecord parse_lcm_log(std::span<const std::uint8_t> bytes, const std::strin
     if (std::find(out.channels.begin(), out.channels.end(), channel) == out.channels.end())
       out.channels.emplace_back(channel);
     for (int i = 0; i < n; ++i) {
-      const SampleRecord& s = buf[static_cast<std::size_t>(i)];
+      const StampedSample& s = buf[static_cast<std::size_t>(i)];
       if (!utime.empty() && (s.utime <= utime.back() || s.seq <= seq.back())) {
         ++out.skipped_order;
         continue;

@@ -1,20 +1,15 @@
-#include "modalwatch/checkpoint.hpp"
-
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
+#include "modalwatch/io/checkpoint.hpp"
 
 #include <array>
 #include <bit>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
-#include <filesystem>
 #include <fstream>
 #include <stdexcept>
-#include <system_error>
 
 #include "modalwatch/error.hpp"
+#include "modalwatch/io/atomic_file.hpp"
 #include "modalwatch/prefilter.hpp"
 
 namespace modalwatch {
@@ -197,10 +192,6 @@ struct Fnv {
     bytes(s.data(), s.size());
   }
 };
-
-[[noreturn]] void throw_errno(const std::string& what, int err) {
-  throw std::system_error(err, std::generic_category(), what);
-}
 
 }  // namespace
 
@@ -407,47 +398,7 @@ Checkpoint decode_checkpoint(std::span<const std::uint8_t> bytes, const std::str
 
 void write_checkpoint(const std::string& path, const Checkpoint& c) {
   const std::vector<std::uint8_t> bytes = encode_checkpoint(c);
-  const std::filesystem::path target(path);
-  std::filesystem::path dir = target.parent_path();
-  if (dir.empty()) dir = ".";
-  std::string tmp = (dir / ("." + target.filename().string() + ".XXXXXX")).string();
-  const int fd = ::mkstemp(tmp.data());
-  if (fd < 0) throw_errno("checkpoint: cannot create a temporary file in " + dir.string(), errno);
-  auto abandon = [&](const std::string& what, int err) {
-    ::close(fd);
-    ::unlink(tmp.c_str());
-    throw_errno("checkpoint: " + what + " " + tmp, err);
-  };
-  std::size_t done = 0;
-  while (done < bytes.size()) {
-    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      abandon("cannot write", errno);
-    }
-    done += static_cast<std::size_t>(n);
-  }
-  if (::fchmod(fd, 0640) != 0) abandon("cannot set the mode of", errno);
-  if (::fsync(fd) != 0) abandon("cannot fsync", errno);
-  if (::close(fd) != 0) {
-    const int err = errno;
-    ::unlink(tmp.c_str());
-    throw_errno("checkpoint: cannot close " + tmp, err);
-  }
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    const int err = errno;
-    ::unlink(tmp.c_str());
-    throw_errno("checkpoint: cannot rename " + tmp + " to " + path, err);
-  }
-  // The rename is durable only once the directory is.
-  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dfd < 0) throw_errno("checkpoint: cannot open directory " + dir.string(), errno);
-  if (::fsync(dfd) != 0) {
-    const int err = errno;
-    ::close(dfd);
-    throw_errno("checkpoint: cannot fsync directory " + dir.string(), err);
-  }
-  ::close(dfd);
+  write_file_atomically(path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()), 0640);
 }
 
 Checkpoint read_checkpoint(const std::string& path) {

@@ -1,7 +1,7 @@
 // CSV records. The whole file is read into memory (or, by RecordStream, a
 // large chunk at a time) and parsed in place with std::from_chars: iostream per
 // field is an order of magnitude too slow for records of millions of rows.
-#include "modalwatch/csv.hpp"
+#include "modalwatch/io/csv.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -19,6 +19,7 @@
 #include <system_error>
 
 #include "modalwatch/error.hpp"
+#include "modalwatch/io/atomic_file.hpp"
 
 namespace modalwatch {
 namespace {
@@ -507,7 +508,7 @@ namespace {
 
 // std::to_chars with precision 17 prints what %.17g prints, several times faster
 // than fprintf; rows are buffered and written in large blocks.
-void write_rows(std::FILE* f, const std::vector<std::string>& columns, const Eigen::MatrixXd& data) {
+void write_rows(AtomicFile& f, const std::vector<std::string>& columns, const Eigen::MatrixXd& data) {
   std::string out;
   for (std::size_t j = 0; j < columns.size(); ++j) (out += j == 0 ? "" : ",") += columns[j];
   out += '\n';
@@ -520,11 +521,11 @@ void write_rows(std::FILE* f, const std::vector<std::string>& columns, const Eig
     }
     out += '\n';
     if (out.size() > (1 << 16)) {
-      std::fwrite(out.data(), 1, out.size(), f);
+      f.write(out);
       out.clear();
     }
   }
-  std::fwrite(out.data(), 1, out.size(), f);
+  f.write(out);
 }
 
 // The header has no quoting, so names that would split or shift columns are refused.
@@ -543,20 +544,12 @@ void check_columns(const std::string& path, const std::vector<std::string>& colu
 void write_table(const std::string& path, const std::vector<std::string>& columns,
                  const Eigen::MatrixXd& data) {
   check_columns(path, columns, data);
-  const std::string tmp = path + ".tmp." + std::to_string(::getpid());
-  std::FILE* f = std::fopen(tmp.c_str(), "wb");
-  if (!f) throw InputError(path, std::string("cannot write: ") + std::strerror(errno));
-  write_rows(f, columns, data);
-  const bool failed = std::ferror(f) != 0;
-  const int saved = errno;
-  if (std::fclose(f) != 0 || failed) {
-    std::remove(tmp.c_str());
-    throw InputError(path, std::string("cannot write: ") + std::strerror(failed ? saved : errno));
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    const int err = errno;
-    std::remove(tmp.c_str());
-    throw InputError(path, std::string("cannot rename the temporary file: ") + std::strerror(err));
+  try {
+    AtomicFile file(path);
+    write_rows(file, columns, data);
+    file.commit();
+  } catch (const std::system_error& e) {
+    throw InputError(path, std::string("cannot write: ") + e.code().message());
   }
 }
 
