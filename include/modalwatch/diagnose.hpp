@@ -1,30 +1,22 @@
 #pragma once
-// Closing the loop with measured data (DESIGN.md, "Closing the loop"): fit the
-// configured additive model, test the residual, trace it to an effect the model
-// lacks, add the best effect, refit, and repeat while the validation error drops
-// significantly and the residual tests still fail.
+// Closing the loop with measured data: fit the configured additive model, test
+// the residual, trace it to an effect the model lacks, add the best effect,
+// refit, and repeat while the validation error drops significantly and the
+// residual tests still fail.
 //
-// The augmented model is the additive model of eq. (5) driven by a plant input
-// that carries the effects, plus output terms:
-//
-//   u_p(t_k) = u(t_{k-d}) + u_off - Fc sign(y_k - y_{k-1}) - c y_m^3   (held over [t_k, t_k+1))
-//   y_m = 1.5 y_k - 0.5 y_{k-1}   (y extrapolated to the middle of the hold interval)
-//   y(t_k)   = sum_i G_i(p) u_p + y_off + drift (t_k - t_0)
-//
-// The nonlinear branches (Coulomb, cubic) are additive branches driven by their
-// own signal through the same dynamics, A(p) y = B(p) (u - c y^3). For
-// strictly proper submodels y_k is fixed by the inputs before t_k, so the
-// branches are sampled at t_k and held with the input (no extra delay; for a
-// biproper submodel they use its output without the feedthrough). The
-// simulator's PlantEffects have the same structure. Only the modes and rigid bodies
-// are carried by the recursive estimator (`track`) and the daemon; offset,
-// drift, delay, Coulomb and cubic terms are fitted by `diagnose` alone.
+// The augmented model is the additive model of eq. (5) with the effects of
+// include/modalwatch/effects.hpp around it (input offset, delay, Coulomb and
+// cubic branches at its input; output offset and drift at its output), the
+// structure `simulate` makes records with. Only the modes and rigid bodies are
+// carried by the recursive estimator (`track`) and the daemon; the effects are
+// fitted by `diagnose` alone.
 #include <string>
 #include <utility>
 #include <vector>
 
 #include <Eigen/Core>
 
+#include "modalwatch/effects.hpp"
 #include "modalwatch/model.hpp"
 #include "modalwatch/prefilter.hpp"
 #include "modalwatch/record.hpp"
@@ -36,17 +28,12 @@ enum class EffectKind { mode, rigid_body, offset, drift, delay, coulomb, cubic }
 const char* effect_name(EffectKind kind);
 std::vector<EffectKind> all_effects();
 
-// What a model of modes does not carry. A flag says the parameter is part of
-// the model (and fitted); its value may still be small.
-struct ModelEffects {
+// The effects of a model, and which of them it carries: a flag says the
+// parameter is part of the model (and fitted); its value may still be small.
+// A value without its flag is not used. A delay is part of the model when > 0.
+struct ModelEffects : PlantEffects {
   bool output_offset_on = false, input_offset_on = false, drift_on = false, coulomb_on = false, cubic_on = false;
-  double output_offset = 0.0;  // y units
-  double input_offset = 0.0;   // u units
-  double drift = 0.0;          // y units per s, from the first sample of the record
-  int delay = 0;               // samples
-  double coulomb = 0.0;        // Fc, u units
-  double cubic = 0.0;          // c, u units per y unit cubed
-  int n_params() const;        // continuous parameters plus one for a delay
+  int n_params() const;  // continuous parameters plus one for a delay
 };
 
 struct AugmentedModel {

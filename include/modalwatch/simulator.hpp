@@ -10,6 +10,7 @@
 
 #include <Eigen/Core>
 
+#include "modalwatch/effects.hpp"
 #include "modalwatch/model.hpp"
 #include "modalwatch/record.hpp"
 #include "modalwatch/signals.hpp"
@@ -35,28 +36,13 @@ struct PlantMode {
   bool operator==(const PlantMode&) const = default;
 };
 
-// Effects a model of modes alone does not describe; `modalwatch diagnose` is
-// tested on records that carry them. The plant input is
-//   u_{k-d} + input_offset - coulomb sign(y_k - y_{k-1}) - cubic y_m^3,  y_m = 1.5 y_k - 0.5 y_{k-1},
-// held over [t_k, t_k+1), with y the noise-free output before the input sample
-// acts (y_k for strictly proper modes): an explicit loop without an extra
-// sample of delay. diagnose fits the same structure (include/modalwatch/diagnose.hpp).
-struct PlantEffects {
-  double output_offset = 0.0;  // added to y (sensor offset)
-  double input_offset = 0.0;   // added to the plant input (force offset)
-  int input_delay = 0;         // samples: the plant sees u_{k-d}
-  double coulomb = 0.0;        // Fc: plant input u - Fc sign(v)
-  double cubic = 0.0;          // c: plant input u - c y^3 (cubic stiffness)
-  bool operator==(const PlantEffects&) const = default;
-};
-
 struct PlantSpec {
   std::vector<PlantMode> modes;
   // Output noise: white Gaussian with this variance, or set by snr_db
   // (10 log10 of noise-free output power over noise power) when given.
   double noise_variance = 0.0;
   std::optional<double> snr_db;
-  PlantEffects effects;  // none by default
+  PlantEffects effects;  // none by default (include/modalwatch/effects.hpp)
   bool operator==(const PlantSpec&) const = default;
 };
 

@@ -113,7 +113,7 @@ std::string effects_comment(const ModelEffects& e) {
   if (e.output_offset_on) s += "#   output_offset: " + num(e.output_offset, 10) + "\n";
   if (e.input_offset_on) s += "#   input_offset: " + num(e.input_offset, 10) + "\n";
   if (e.drift_on) s += "#   drift: " + num(e.drift, 10) + "   # output units per s\n";
-  if (e.delay > 0) s += "#   input_delay: " + std::to_string(e.delay) + "   # samples\n";
+  if (e.input_delay > 0) s += "#   input_delay: " + std::to_string(e.input_delay) + "   # samples\n";
   if (e.coulomb_on) s += "#   coulomb: " + num(e.coulomb, 10) + "\n";
   if (e.cubic_on) s += "#   cubic: " + num(e.cubic, 10) + "\n";
   return s;

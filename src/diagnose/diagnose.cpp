@@ -1,5 +1,5 @@
 // modalwatch diagnose: fit, test the residual, trace it to an effect, add the
-// best effect, refit, repeat (DESIGN.md "Closing the loop").
+// best effect, refit, repeat.
 //
 // Fitting. The configured structure starts from the additive SRIVC of the
 // paper (fit_srivc; open or closed loop) and from the configured values; each
@@ -162,7 +162,7 @@ Refined refine(const AugmentedModel& start, const Problem& pb, int iterations) {
 // for models whose effects do not act on the plant input.
 bool srivc_start(const AdditiveModel& linear, const ModelEffects& e, const Record& data, const LoopSpec& loop,
                  const DiagnoseOptions& options, AdditiveModel& out) {
-  if (e.input_offset_on || e.coulomb_on || e.cubic_on || e.delay > 0) return false;
+  if (e.input_offset_on || e.coulomb_on || e.cubic_on || e.input_delay > 0) return false;
   Record corrected = data;
   if (e.output_offset_on) corrected.y.array() -= e.output_offset;
   if (e.drift_on) corrected.y.array() -= e.drift * (data.t.array() - data.t(0));
@@ -399,7 +399,7 @@ int correlation_lag(const Eigen::VectorXd& e, const Eigen::VectorXd& u, int max_
 }
 
 Candidate candidate_delay(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
-  if (current.effects.delay > 0) return invalid(EffectKind::delay, "already in the model");
+  if (current.effects.input_delay > 0) return invalid(EffectKind::delay, "already in the model");
   const int lag = correlation_lag(ctx.est.data.y - y0, ctx.est.data.u, ctx.options.max_delay);
   // Whole samples 1..max_delay, each with a short refit from the current model
   // and from the configured values (the current fit has bent its modes to
@@ -410,7 +410,7 @@ Candidate candidate_delay(const AugmentedModel& current, const Eigen::VectorXd& 
     for (int from = 0; from < 2; ++from) {
       AugmentedModel m = current;
       if (from == 1) m.linear = ctx.configured;
-      m.effects.delay = d;
+      m.effects.input_delay = d;
       const Refined r = refine(m, ctx.est, std::min(8, ctx.options.oe_iterations));
       if (r.cost < best.cost) {
         best = r;

@@ -1,6 +1,6 @@
 // The augmented model on a record (include/modalwatch/diagnose.hpp): the
 // submodels exactly discretised under ZOH in normalised time, the effects
-// around them, open or closed loop.
+// (include/modalwatch/effects.hpp) around them, open or closed loop.
 #include "modalwatch/diagnose.hpp"
 
 #include <algorithm>
@@ -29,10 +29,22 @@ std::vector<EffectKind> all_effects() {
 
 int ModelEffects::n_params() const {
   return int(output_offset_on) + int(input_offset_on) + int(drift_on) + int(coulomb_on) + int(cubic_on) +
-         (delay > 0 ? 1 : 0);
+         (input_delay > 0 ? 1 : 0);
 }
 
 namespace {
+
+// The effects the model carries.
+PlantEffects carried(const ModelEffects& e) {
+  PlantEffects p;
+  if (e.output_offset_on) p.output_offset = e.output_offset;
+  if (e.input_offset_on) p.input_offset = e.input_offset;
+  if (e.drift_on) p.drift = e.drift;
+  p.input_delay = std::max(e.input_delay, 0);
+  if (e.coulomb_on) p.coulomb = e.coulomb;
+  if (e.cubic_on) p.cubic = e.cubic;
+  return p;
+}
 
 // The time scale of a submodel: |a_n|^(-1/n) (wn for a mode), 1 without A.
 double time_scale(const Submodel& s) {
@@ -88,7 +100,8 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
   std::vector<SubmodelRunner> runners;
   const int substeps = std::max(1, loop.substeps);
   for (const Submodel& s : model.linear.submodels) runners.emplace_back(s, T / substeps);
-  const ModelEffects& e = model.effects;
+  const PlantEffects e = carried(model.effects);
+  EffectState effects(e);
 
   // Closed loop: the excitation besides the controller, from the measured signals.
   Eigen::VectorXd u_ext;
@@ -103,25 +116,8 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
 
   Eigen::VectorXd y(N);
   if (u_sim) u_sim->resize(N);
-  std::vector<double> u_past(static_cast<std::size_t>(e.delay), 0.0);  // ring of the last d inputs
-  std::size_t head = 0;
-  double y1 = 0.0;  // plant output (before offset and drift, without feedthrough) one substep back
   const double t0 = data.t(0);
   const bool interpolate = loop.interpolate_input && !loop.closed;
-  // The input to the plant besides u: offset and the nonlinear branches, from
-  // the output at the start of the (sub)interval before its input acts.
-  auto branches_at = [&](double y_now, double y_before) {
-    const double v_sign = (y_now > y_before) ? 1.0 : ((y_now < y_before) ? -1.0 : 0.0);
-    double b = 0.0;
-    if (e.input_offset_on) b += e.input_offset;
-    if (e.coulomb_on) b -= e.coulomb * v_sign;
-    // The cubic branch is held over the interval: take y at its middle,
-    // extrapolated, so the held stiffness adds no half-interval lag (that lag
-    // acts as negative damping, felt at w T ~ 0.7 on the Silverbox).
-    const double y_mid = 1.5 * y_now - 0.5 * y_before;
-    if (e.cubic_on) b -= e.cubic * y_mid * y_mid * y_mid;
-    return b;
-  };
   for (Eigen::Index k = 0; k < N; ++k) {
     // Move every submodel to t_k: for strictly proper submodels their output
     // y_k is then known before the input sample u_k, which the nonlinear
@@ -131,44 +127,36 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
       y_free += r.advance();
       feed += r.feedthrough();
     }
-    const double branches = branches_at(y_free, y1);
-    const double delayed = e.delay > 0 ? u_past[head] : 0.0;
-    double out_terms = 0.0;
-    if (e.output_offset_on) out_terms += e.output_offset;
-    if (e.drift_on) out_terms += e.drift * (data.t(k) - t0);
+    const double branches = effects.branches(y_free);
+    const double out_terms = effects.output_terms(data.t(k) - t0);
     double u = data.u(k);
     if (loop.closed) {
       // y_k = y_free + D u_p + out_terms, u_p = (u_k or u_{k-d}) + branches.
-      const bool direct = e.delay == 0;
-      const double y_known = y_free + feed * (branches + (direct ? 0.0 : delayed)) + out_terms;
-      const double gain = 1.0 + c0 * (direct ? feed : 0.0);
+      const double y_known = y_free + feed * effects.known_input(branches) + out_terms;
+      const double gain = 1.0 + c0 * (effects.delays() ? 0.0 : feed);
       u = (controller.peek(data.r(k) - y_known) + u_ext(k)) / gain;
     }
     // The input over [t_k, t_k+1): held, or (open loop, band-limited input)
     // linear towards the next sample, at the middle of each substep.
-    const double u_a = e.delay > 0 ? delayed : u;
+    const double u_a = effects.delayed(u);
     double u_b = u_a;
     if (interpolate) {
-      const Eigen::Index j = k + 1 - e.delay;
+      const Eigen::Index j = k + 1 - e.input_delay;
       u_b = j < 0 ? 0.0 : (j < N ? data.u(j) : u_a);
     }
     auto held = [&](int sub) { return interpolate ? u_a + (u_b - u_a) * (sub + 0.5) / substeps : u_a; };
     double y_plant = 0.0;
     for (SubmodelRunner& r : runners) y_plant += r.complete(held(0) + branches);
-    if (e.delay > 0) {
-      u_past[head] = u;
-      head = (head + 1) % u_past.size();
-    }
     y(k) = y_plant + out_terms;
     if (loop.closed) controller.step(data.r(k) - y(k));
     if (u_sim) (*u_sim)(k) = u;
-    y1 = y_free;
+    effects.end_sample(u, y_free);
     for (int sub = 1; sub < substeps; ++sub) {
       double y_sub = 0.0;
       for (SubmodelRunner& r : runners) y_sub += r.advance();
-      const double b = branches_at(y_sub, y1);
+      const double b = effects.branches(y_sub);
       for (SubmodelRunner& r : runners) r.complete(held(sub) + b);
-      y1 = y_sub;
+      effects.end_substep(y_sub);
     }
   }
   return y;

@@ -113,40 +113,6 @@ struct Signals {
   Eigen::VectorXd u, y_clean, y;
 };
 
-// The plant input after the effects: the delayed u plus the input offset, minus
-// the Coulomb and cubic branches. The branches are fed by the noise-free plant
-// output at t_k before the input sample u_k acts (for strictly proper modes,
-// y_k itself) and held with the input: the loop stays explicit without an extra
-// sample of delay. The cubic branch uses y extrapolated to the middle of the
-// hold interval, 1.5 y_k - 0.5 y_k-1. diagnose fits the same structure.
-class EffectState {
- public:
-  explicit EffectState(const PlantEffects& e) : e_(e), u_past_(static_cast<std::size_t>(e.input_delay), 0.0) {}
-  // Part of the plant input that does not depend on u_k; y_free is the plant
-  // output at t_k with a zero input sample.
-  double branches(double y_free) const {
-    const double v_sign = (y_free > y1_) ? 1.0 : ((y_free < y1_) ? -1.0 : 0.0);
-    const double y_mid = 1.5 * y_free - 0.5 * y1_;  // middle of the hold interval
-    return e_.input_offset - e_.coulomb * v_sign - e_.cubic * y_mid * y_mid * y_mid;
-  }
-  // u_{k-d}; for d = 0 this is u itself.
-  double delayed(double u) const { return e_.input_delay == 0 ? u : u_past_[head_]; }
-  bool delayed_feeds_through() const { return e_.input_delay == 0; }
-  void push(double u, double y_free) {
-    if (e_.input_delay > 0) {
-      u_past_[head_] = u;
-      head_ = (head_ + 1) % u_past_.size();
-    }
-    y1_ = y_free;
-  }
-
- private:
-  const PlantEffects& e_;
-  std::vector<double> u_past_;  // ring of the last d inputs, oldest at head_
-  std::size_t head_ = 0;
-  double y1_ = 0.0;  // y_free at k-1
-};
-
 std::vector<ModeSimulator> make_modes(const PlantSpec& plant, double T) {
   std::vector<ModeSimulator> modes;
   modes.reserve(plant.modes.size());
@@ -159,7 +125,7 @@ Signals run_open_loop(const PlantSpec& plant, const Eigen::VectorXd& t, double T
   std::vector<ModeSimulator> modes = make_modes(plant, T);
   EffectState effects(plant.effects);
   Signals s{u, Eigen::VectorXd::Zero(t.size()), Eigen::VectorXd()};
-  const bool nonlinear = plant.effects.coulomb != 0.0 || plant.effects.cubic != 0.0;
+  const bool nonlinear = plant.effects.feeds_back();
   for (Eigen::Index k = 0; k < t.size(); ++k) {
     double y_free = 0.0;
     for (ModeSimulator& m : modes) {
@@ -169,8 +135,8 @@ Signals run_open_loop(const PlantSpec& plant, const Eigen::VectorXd& t, double T
     const double u_plant = effects.delayed(u(k)) + effects.branches(y_free);
     double y_plant = 0.0;
     for (ModeSimulator& m : modes) y_plant += m.step(u_plant);
-    effects.push(u(k), y_free);
-    s.y_clean(k) = y_plant + plant.effects.output_offset;
+    effects.end_sample(u(k), y_free);
+    s.y_clean(k) = y_plant + effects.output_terms(t(k) - t(0));
   }
   s.y = s.y_clean + noise;
   return s;
@@ -196,20 +162,20 @@ Signals run_closed_loop(const PlantSpec& plant, const ExperimentSpec& ex, const 
     }
     // With a delay u_k does not reach y_k; without, y_k depends on u_k through D.
     const double branches = effects.branches(y_free);
-    const bool direct_u = effects.delayed_feeds_through();
     const double y_zero_input = y_free;
-    y_free += feed * (branches + (direct_u ? 0.0 : effects.delayed(0.0)));
-    const double direct = direct_u ? feed : 0.0;
+    y_free += feed * effects.known_input(branches);
+    const double direct = effects.delays() ? 0.0 : feed;
     const double loop = 1.0 + c0 * direct;
     if (loop == 0.0) throw std::invalid_argument("simulate: ill-posed loop (1 + C(inf) G(inf) = 0)");
-    const double y_measured_free = y_free + plant.effects.output_offset + noise(k);
+    const double y_out = effects.output_terms(t(k) - t(0));
+    const double y_measured_free = y_free + y_out + noise(k);
     const double u = controller.peek(r(k) - y_measured_free) / loop;
     const double u_plant = effects.delayed(u) + branches;
     double y_plant = 0.0;
     for (ModeSimulator& m : modes) y_plant += m.step(u_plant);
-    effects.push(u, y_zero_input);
+    effects.end_sample(u, y_zero_input);
     s.u(k) = u;
-    s.y_clean(k) = y_plant + plant.effects.output_offset;
+    s.y_clean(k) = y_plant + y_out;
     s.y(k) = s.y_clean(k) + noise(k);
     controller.step(r(k) - s.y(k));
   }
@@ -254,8 +220,8 @@ void check_specs(const PlantSpec& plant, const ExperimentSpec& ex) {
   if (plant.snr_db && !std::isfinite(*plant.snr_db)) throw std::invalid_argument("simulate: snr_db must be finite");
   const PlantEffects& e = plant.effects;
   if (e.input_delay < 0) throw std::invalid_argument("simulate: input_delay must be >= 0");
-  if (!std::isfinite(e.output_offset) || !std::isfinite(e.input_offset) || !std::isfinite(e.cubic) ||
-      !(e.coulomb >= 0.0) || !std::isfinite(e.coulomb))
+  if (!std::isfinite(e.output_offset) || !std::isfinite(e.input_offset) || !std::isfinite(e.drift) ||
+      !std::isfinite(e.cubic) || !(e.coulomb >= 0.0) || !std::isfinite(e.coulomb))
     throw std::invalid_argument("simulate: effects must be finite (coulomb >= 0)");
 }
 
