@@ -1,0 +1,330 @@
+// `modalwatch diagnose`'s report (diagnose_report.hpp): the files, the plot
+// script run on them, and the steps on stdout.
+#include "diagnose_report.hpp"
+
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <numbers>
+#include <sstream>
+#include <vector>
+
+#include "json_writer.hpp"
+#include "modalwatch/io/atomic_file.hpp"
+#include "modalwatch/io/csv.hpp"
+
+extern char** environ;
+
+namespace modalwatch::cli {
+
+std::string format_number(double v, int precision) { return json_number(v, precision); }
+
+namespace {
+
+// ------------------------------------------------------------ summary.json
+
+void write_test(JsonWriter& j, const ResidualTest& t) {
+  j.begin_object();
+  j.key("statistic").value(t.statistic, 6).key("threshold").value(t.threshold, 6).key("pass").value(t.pass);
+  j.end_object();
+}
+
+void write_submodel(JsonWriter& j, const Submodel& s) {
+  j.begin_object().key("name").value(s.name);
+  if (s.is_mode()) {
+    const ModalParameters p = modal_parameters(s);
+    j.key("kind").value("mode").key("wn").value(p.wn).key("zeta").value(p.zeta).key("gain").value(p.gain);
+  } else {
+    j.key("kind").value("transfer_function").key("rigid_poles").value(s.rigid_poles);
+    for (const auto& [name, c] : {std::pair{"a", &s.a}, std::pair{"b", &s.b}}) {
+      j.key(name).begin_array();
+      for (const double v : *c) j.value(v);
+      j.end_array();
+    }
+  }
+  j.end_object();
+}
+
+// The effects the model carries.
+void write_effects(JsonWriter& j, const ModelEffects& e) {
+  j.begin_object();
+  if (e.output_offset_on) j.key("output_offset").value(e.output_offset);
+  if (e.input_offset_on) j.key("input_offset").value(e.input_offset);
+  if (e.drift_on) j.key("drift").value(e.drift);
+  if (e.input_delay > 0) j.key("input_delay").value(e.input_delay);
+  if (e.coulomb_on) j.key("coulomb").value(e.coulomb);
+  if (e.cubic_on) j.key("cubic").value(e.cubic);
+  j.end_object();
+}
+
+void write_step(JsonWriter& j, const DiagnoseStep& s) {
+  j.begin_object().key("effect").value(s.effect).key("params").begin_object();
+  for (const auto& [k, v] : s.params) j.key(k).value(v, 10);
+  j.end_object();
+  j.key("validation_rms").value(s.validation_rms, 10).key("fit_percent").value(s.fit_percent, 8);
+  j.key("estimation_rms").value(s.estimation_rms, 10).key("bic").value(s.bic, 10);
+  j.key("whiteness_pass").value(s.residual.whiteness.pass);
+  write_test(j.key("whiteness"), s.residual.whiteness);
+  write_test(j.key("independence"), s.residual.independence);
+  write_test(j.key("coherence"), s.residual.coherence);
+  j.key("submodels").begin_array();
+  for (const Submodel& sm : s.model.linear.submodels) write_submodel(j, sm);
+  j.end_array();
+  write_effects(j.key("effects"), s.model.effects);
+  j.end_object();
+}
+
+// ------------------------------------------------------------ plots
+
+struct PlotOutcome {
+  bool made = false;
+  std::string failure;  // why not, when the script was given
+};
+
+// python3 SCRIPT DIR, without a shell: the paths are arguments, never parsed.
+// The script's stderr is collected and shown; its stdout is the command's.
+PlotOutcome run_plot_script(const std::string& script, const std::string& dir) {
+  static const std::string python = "/usr/bin/python3";  // the script's interpreter (Debian's matplotlib)
+  std::vector<std::string> args{python, script, dir};
+  std::vector<char*> argv;
+  for (std::string& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  int err[2];
+  if (pipe2(err, O_CLOEXEC) != 0) return {false, std::string("cannot make a pipe: ") + std::strerror(errno)};
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_adddup2(&actions, err[1], STDERR_FILENO);
+  std::fflush(stdout);
+  pid_t pid = 0;
+  const int spawned = posix_spawn(&pid, python.c_str(), &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  close(err[1]);
+  if (spawned != 0) {
+    close(err[0]);
+    return {false, "cannot run " + python + ": " + std::strerror(spawned)};
+  }
+  std::string text;
+  char buf[4096];
+  for (;;) {
+    const ssize_t n = read(err[0], buf, sizeof buf);
+    if (n > 0) text.append(buf, static_cast<std::size_t>(n));
+    else if (n == 0 || errno != EINTR) break;
+  }
+  close(err[0]);
+  int status = 0;
+  while (waitpid(pid, &status, 0) < 0)
+    if (errno != EINTR) return {false, std::string("waitpid: ") + std::strerror(errno)};
+  if (!text.empty()) std::fprintf(stderr, "%s%s", text.c_str(), text.back() == '\n' ? "" : "\n");
+  if (WIFEXITED(status) && WEXITSTATUS(status) == 0) return {true, ""};
+  const std::string how = WIFEXITED(status) ? "exited with status " + std::to_string(WEXITSTATUS(status))
+                                            : "killed by signal " + std::to_string(WTERMSIG(status));
+  return {false, python + " " + script + " " + how};
+}
+
+// ------------------------------------------------------------ report.md, model.yaml, tables
+
+std::string params_text(const EffectParams& params) {
+  std::string s;
+  for (const auto& [k, v] : params) s += (s.empty() ? "" : ", ") + k + " = " + format_number(v, 5);
+  return s.empty() ? "-" : s;
+}
+
+std::string test_line(const ResidualTest& t) {
+  return std::string(t.pass ? "pass" : "FAIL") + " (" + format_number(t.statistic, 3) + " vs " + format_number(t.threshold, 3) + ")";
+}
+
+std::string effects_comment(const ModelEffects& e) {
+  std::string s;
+  if (e.output_offset_on) s += "#   output_offset: " + format_number(e.output_offset, 10) + "\n";
+  if (e.input_offset_on) s += "#   input_offset: " + format_number(e.input_offset, 10) + "\n";
+  if (e.drift_on) s += "#   drift: " + format_number(e.drift, 10) + "   # output units per s\n";
+  if (e.input_delay > 0) s += "#   input_delay: " + std::to_string(e.input_delay) + "   # samples\n";
+  if (e.coulomb_on) s += "#   coulomb: " + format_number(e.coulomb, 10) + "\n";
+  if (e.cubic_on) s += "#   cubic: " + format_number(e.cubic, 10) + "\n";
+  return s;
+}
+
+std::string model_table(const AdditiveModel& m) {
+  std::string s = "| submodel | kind | f [Hz] | wn [rad/s] | zeta | gain / coefficients |\n|---|---|---|---|---|---|\n";
+  for (const Submodel& sm : m.submodels) {
+    if (sm.is_mode()) {
+      const ModalParameters p = modal_parameters(sm);
+      s += "| " + sm.name + " | mode | " + format_number(p.hz(), 6) + " | " + format_number(p.wn, 6) + " | " + format_number(p.zeta, 4) + " | " +
+           format_number(p.gain, 5) + " |\n";
+    } else {
+      std::string c;
+      const Eigen::VectorXd th = sm.theta();
+      for (int j = 0; j < sm.n_theta(); ++j)
+        c += (j ? ", " : "") + std::string(j < sm.n ? "a" : "b") + std::to_string(j < sm.n ? j + 1 : j - sm.n) +
+             " = " + format_number(th(j), 6);
+      s += "| " + sm.name + " | l = " + std::to_string(sm.rigid_poles) + ", n = " + std::to_string(sm.n) +
+           " | | | | " + c + " |\n";
+    }
+  }
+  return s;
+}
+
+std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
+  const DiagnoseResult& r = in.result;
+  const DiagnoseArgs& args = in.args;
+  const Config& config = in.config;
+  const Eigen::Index n_est = in.estimation_samples, n_val = in.validation.size() - in.lead_in;
+  std::ostringstream o;
+  o << "# modalwatch diagnose\n\n";
+  o << "Config `" << args.config << "` (" << (config.closed_loop ? "closed" : "open") << " loop), data `"
+    << args.data << "`";
+  if (!args.validate.empty()) o << ", validation `" << args.validate << "`";
+  o << ". Input intersample: " << (args.input_hold == "foh" ? "band-limited (first-order hold)" : "held (ZOH)")
+    << ", " << args.substeps << " integration substep(s) per sample";
+  o << ". Estimation part: " << n_est << " samples; validation part: " << n_val << " samples.\n\n";
+  o << "Validation error: the model simulated on the validation part ("
+    << (config.closed_loop ? "closed loop from r, with the measured excitation besides the controller"
+                           : "open loop from the measured u")
+    << "). fit % = 100 (1 - ||y - y_sim|| / ||y - mean(y)||). BIC = N ln(MSE) + k ln N on the estimation part.\n\n";
+  o << "## Steps (before/after)\n\n";
+  o << "| step | added effect | fitted parameters | est. RMS | val. RMS | fit % | BIC | whiteness | independence | "
+       "coherence |\n|---|---|---|---|---|---|---|---|---|---|\n";
+  for (std::size_t i = 0; i < r.steps.size(); ++i) {
+    const DiagnoseStep& s = r.steps[i];
+    o << "| " << i << " | " << s.effect << " | " << params_text(s.params) << " | " << format_number(s.estimation_rms, 4)
+      << " | " << format_number(s.validation_rms, 4) << " | " << format_number(s.fit_percent, 4) << " | " << format_number(s.bic, 6) << " | "
+      << test_line(s.residual.whiteness) << " | " << test_line(s.residual.independence) << " | "
+      << test_line(s.residual.coherence) << " |\n";
+  }
+  o << "\nStopped: " << r.stop_reason << ".\n\n";
+  o << "Residual tests (validation part): whiteness = largest |autocorrelation| at lags 1..M against the 99 % band "
+       "2.58/sqrt(N), pass when at most 5 % of the lags are outside; independence = the same for the "
+       "cross-correlation with past input u(k - tau), tau = 0..M; coherence = largest residual-input squared "
+       "coherence over the excited band against its 99 % level (Bonferroni over the frequencies).\n\n";
+  for (std::size_t i = 0; i < r.steps.size(); ++i) {
+    const DiagnoseStep& s = r.steps[i];
+    if (s.ranking.empty()) continue;
+    o << "### Candidates from step " << i << " (ranked by validation RMS)\n\n";
+    o << "| rank | effect | parameters | est. RMS | val. RMS | fit % | BIC | note |\n|---|---|---|---|---|---|---|---|\n";
+    for (std::size_t j = 0; j < s.ranking.size(); ++j) {
+      const Candidate& c = s.ranking[j];
+      o << "| " << j + 1 << " | " << effect_name(c.kind) << " | " << params_text(c.params) << " | "
+        << format_number(c.estimation_rms, 4) << " | " << format_number(c.validation_rms, 4) << " | " << format_number(c.fit_percent, 4) << " | "
+        << format_number(c.bic, 6) << " | " << c.note << " |\n";
+    }
+    o << "\n";
+  }
+  o << "## Models\n\nConfigured structure, fitted (step 0):\n\n" << model_table(r.steps.front().model.linear);
+  o << "\nAugmented (last step):\n\n" << model_table(r.steps.back().model.linear);
+  const std::string eff = effects_comment(r.steps.back().model.effects);
+  if (!eff.empty()) o << "\nEffects (fitted by diagnose only):\n\n```\n" << eff << "```\n";
+  o << "\n`model.yaml` holds the augmented model: its modes and rigid bodies are read by `fit`, `track` and the "
+       "daemon; offset, drift, delay, Coulomb and cubic terms are written as comments, since only `diagnose` "
+       "fits them.\n\n";
+  o << "## Figures\n\n";
+  if (plots.made) {
+    o << "![Residual spectrum before and after](residual_spectrum.png)\n\n";
+    o << "![Simulated against measured, validation part](validation.png)\n\n";
+    o << "![Bode of both models](bode.png)\n";
+  } else {
+    o << "Not made";
+    if (!plots.failure.empty()) o << " (" << plots.failure << ")";
+    o << ": run `scripts/plot_diagnose.py " << args.report << "` for residual_spectrum.png, validation.png and "
+      << "bode.png from the CSV files here.\n";
+  }
+  return o.str();
+}
+
+void write_tables(const std::string& dir, const DiagnoseResult& r, const Record& full_val, Eigen::Index lead_in) {
+  const Record val = full_val.segment(lead_in, full_val.size() - lead_in);
+  const DiagnoseStep& first = r.steps.front();
+  const DiagnoseStep& last = r.steps.back();
+  {
+    const Spectra& a = first.residual.spectra;
+    const Spectra& b = last.residual.spectra;
+    const Eigen::Index F = std::min(a.frequency_hz.size(), b.frequency_hz.size());
+    Eigen::MatrixXd t(F, 7);
+    t << a.frequency_hz.head(F), a.residual_psd.head(F), b.residual_psd.head(F), a.residual_to_input.head(F),
+        b.residual_to_input.head(F), a.coherence.head(F), b.coherence.head(F);
+    write_table(dir + "/spectra.csv",
+                {"f_hz", "psd_before", "psd_after", "e_to_u_before", "e_to_u_after", "coherence_before",
+                 "coherence_after"},
+                t);
+  }
+  {
+    Eigen::MatrixXd t(val.size(), 4);
+    t << val.t, val.y, first.validation_output.tail(val.size()), last.validation_output.tail(val.size());
+    write_table(dir + "/validation.csv", {"t", "y", "y_before", "y_after"}, t);
+  }
+  {
+    const double fs = 1.0 / val.sample_time();
+    const int F = 400;
+    Eigen::MatrixXd t(F, 5);
+    const double f0 = fs / 2.0 * 1e-3, f1 = fs / 2.0;
+    for (int i = 0; i < F; ++i) {
+      const double f = f0 * std::pow(f1 / f0, double(i) / (F - 1));
+      const double w = 2.0 * std::numbers::pi * f;
+      const auto g0 = first.model.linear.response(w), g1 = last.model.linear.response(w);
+      t.row(i) << f, std::abs(g0), std::arg(g0) * 180.0 / std::numbers::pi, std::abs(g1),
+          std::arg(g1) * 180.0 / std::numbers::pi;
+    }
+    write_table(dir + "/bode.csv", {"f_hz", "mag_before", "phase_before_deg", "mag_after", "phase_after_deg"}, t);
+  }
+  {
+    const Eigen::Index M = first.residual.autocorrelation.size();
+    Eigen::MatrixXd t(M, 5);
+    for (Eigen::Index k = 0; k < M; ++k)
+      t.row(k) << double(k), first.residual.autocorrelation(k), last.residual.autocorrelation(k),
+          first.residual.cross_correlation(k), last.residual.cross_correlation(k);
+    write_table(dir + "/correlations.csv", {"lag", "acf_before", "acf_after", "ccf_before", "ccf_after"}, t);
+  }
+}
+
+void print_steps(const DiagnoseResult& r, const std::string& dir) {
+  std::printf("%-4s %-11s %-44s %12s %12s %8s %10s\n", "step", "effect", "parameters", "est. RMS", "val. RMS",
+              "fit %", "whiteness");
+  for (std::size_t i = 0; i < r.steps.size(); ++i) {
+    const DiagnoseStep& s = r.steps[i];
+    std::printf("%-4zu %-11s %-44s %12.5g %12.5g %8.3f %10s\n", i, s.effect.c_str(), params_text(s.params).c_str(),
+                s.estimation_rms, s.validation_rms, s.fit_percent, s.residual.whiteness.pass ? "pass" : "fail");
+  }
+  std::printf("stopped: %s\nreport: %s/report.md\n", r.stop_reason.c_str(), dir.c_str());
+}
+
+}  // namespace
+
+std::string diagnose_summary_json(const DiagnoseResult& result, const DiagnoseArgs& args) {
+  JsonWriter j;
+  j.begin_object().key("steps").begin_array(JsonWriter::Layout::lines);
+  for (const DiagnoseStep& s : result.steps) write_step(j, s);
+  j.end_array();
+  j.key("stop_reason").value(result.stop_reason);
+  j.key("config").value(args.config).key("data").value(args.data).key("validate");
+  if (args.validate.empty()) j.null();
+  else j.value(args.validate);
+  return j.end_object().finish();
+}
+
+void write_diagnose_report(const DiagnoseReport& in) {
+  const DiagnoseArgs& args = in.args;
+  const DiagnoseResult& r = in.result;
+  std::filesystem::create_directories(args.report);
+  write_file_atomically(args.report + "/summary.json", diagnose_summary_json(r, args));
+  write_tables(args.report, r, in.validation, in.lead_in);
+  std::string yaml = config_to_yaml(in.config, r.steps.back().model.linear);
+  const std::string eff = effects_comment(r.steps.back().model.effects);
+  if (!eff.empty())
+    yaml += "\n# Effects fitted by `modalwatch diagnose` that fit, track and the daemon do not carry:\n" + eff;
+  write_file_atomically(args.report + "/model.yaml", yaml);
+  PlotOutcome plots;
+  if (!args.plot_script.empty()) {
+    plots = run_plot_script(args.plot_script, args.report);
+    if (!plots.made) std::fprintf(stderr, "modalwatch diagnose: plots failed (%s)\n", plots.failure.c_str());
+  }
+  write_file_atomically(args.report + "/report.md", report_md(in, plots));
+  print_steps(r, args.report);
+}
+
+}  // namespace modalwatch::cli

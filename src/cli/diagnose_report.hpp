@@ -1,0 +1,36 @@
+#pragma once
+// The report of `modalwatch diagnose`, in its directory: report.md (the steps
+// before and after, the ranked candidates, the models), summary.json (the same
+// steps for programs), model.yaml (the augmented model as a config), the CSV
+// tables, and the PNGs scripts/plot_diagnose.py makes from them.
+#include <string>
+
+#include <Eigen/Core>
+
+#include "commands.hpp"
+#include "modalwatch/diagnose.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/record.hpp"
+
+namespace modalwatch::cli {
+
+// "%.*g", or null when not finite: the numbers of the report and its messages.
+std::string format_number(double v, int precision = 6);
+
+struct DiagnoseReport {
+  const DiagnoseArgs& args;
+  const Config& config;
+  const DiagnoseResult& result;
+  const Record& validation;  // as simulated: its first lead_in samples only set the state
+  Eigen::Index lead_in = 0;
+  Eigen::Index estimation_samples = 0;
+};
+
+// Writes the report into args.report (each file replaced atomically), runs
+// args.plot_script on it when given, and prints the steps on stdout.
+void write_diagnose_report(const DiagnoseReport& report);
+
+// summary.json: the steps, the stop reason and the inputs.
+std::string diagnose_summary_json(const DiagnoseResult& result, const DiagnoseArgs& args);
+
+}  // namespace modalwatch::cli
