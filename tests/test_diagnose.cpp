@@ -395,9 +395,10 @@ std::string sh_quote(const std::string& s) {
   return q + "'";
 }
 
-// Paths with a quote and a newline give a summary.json that parses back to
-// them, and the plot script runs without a shell: its path is an argument,
-// never parsed, and its exit status and stderr are reported.
+// Paths with quotes, a tab and a newline: diagnose reads and writes there, the
+// JSON of them parses back to them, and the plot script runs without a shell
+// (its path is an argument, never parsed) with its exit status and stderr
+// reported.
 TEST_F(DiagnoseCli, ReportJsonAndPlotScriptWithQuotesAndNewlinesInPaths) {
   if (!std::filesystem::exists("/usr/bin/python3")) GTEST_SKIP() << "no /usr/bin/python3 to run the scripts";
   const std::string dir = path("it's a \"dir\"\nhere");
@@ -432,22 +433,23 @@ simulation:
   const std::string report_md((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
   EXPECT_NE(report_md.find("Not made (/usr/bin/python3 " + script + " exited with status 3)"), std::string::npos);
 
-  std::ifstream in(report + "/summary.json");
-  const std::string json((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  EXPECT_NE(json.find("\"config\": " + cli::json_string(config)), std::string::npos) << json;
-  EXPECT_NE(json.find("it's a \\\"dir\\\"\\nhere/run\\t1.csv"), std::string::npos) << json;
-  // Parsed back by Python's json: the paths come out as they went in.
+  // Parsed back by Python's json: summary.json, and a document holding the paths.
+  cli::JsonWriter doc;
+  doc.begin_object().key("config").value(config).key("data").value(data).key("report").value(report).end_object();
+  const std::string paths = write("paths.json", doc.finish());
   const std::string checker = write("check.py", R"(import json, sys
-d = json.load(open(sys.argv[1], encoding="utf-8"))
-assert d["steps"][0]["effect"] == "none" and d["validate"] is None
-open(sys.argv[2], "wb").write((d["config"] + "\0" + d["data"]).encode("utf-8"))
+s = json.load(open(sys.argv[1], encoding="utf-8"))
+assert s["steps"][0]["effect"] == "none" and s["steps"][0]["submodels"][0]["name"] == "m1"
+d = json.load(open(sys.argv[2], encoding="utf-8"))
+open(sys.argv[3], "wb").write((d["config"] + "\0" + d["data"] + "\0" + d["report"]).encode("utf-8"))
 )");
-  ASSERT_EQ(std::system(("/usr/bin/python3 " + checker + " " + sh_quote(report + "/summary.json") + " " +
-                         path("parsed.bin")).c_str()),
+  ASSERT_EQ(std::system(("/usr/bin/python3 " + checker + " " + sh_quote(report + "/summary.json") + " " + paths +
+                         " " + path("parsed.bin")).c_str()),
             0);
   std::ifstream parsed(path("parsed.bin"), std::ios::binary);
+  const std::string nul(1, '\0');
   EXPECT_EQ(std::string((std::istreambuf_iterator<char>(parsed)), std::istreambuf_iterator<char>()),
-            config + std::string(1, '\0') + data);
+            config + nul + data + nul + report);
 }
 
 // ------------------------------------------------------------ measured records

@@ -34,6 +34,7 @@ std::vector<EffectKind> all_effects();
 struct ModelEffects : PlantEffects {
   bool output_offset_on = false, input_offset_on = false, drift_on = false, coulomb_on = false, cubic_on = false;
   int n_params() const;  // continuous parameters plus one for a delay
+  bool operator==(const ModelEffects&) const = default;
 };
 
 struct AugmentedModel {

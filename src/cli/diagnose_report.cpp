@@ -295,15 +295,12 @@ void print_steps(const DiagnoseResult& r, const std::string& dir) {
 
 }  // namespace
 
-std::string diagnose_summary_json(const DiagnoseResult& result, const DiagnoseArgs& args) {
+std::string diagnose_summary_json(const DiagnoseResult& result) {
   JsonWriter j;
   j.begin_object().key("steps").begin_array(JsonWriter::Layout::lines);
   for (const DiagnoseStep& s : result.steps) write_step(j, s);
   j.end_array();
   j.key("stop_reason").value(result.stop_reason);
-  j.key("config").value(args.config).key("data").value(args.data).key("validate");
-  if (args.validate.empty()) j.null();
-  else j.value(args.validate);
   return j.end_object().finish();
 }
 
@@ -311,7 +308,7 @@ void write_diagnose_report(const DiagnoseReport& in) {
   const DiagnoseArgs& args = in.args;
   const DiagnoseResult& r = in.result;
   std::filesystem::create_directories(args.report);
-  write_file_atomically(args.report + "/summary.json", diagnose_summary_json(r, args));
+  write_file_atomically(args.report + "/summary.json", diagnose_summary_json(r));
   write_tables(args.report, r, in.validation, in.lead_in);
   std::string yaml = config_to_yaml(in.config, r.steps.back().model.linear);
   const std::string eff = effects_comment(r.steps.back().model.effects);

@@ -30,7 +30,8 @@ struct DiagnoseReport {
 // args.plot_script on it when given, and prints the steps on stdout.
 void write_diagnose_report(const DiagnoseReport& report);
 
-// summary.json: the steps, the stop reason and the inputs.
-std::string diagnose_summary_json(const DiagnoseResult& result, const DiagnoseArgs& args);
+// summary.json: the steps (each with its model) and the stop reason; nothing
+// of where the records came from, so the same data gives the same file.
+std::string diagnose_summary_json(const DiagnoseResult& result);
 
 }  // namespace modalwatch::cli
