@@ -17,11 +17,16 @@ launcher=()
 command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 # The installation alone: no tests, and cpack's install step does not build them.
 echo "== build ($build, prefix /usr)"
-cmake -S "$here" -B "$build" -DCMAKE_BUILD_TYPE=Release -DCMAKE_INSTALL_PREFIX=/usr \
-  -DCMAKE_SKIP_INSTALL_ALL_DEPENDENCY=ON -DMODALWATCH_BENCHMARKS=OFF "${launcher[@]}" >/dev/null
-cmake --build "$build" -j"$jobs" --target modalwatch_installation >/dev/null
+log="$build/package.log"
+mkdir -p "$build"
+run() { "$@" >>"$log" 2>&1 || { tail -40 "$log"; echo "FAIL: $* (log: $log)"; exit 1; }; }
+: >"$log"
+run cmake -S "$here" -B "$build" -DCMAKE_BUILD_TYPE=Release -DCMAKE_INSTALL_PREFIX=/usr \
+  -DCMAKE_SKIP_INSTALL_ALL_DEPENDENCY=ON -DMODALWATCH_BENCHMARKS=OFF "${launcher[@]}"
+run cmake --build "$build" -j"$jobs" --target modalwatch_installation
 echo "== cpack"
-(cd "$build" && rm -f modalwatch_*.deb && cpack -G DEB >/dev/null)
+rm -f "$build"/modalwatch_*.deb
+(cd "$build" && run cpack -G DEB)
 deb=$(ls "$build"/modalwatch_*.deb)
 echo "package: $(basename "$deb")"
 dpkg-deb --field "$deb" Package Version Architecture Depends Suggests
