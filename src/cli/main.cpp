@@ -8,10 +8,12 @@
 #include <CLI/CLI.hpp>
 
 #include "commands.hpp"
+#include "modalwatch_version.hpp"
 
 int main(int argc, char** argv) {
   using namespace modalwatch::cli;
   CLI::App app{"modalwatch: identification of continuous-time modal models (additive RSRIVC)"};
+  app.set_version_flag("--version", "modalwatch " MODALWATCH_VERSION);
   app.require_subcommand(1);
 
   SimulateArgs sim;
@@ -87,6 +89,8 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
   } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
     app.exit(e);
