@@ -40,10 +40,9 @@ install(TARGETS modalwatch modalwatchd RUNTIME DESTINATION ${CMAKE_INSTALL_BINDI
 
 set_target_properties(modalwatch_core PROPERTIES EXPORT_NAME core)
 set_target_properties(modalwatch_io PROPERTIES EXPORT_NAME io)
-set_target_properties(modalwatch_messages PROPERTIES EXPORT_NAME messages)
 set_target_properties(modalwatch_lcmtypes PROPERTIES EXPORT_NAME lcmtypes)
 set_target_properties(modalwatch_daemon PROPERTIES EXPORT_NAME daemon)
-install(TARGETS modalwatch_core modalwatch_io modalwatch_messages modalwatch_lcmtypes
+install(TARGETS modalwatch_core modalwatch_io modalwatch_lcmtypes
   EXPORT modalwatchTargets
   ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
   INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
@@ -156,7 +155,7 @@ endif()
 # scripts/check/package.sh builds, configured with CMAKE_SKIP_INSTALL_ALL_DEPENDENCY.
 add_custom_target(modalwatch_installation)
 add_dependencies(modalwatch_installation modalwatch modalwatchd modalwatch_core modalwatch_io
-  modalwatch_messages modalwatch_daemon)
+  modalwatch_daemon)
 foreach(_optional modalwatch_man modalwatch_lcmtypes_jar)
   if(TARGET ${_optional})
     add_dependencies(modalwatch_installation ${_optional})
