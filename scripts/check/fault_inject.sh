@@ -25,12 +25,12 @@
 # (freezes.csv records it): a kill check that fails while that happened is
 # printed as SKIP with the figures, not counted as a failure.
 #
-#   scripts/fault_inject.sh                 # about 2 min
-#   KILLS=10 PERIOD=1 SPEED=2 BUILD_DIR=/path/to/build OUT=dir scripts/fault_inject.sh
+#   scripts/check/fault_inject.sh                 # about 2 min
+#   KILLS=10 PERIOD=1 SPEED=2 BUILD_DIR=/path/to/build OUT=dir scripts/check/fault_inject.sh
 # Needs build/modalwatch and build/modalwatchd (BUILD_DIR), /usr/bin/python3, a
 # multicast route (scripts/setup.sh adds one), root for the tmpfs of check 3.
 set -uo pipefail
-cd "$(dirname "$0")/.." || exit 1
+cd "$(dirname "$0")/../.." || exit 1
 build=${BUILD_DIR:-build}
 KILLS=${KILLS:-5}
 PERIOD=${PERIOD:-2}

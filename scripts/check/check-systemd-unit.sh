@@ -9,7 +9,7 @@
 # Exit 0 pass, 1 fail, 77 skipped (no systemd-analyze); ctest runs it as
 # systemd_unit. Prints the exposure score.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 unit=systemd/modalwatch@.service
 max="${MAX_EXPOSURE:-2.0}"
 
