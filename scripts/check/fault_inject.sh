@@ -1,37 +1,38 @@
 #!/usr/bin/env bash
-# Fault injection (issue 6): modalwatchd's failure behaviour, one PASS/FAIL line
-# per check plus the figures; exits non-zero when any check fails.
-#   1. kill -9 at KILLS (5) random moments during a replay at SPEED (1) x real
-#      time of the flexible beam (config/flexible-beam-drift.yaml without its
-#      drift), checkpoint every PERIOD (2) s; restarted each time. After each
-#      restart: (a) it resumed from the checkpoint (log: "restored checkpoint",
-#      "resumed from checkpoint", "estimating from the restored checkpoint (no
-#      warm-up)", no "warm-up over"); (b) the restored checkpoint is the last one
-#      written before the kill and its newest sample is at most one period
-#      (+ slack) older than the newest sample at the kill (sample time from the
-#      time-stamped `modalwatch watch` output); (c) `modalwatch watch` shows
-#      estimates again within one period of the restart, with no NaN/Inf.
-#      Figures per kill: samples lost (processed after the checkpoint, sent
-#      while down), time to the first estimate, out-of-order/duplicate counts.
-#   2. An unusable LCM URL at start (bogus://x, udpm://999.1.1.1:7667): a clear
-#      message on stderr naming lcm.url and the URL, a non-zero exit code.
-#   3. A full disk for the checkpoint (64 KiB tmpfs, filled; without mount
-#      permission: a missing directory): the failure is logged, estimates keep
-#      coming, SIGTERM still exits 0, no temporary file is left behind.
-#   4. An invalid config at start (exit code 2, message with file:line and the
-#      key) and SIGHUP with an invalid config (logged with key and line, the
-#      daemon keeps running and publishing; a valid SIGHUP then applies).
-# On a shared machine every process of this test can stop for seconds at once
-# (freezes.csv records it): a kill check that fails while that happened is
-# printed as SKIP with the figures, not counted as a failure.
+# kill -9 at random moments: modalwatchd killed KILLS (5) times while a replay
+# at SPEED (1) x real time of the flexible beam (config/flexible-beam-drift.yaml
+# without its drift) runs, checkpoint every PERIOD (2) s, restarted each time
+# from the previous instance's checkpoint. The test suite kills the daemon once,
+# at a fixed moment, in process-level isolation; this runs the real processes
+# (`modalwatch replay`, `modalwatch watch`) for minutes, kills several times in
+# a row at random moments (one may land inside a checkpoint write) and reports
+# the figures. After each restart:
+#   (a) it resumed from the checkpoint ("restored checkpoint", "resumed from
+#       checkpoint", "estimating from the restored checkpoint (no warm-up)", no
+#       "warm-up over");
+#   (b) the restored checkpoint is the last one written before the kill, and its
+#       newest sample is at most one period (+ 0.5 s) older than the newest
+#       sample at the kill (sample time from the time-stamped watch output);
+#   (c) `modalwatch watch` shows estimates again within one period of the
+#       restart, with no NaN/Inf.
+# Figures per kill: samples lost (processed after the checkpoint, sent while
+# down), time to the first estimate, out-of-order/duplicate counts; then the
+# temporary checkpoint files the kills left. The last instance must stop on
+# SIGTERM with exit 0 and a final checkpoint.
+# On a shared machine every process of this script can stop for seconds at once
+# (freezes.csv records it): a check that fails while that happened is printed as
+# SKIP with the figures, not counted as a failure.
+# One PASS/FAIL line per check; exits non-zero when any check fails.
 #
-#   scripts/check/fault_inject.sh                 # about 2 min
-#   KILLS=10 PERIOD=1 SPEED=2 BUILD_DIR=/path/to/build OUT=dir scripts/check/fault_inject.sh
-# Needs build/modalwatch and build/modalwatchd (BUILD_DIR), /usr/bin/python3, a
-# multicast route (scripts/setup.sh adds one), root for the tmpfs of check 3.
+#   scripts/check/fault_inject.sh          # about 1 min
+#   KILLS=10 PERIOD=1 SPEED=2 BUILD_DIR=build OUT=dir scripts/check/fault_inject.sh
+# Needs /usr/bin/python3 and a multicast route (scripts/setup.sh adds one);
+# builds BUILD_DIR (build) when it has no modalwatch and modalwatchd.
 set -uo pipefail
 cd "$(dirname "$0")/../.." || exit 1
-build=${BUILD_DIR:-build}
+source scripts/lib/daemon.sh
+mw_ensure_build "${BUILD_DIR:-build}" || exit 1
+build=$MW_BUILD
 KILLS=${KILLS:-5}
 PERIOD=${PERIOD:-2}
 SPEED=${SPEED:-1}
@@ -39,125 +40,91 @@ OUT=${OUT:-$(mktemp -d /tmp/modalwatch-fault.XXXXXX)}
 PY=/usr/bin/python3
 mkdir -p "$OUT"
 OUT=$(cd "$OUT" && pwd)
-for b in modalwatch modalwatchd; do
-  [ -x "$build/$b" ] || { echo "fault_inject.sh: no $build/$b (set BUILD_DIR)"; exit 1; }
-done
 port=$((7900 + RANDOM % 200))
 url="udpm://239.255.76.67:$port?ttl=0"
 echo "== fault injection: $build, files in $OUT, LCM $url"
 
-failures=0
-result() {  # result 0|1 "what" ["figures"]
-  if [ "$1" -eq 0 ]; then echo "PASS  $2${3:+  [$3]}"; else echo "FAIL  $2${3:+  [$3]}"; failures=$((failures + 1)); fi
-}
 now() { echo "$EPOCHREALTIME"; }
-# wait_for FILE REGEX TIMEOUT_S: polls until FILE has a line matching REGEX (grep -E).
-wait_for() {
-  local deadline
-  deadline=$(awk -v t="$EPOCHREALTIME" -v d="$3" 'BEGIN { printf "%.3f", t + d }')
-  until grep -qE -- "$2" "$1" 2>/dev/null; do
-    awk -v t="$EPOCHREALTIME" -v d="$deadline" 'BEGIN { exit !(t > d) }' && return 1
-    sleep 0.05
-  done
-}
-count_lines() { grep -cE -- "$2" "$1" 2>/dev/null || true; }
-# `modalwatch watch` with every line prefixed by the wall-clock time it arrived.
-start_watch() {  # start_watch CONFIG OUTFILE; sets $watcher
-  "$build/modalwatch" watch --config "$1" --every 1 \
-    > >(while IFS= read -r l; do printf '%s %s\n' "$EPOCHREALTIME" "$l"; done >"$2") 2>"$2.err" &
-  watcher=$!
-}
 pids=()
-mnt=""
-# This machine is shared: record when this test's own processes stopped running
-# (a 0.1 s sleep that took more than 0.6 s), so that a pause of everything is not
-# blamed on the daemon.
+# The machine may be shared: record when this script's own processes stopped
+# running (a 0.1 s sleep that took more than 0.6 s), so that a pause of
+# everything is not blamed on the daemon.
 ( prev=${EPOCHREALTIME/./}
   while sleep 0.1; do n=${EPOCHREALTIME/./}; (( n - prev > 600000 )) && echo "$((prev / 1000)),$((n / 1000))"; prev=$n; done
 ) >"$OUT/freezes.csv" &
 pids+=("$!")
 cleanup() {
+  mw_kill_daemon
   for p in "${pids[@]}"; do kill -9 "$p" 2>/dev/null; done
-  [ -n "$mnt" ] && umount "$mnt" 2>/dev/null
 }
 trap cleanup EXIT
 
 # The drifting demo config without its drift, on our port, with a short checkpoint period.
 duration=$(awk -v n="$KILLS" -v p="$PERIOD" -v s="$SPEED" 'BEGIN { d = s * (8 + n * (3 * p + 2)) + 5 / s + 5; print (d < 20 ? 20 : int(d + 1)) }')
-make_config() {  # make_config OUT.yaml [checkpoint path]
-  sed -e '/trajectory:/,/gain: \[\[/d' \
-      -e "s#^  url: .*#  url: $url#" \
-      -e "s/^  duration: .*/  duration: $duration/" \
-      -e "s/^  log_level: .*/  log_level: debug/" \
-      ${2:+-e "/^daemon:/a\\  checkpoint: {path: $2, period: $PERIOD}"} \
-      config/flexible-beam-drift.yaml >"$1"
-}
-make_config "$OUT/fault.yaml" "$OUT/ckpt/modalwatchd.ckpt"
 mkdir -p "$OUT/ckpt"
 rm -f "$OUT/ckpt/modalwatchd.ckpt"
-grep -q trajectory "$OUT/fault.yaml" && { echo "fault_inject.sh: could not remove the drift"; exit 1; }
+mw_config config/flexible-beam-drift.yaml "$OUT/fault.yaml" --no-drift lcm.url="$url" \
+  simulation.duration="$duration" daemon.log_level=debug \
+  daemon.checkpoint="{path: $OUT/ckpt/modalwatchd.ckpt, period: $PERIOD}" || exit 1
 echo "== simulate: $duration s of the flexible beam at 4096 Hz -> $OUT/record.csv"
 "$build/modalwatch" simulate --config "$OUT/fault.yaml" --out "$OUT/record.csv" >/dev/null || exit 1
 
-# ---------------------------------------------------------------- 1. kill -9
-echo "== 1. kill -9 at $KILLS random moments, checkpoint every $PERIOD s, replay at ${SPEED}x"
-start_daemon() {  # start_daemon CONFIG LOG; sets $daemon
-  "$build/modalwatchd" --config "$1" 2>"$2" &
-  daemon=$!
-  pids+=("$daemon")
-}
+echo "== kill -9 at $KILLS random moments, checkpoint every $PERIOD s, replay at ${SPEED}x"
 : >"$OUT/kills.csv"
-start_daemon "$OUT/fault.yaml" "$OUT/daemon.0.log"
-wait_for "$OUT/daemon.0.log" "modalwatchd: " 10 || { echo "modalwatchd did not start:"; cat "$OUT/daemon.0.log"; exit 1; }
-start_watch "$OUT/fault.yaml" "$OUT/watch.log"
+mw_start_daemon "$OUT/fault.yaml" "$OUT/daemon.0.log"
+mw_wait_ready "$OUT/daemon.0.log" || exit 1
+# `modalwatch watch` with every line prefixed by the wall-clock time it arrived.
+"$build/modalwatch" watch --config "$OUT/fault.yaml" --every 1 \
+  > >(while IFS= read -r l; do printf '%s %s\n' "$EPOCHREALTIME" "$l"; done >"$OUT/watch.log") 2>"$OUT/watch.log.err" &
+watcher=$!
 pids+=("$watcher")
 sleep 0.3
 "$build/modalwatch" replay --config "$OUT/fault.yaml" --data "$OUT/record.csv" --speed "$SPEED" --batch 16 \
   >"$OUT/replay.log" 2>&1 &
 replay=$!
 pids+=("$replay")
-kill1_ok=1
-if ! wait_for "$OUT/daemon.0.log" "warm-up over after" $((20 / SPEED + 10)); then
-  echo "FAIL  the first daemon did not finish its warm-up"; kill1_ok=0
+kill_ok=1
+if ! mw_wait_for "$OUT/daemon.0.log" "warm-up over after" $((20 / SPEED + 10)); then
+  echo "FAIL  the first daemon did not finish its warm-up"; kill_ok=0
 fi
 for k in $(seq 1 "$KILLS"); do
-  [ "$kill1_ok" = 1 ] || break
+  [ "$kill_ok" = 1 ] || break
   prev="$OUT/daemon.$((k - 1)).log"
   # A checkpoint of this instance first (the first is written PERIOD s after
   # its start), then a random moment within the next two periods.
-  if ! wait_for "$prev" "checkpoint written" $((PERIOD + 10)); then
-    echo "FAIL  instance $((k - 1)) wrote no checkpoint"; kill1_ok=0; break
+  if ! mw_wait_for "$prev" "checkpoint written" $((PERIOD + 10)); then
+    echo "FAIL  instance $((k - 1)) wrote no checkpoint"; kill_ok=0; break
   fi
   delay=$(awk -v r="$RANDOM" -v p="$PERIOD" 'BEGIN { printf "%.3f", r / 32768 * 2 * p }')
   sleep "$delay"
-  kill -0 "$replay" 2>/dev/null || { echo "FAIL  the replay ended before kill $k (record too short)"; kill1_ok=0; break; }
+  kill -0 "$replay" 2>/dev/null || { echo "FAIL  the replay ended before kill $k (record too short)"; kill_ok=0; break; }
   wk=$(now)
-  kill -9 "$daemon"
-  wait "$daemon" 2>/dev/null
+  kill -9 "$MW_DAEMON_PID"
+  wait "$MW_DAEMON_PID" 2>/dev/null
   rk=$(now)
-  start_daemon "$OUT/fault.yaml" "$OUT/daemon.$k.log"
+  mw_start_daemon "$OUT/fault.yaml" "$OUT/daemon.$k.log"
   echo "$k,$wk,$rk,$delay" >>"$OUT/kills.csv"
   echo "   kill $k at +$delay s after the first checkpoint of instance $((k - 1)); restarted"
-  wait_for "$OUT/daemon.$k.log" "estimating from the restored checkpoint|warm-up over after" $((PERIOD + 10)) ||
-    { echo "   instance $k: no estimation within $((PERIOD + 10)) s"; }
+  mw_wait_for "$OUT/daemon.$k.log" "estimating from the restored checkpoint|warm-up over after" $((PERIOD + 10)) ||
+    echo "   instance $k: no estimation within $((PERIOD + 10)) s"
 done
 # The last instance: let it publish for a period, then stop it properly.
 sleep "$PERIOD"
-kill -TERM "$daemon"; wait "$daemon"; last_rc=$?
+mw_stop_daemon
 kill "$replay" "$watcher" 2>/dev/null; wait "$replay" 2>/dev/null
 sleep 0.2
-$PY - "$OUT" "$KILLS" "$PERIOD" "$SPEED" "$last_rc" "$kill1_ok" <<'PY' || failures=$((failures + 1))
+$PY - "$OUT" "$KILLS" "$PERIOD" "$SPEED" "$MW_DAEMON_RC" "$kill_ok" <<'PY'
 import datetime, math, re, sys
 out, kills, period, speed, last_rc, kill_ok = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), float(sys.argv[4]), int(sys.argv[5]), sys.argv[6] == "1"
 T = 1.0 / 4096
 ok = True
 freezes = [tuple(int(x) * 1e-3 for x in l.split(",")) for l in open(f"{out}/freezes.csv").read().split()]
-def frozen(a, b):  # s during which this test's processes did not run, within [a, b]
+def frozen(a, b):  # s during which this script's processes did not run, within [a, b]
     return sum(max(0.0, min(b, f1) - max(a, f0)) for f0, f1 in freezes)
 def check(cond, what, fig="", froze=0.0):
     global ok
     if not cond and froze > 0.3:  # everything stopped, the daemon included: not its failure
-        print(f"SKIP  {what}  [{fig}; this test's processes were all stopped for {froze:.2f} s meanwhile]")
+        print(f"SKIP  {what}  [{fig}; this script's processes were all stopped for {froze:.2f} s meanwhile]")
         return
     print(("PASS  " if cond else "FAIL  ") + what + (f"  [{fig}]" if fig else ""))
     ok &= bool(cond)
@@ -257,109 +224,14 @@ if ooo_total:
 import glob
 temps = glob.glob(f"{out}/ckpt/.modalwatchd.ckpt.*")
 print(f"      temporary checkpoint files left by the kills (a kill during a write): {len(temps)}")
-print(f"      this test's processes were all stopped {len(freezes)} times (0.6 s or more), "
+print(f"      this script's processes were all stopped {len(freezes)} times (0.6 s or more), "
       f"{sum(b - a for a, b in freezes):.1f} s in all (files: freezes.csv)")
 last = log(kills if kill_ok else 0)
 check(last_rc == 0 and any("checkpoint written" in l and "info" in l for l in last),
       "last instance: SIGTERM -> exit 0 with a final checkpoint", f"exit {last_rc}")
 sys.exit(0 if ok else 1)
 PY
-
-# ---------------------------------------------------------------- 2. bad LCM URL
-echo "== 2. unusable LCM URL at start"
-make_config "$OUT/good.yaml"
-for bad in "bogus://x" "udpm://999.1.1.1:7667"; do
-  sed "s#^  url: .*#  url: $bad#" "$OUT/good.yaml" >"$OUT/badurl.yaml"
-  timeout 20 "$build/modalwatchd" --config "$OUT/badurl.yaml" >/dev/null 2>"$OUT/badurl.err"; rc=$?
-  msg=$(grep -m1 "lcm.url" "$OUT/badurl.err")
-  [ "$rc" -ne 0 ] && [ "$rc" -ne 124 ] && grep -qF "$bad" <<<"$msg"; ok=$?
-  result $ok "lcm.url '$bad': non-zero exit, message on stderr" "exit $rc; $(tr '\n' ' ' <"$OUT/badurl.err" | cut -c1-220)"
-done
-echo "      (exit 2; the unit's Restart=on-failure restarts on any non-zero exit, every RestartSec=2s until its start limit)"
-
-# ---------------------------------------------------------------- 3. full disk
-echo "== 3. checkpoint on a full disk"
-full="$OUT/full"
-mkdir -p "$full"
-if mount -t tmpfs -o size=64k tmpfs "$full" 2>"$OUT/mount.err"; then
-  mnt=$full
-  dd if=/dev/zero of="$full/fill" bs=4k >/dev/null 2>&1
-  ckdir=$full
-  how="64 KiB tmpfs, $(df -k --output=avail "$full" | tail -1 | tr -d ' ') KiB free after filling"
-else
-  ckdir="$full/missing"  # mkstemp fails as on a full disk; root ignores permissions, so no read-only dir
-  how="no mount permission ($(cat "$OUT/mount.err")): a missing directory instead"
-fi
-make_config "$OUT/full.yaml" "$ckdir/modalwatchd.ckpt"
-start_daemon "$OUT/full.yaml" "$OUT/daemon.full.log"
-wait_for "$OUT/daemon.full.log" "modalwatchd: " 10
-start_watch "$OUT/full.yaml" "$OUT/watch.full.log"
-pids+=("$watcher")
-sleep 0.3
-"$build/modalwatch" replay --config "$OUT/full.yaml" --data "$OUT/record.csv" --speed 2 --batch 16 \
-  >"$OUT/replay.full.log" 2>&1 &
-replay=$!
-pids+=("$replay")
-wait_for "$OUT/daemon.full.log" "warm-up over after" 20
-wait_for "$OUT/daemon.full.log" "checkpoint NOT written" $((PERIOD + 5)); seen=$?
-t_fail=$(now)
-n0=$(count_lines "$OUT/watch.full.log" " estimates ")
-# Estimates after the failure: at least one period's worth.
-sleep "$PERIOD"
-n1=$(count_lines "$OUT/watch.full.log" " estimates ")
-alive=0; kill -0 "$daemon" 2>/dev/null && alive=1
-kill -TERM "$daemon"; wait "$daemon"; rc=$?
-kill "$replay" "$watcher" 2>/dev/null; wait "$replay" 2>/dev/null
-nfail=$(count_lines "$OUT/daemon.full.log" "checkpoint NOT written")
-left=$(ls -A "$ckdir" 2>/dev/null | grep -v '^fill$' | tr '\n' ' ')
-nan=$(grep -ciE "\bnan\b|\binf\b" <(grep " estimates " "$OUT/watch.full.log") || true)
-msg=$(grep -m1 "checkpoint NOT written" "$OUT/daemon.full.log" | cut -c25-260)
-[ "$seen" -eq 0 ]; result $? "full disk: the failed checkpoint is logged" "$how; $nfail failures logged; first: $msg"
-[ "$alive" -eq 1 ] && [ $((n1 - n0)) -ge 5 ] && [ "$nan" -eq 0 ]
-result $? "full disk: the daemon keeps estimating and publishing" "$((n1 - n0)) estimates in the $PERIOD s after the failure, $nan with NaN/Inf"
-[ "$rc" -eq 0 ]; result $? "full disk: SIGTERM -> exit 0 (final checkpoint failure logged)" "exit $rc"
-[ -z "$left" ]; result $? "full disk: no checkpoint or temporary file left in the directory" "${left:-empty}"
-[ -n "$mnt" ] && { umount "$mnt" && mnt=""; }
-
-# ---------------------------------------------------------------- 4. invalid config
-echo "== 4. invalid config at start and on SIGHUP"
-sed 's/^  publish_period: .*/  publish_perid: 0.1/' "$OUT/good.yaml" >"$OUT/badkey.yaml"
-sed 's/^  loop_rate_hz: .*/  loop_rate_hz: -5/' "$OUT/good.yaml" >"$OUT/badval.yaml"
-for bad in badkey:daemon.publish_perid:publish_perid badval:daemon.loop_rate_hz:loop_rate_hz; do
-  IFS=: read -r f key word <<<"$bad"
-  line=$(grep -n "^  $word:" "$OUT/$f.yaml" | cut -d: -f1)
-  timeout 20 "$build/modalwatchd" --config "$OUT/$f.yaml" >/dev/null 2>"$OUT/$f.err"; rc=$?
-  [ "$rc" -eq 2 ] && grep -qF "$f.yaml:$line: key '$key'" "$OUT/$f.err"
-  result $? "invalid config at start ($key at line $line): exit 2, file:line and key named" \
-    "exit $rc; $(head -c 200 "$OUT/$f.err" | tr '\n' ' ' | cut -c25-)"
-done
-cp "$OUT/good.yaml" "$OUT/hup.yaml"
-start_daemon "$OUT/hup.yaml" "$OUT/daemon.hup.log"
-wait_for "$OUT/daemon.hup.log" "modalwatchd: " 10
-start_watch "$OUT/hup.yaml" "$OUT/watch.hup.log"
-pids+=("$watcher")
-sleep 0.5
-cp "$OUT/badkey.yaml" "$OUT/hup.yaml"
-line=$(grep -n "^  publish_perid:" "$OUT/hup.yaml" | cut -d: -f1)
-kill -HUP "$daemon"
-wait_for "$OUT/daemon.hup.log" "reload rejected" 10
-t_hup=$(now)
-sleep 1.5
-alive=0; kill -0 "$daemon" 2>/dev/null && alive=1
-n_after=$(awk -v t="$t_hup" '$1 > t && $2 == "faults"' "$OUT/watch.hup.log" | wc -l)
-msg=$(grep -m1 "reload rejected" "$OUT/daemon.hup.log" | cut -c25-)
-[ "$alive" -eq 1 ] && [ "$n_after" -ge 5 ] && grep -qF "hup.yaml:$line: key 'daemon.publish_perid'" <<<"$msg"
-result $? "SIGHUP with an invalid config: logged with key and line, keeps running and publishing" \
-  "alive: $alive, $n_after fault status messages in 1.5 s after; $msg"
-cp "$OUT/good.yaml" "$OUT/hup.yaml"
-sed -i 's/^  log_level: .*/  log_level: info/' "$OUT/hup.yaml"
-kill -HUP "$daemon"
-wait_for "$OUT/daemon.hup.log" "reloaded .*hup.yaml" 10
-result $? "SIGHUP with the config fixed: applied" "$(grep -m1 -o "reloaded .*log level [a-z]*" "$OUT/daemon.hup.log")"
-kill -TERM "$daemon"; wait "$daemon"; rc=$?
-kill "$watcher" 2>/dev/null
-[ "$rc" -eq 0 ]; result $? "after the reloads: SIGTERM -> exit 0" "exit $rc"
-
+rc=$?
 echo "== files: $OUT"
-[ "$failures" -eq 0 ] && { echo "RESULT: PASS"; exit 0; }
-echo "RESULT: FAIL ($failures)"; exit 1
+[ "$rc" -eq 0 ] && { echo "RESULT: PASS"; exit 0; }
+echo "RESULT: FAIL"; exit 1
