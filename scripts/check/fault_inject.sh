@@ -24,7 +24,7 @@
 # SKIP with the figures, not counted as a failure.
 # One PASS/FAIL line per check; exits non-zero when any check fails.
 #
-#   scripts/check/fault_inject.sh          # about 1 min
+#   scripts/check/fault_inject.sh          # about 30 s
 #   KILLS=10 PERIOD=1 SPEED=2 BUILD_DIR=build OUT=dir scripts/check/fault_inject.sh
 # Needs /usr/bin/python3 and a multicast route (scripts/setup.sh adds one);
 # builds BUILD_DIR (build) when it has no modalwatch and modalwatchd.

@@ -14,12 +14,16 @@
 #   scripts/check/soak.sh                   # both (about 8 min + 1 h)
 #   HOURS=1 DAEMON_SECONDS=300 scripts/check/soak.sh
 #   SKIP_ESTIMATOR=1 / SKIP_DAEMON=1        # one part only
-# Needs a build with benchmarks (scripts/setup.sh's default) in BUILD_DIR (build);
-# builds it when missing.
+# Needs a build in BUILD_DIR (build), with benchmarks (scripts/setup.sh's default)
+# for part 1; builds it when missing.
 set -uo pipefail
 cd "$(dirname "$0")/../.." || exit 1
 source scripts/lib/daemon.sh
-mw_ensure_build "${BUILD_DIR:-build}" tests/bench/soak_estimator || exit 1
+if [ "${SKIP_ESTIMATOR:-0}" != 1 ]; then
+  mw_ensure_build "${BUILD_DIR:-build}" tests/bench/soak_estimator || exit 1
+else
+  mw_ensure_build "${BUILD_DIR:-build}" || exit 1
+fi
 build=$MW_BUILD
 HOURS=${HOURS:-24}
 DAEMON_SECONDS=${DAEMON_SECONDS:-3600}
