@@ -65,7 +65,7 @@ int main(int argc, char** argv) {
   diagnose_cmd->add_option("--validate-samples", diag.validate_samples, "FIRST:END rows to validate on");
   diagnose_cmd->add_option("--report,-r", diag.report, "directory for report.md, summary.json, model.yaml")->required();
   diagnose_cmd->add_option("--effects", diag.effects, "comma-separated candidate effects (default: all)");
-  diagnose_cmd->add_option("--plot-script", diag.plot_script, "run this scripts/plot_diagnose.py on the report");
+  diagnose_cmd->add_option("--plot-script", diag.plot_script, "run this scripts/plot/plot_diagnose.py on the report");
   diagnose_cmd->add_option("--t-column", diag.t_column, "time column of the records (e.g. n: sample index)");
   diagnose_cmd->add_option("--y-column", diag.y_column, "output column of the records (e.g. y2)");
   diagnose_cmd->add_option("--input-hold", diag.input_hold, "zoh (held input) or foh (band-limited input, open loop)")

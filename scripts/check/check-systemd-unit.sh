@@ -2,7 +2,7 @@
 # Checks the unit a build installs (systemd/modalwatch@.service.in with its
 # paths filled in by CMake) offline, without a running systemd, as shipped and
 # with the opt-in drop-in systemd/realtime.conf:
-#   scripts/check-systemd-unit.sh [UNIT]   # default build/systemd/modalwatch@.service
+#   scripts/check/check-systemd-unit.sh [UNIT]   # default build/systemd/modalwatch@.service
 #   - systemd-analyze security --offline=true rates it <= 2.0 (MAX_EXPOSURE);
 #   - systemd-analyze verify reports nothing but the missing binary
 #     (<prefix>/bin/modalwatchd exists only once installed);
@@ -11,8 +11,8 @@
 # Exit 0 pass, 1 fail, 77 skipped (no systemd-analyze); ctest runs it as
 # systemd_unit. Prints the exposure score.
 set -euo pipefail
-unit="$(realpath "${1:-$(dirname "$0")/../build/systemd/modalwatch@.service}")"
-cd "$(dirname "$0")/.."
+unit="$(realpath "${1:-$(dirname "$0")/../../build/systemd/modalwatch@.service}")"
+cd "$(dirname "$0")/../.."
 max="${MAX_EXPOSURE:-2.0}"
 
 if ! command -v systemd-analyze >/dev/null; then
