@@ -231,7 +231,7 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
   } else {
     o << "Not made";
     if (!plots.failure.empty()) o << " (" << plots.failure << ")";
-    o << ": run `scripts/plot_diagnose.py " << args.report << "` for residual_spectrum.png, validation.png and "
+    o << ": run `scripts/plot/plot_diagnose.py " << args.report << "` for residual_spectrum.png, validation.png and "
       << "bode.png from the CSV files here.\n";
   }
   return o.str();

@@ -2,7 +2,7 @@
 // The report of `modalwatch diagnose`, in its directory: report.md (the steps
 // before and after, the ranked candidates, the models), summary.json (the same
 // steps for programs), model.yaml (the augmented model as a config), the CSV
-// tables, and the PNGs scripts/plot_diagnose.py makes from them.
+// tables, and the PNGs scripts/plot/plot_diagnose.py makes from them.
 #include <string>
 
 #include <Eigen/Core>
