@@ -114,8 +114,10 @@ PlotOutcome run_plot_script(const std::string& script, const std::string& dir) {
   char buf[4096];
   for (;;) {
     const ssize_t n = read(err[0], buf, sizeof buf);
-    if (n > 0) text.append(buf, static_cast<std::size_t>(n));
-    else if (n == 0 || errno != EINTR) break;
+    if (n > 0)
+      text.append(buf, static_cast<std::size_t>(n));
+    else if (n == 0 || errno != EINTR)
+      break;
   }
   close(err[0]);
   int status = 0;
@@ -137,7 +139,8 @@ std::string params_text(const EffectParams& params) {
 }
 
 std::string test_line(const ResidualTest& t) {
-  return std::string(t.pass ? "pass" : "FAIL") + " (" + format_number(t.statistic, 3) + " vs " + format_number(t.threshold, 3) + ")";
+  return std::string(t.pass ? "pass" : "FAIL") + " (" + format_number(t.statistic, 3) + " vs " +
+         format_number(t.threshold, 3) + ")";
 }
 
 std::string effects_comment(const ModelEffects& e) {
@@ -156,16 +159,16 @@ std::string model_table(const AdditiveModel& m) {
   for (const Submodel& sm : m.submodels) {
     if (sm.is_mode()) {
       const ModalParameters p = modal_parameters(sm);
-      s += "| " + sm.name + " | mode | " + format_number(p.hz(), 6) + " | " + format_number(p.wn, 6) + " | " + format_number(p.zeta, 4) + " | " +
-           format_number(p.gain, 5) + " |\n";
+      s += "| " + sm.name + " | mode | " + format_number(p.hz(), 6) + " | " + format_number(p.wn, 6) + " | " +
+           format_number(p.zeta, 4) + " | " + format_number(p.gain, 5) + " |\n";
     } else {
       std::string c;
       const Eigen::VectorXd th = sm.theta();
       for (int j = 0; j < sm.n_theta(); ++j)
-        c += (j ? ", " : "") + std::string(j < sm.n ? "a" : "b") + std::to_string(j < sm.n ? j + 1 : j - sm.n) +
-             " = " + format_number(th(j), 6);
-      s += "| " + sm.name + " | l = " + std::to_string(sm.rigid_poles) + ", n = " + std::to_string(sm.n) +
-           " | | | | " + c + " |\n";
+        c += (j ? ", " : "") + std::string(j < sm.n ? "a" : "b") + std::to_string(j < sm.n ? j + 1 : j - sm.n) + " = " +
+             format_number(th(j), 6);
+      s += "| " + sm.name + " | l = " + std::to_string(sm.rigid_poles) + ", n = " + std::to_string(sm.n) + " | | | | " +
+           c + " |\n";
     }
   }
   return s;
@@ -178,11 +181,11 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
   const Eigen::Index n_est = in.estimation_samples, n_val = in.validation.size() - in.lead_in;
   std::ostringstream o;
   o << "# modalwatch diagnose\n\n";
-  o << "Config `" << args.config << "` (" << (config.closed_loop ? "closed" : "open") << " loop), data `"
-    << args.data << "`";
+  o << "Config `" << args.config << "` (" << (config.closed_loop ? "closed" : "open") << " loop), data `" << args.data
+    << "`";
   if (!args.validate.empty()) o << ", validation `" << args.validate << "`";
-  o << ". Input intersample: " << (args.input_hold == "foh" ? "band-limited (first-order hold)" : "held (ZOH)")
-    << ", " << args.substeps << " integration substep(s) per sample";
+  o << ". Input intersample: " << (args.input_hold == "foh" ? "band-limited (first-order hold)" : "held (ZOH)") << ", "
+    << args.substeps << " integration substep(s) per sample";
   o << ". Estimation part: " << n_est << " samples; validation part: " << n_val << " samples.\n\n";
   o << "Validation error: the model simulated on the validation part ("
     << (config.closed_loop ? "closed loop from r, with the measured excitation besides the controller"
@@ -194,9 +197,9 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
   for (std::size_t i = 0; i < r.steps.size(); ++i) {
     const DiagnoseStep& s = r.steps[i];
     o << "| " << i << " | " << s.effect << " | " << params_text(s.params) << " | " << format_number(s.estimation_rms, 4)
-      << " | " << format_number(s.validation_rms, 4) << " | " << format_number(s.fit_percent, 4) << " | " << format_number(s.bic, 6) << " | "
-      << test_line(s.residual.whiteness) << " | " << test_line(s.residual.independence) << " | "
-      << test_line(s.residual.coherence) << " |\n";
+      << " | " << format_number(s.validation_rms, 4) << " | " << format_number(s.fit_percent, 4) << " | "
+      << format_number(s.bic, 6) << " | " << test_line(s.residual.whiteness) << " | "
+      << test_line(s.residual.independence) << " | " << test_line(s.residual.coherence) << " |\n";
   }
   o << "\nStopped: " << r.stop_reason << ".\n\n";
   o << "Residual tests (validation part): whiteness = largest |autocorrelation| at lags 1..M against the 99 % band "
@@ -207,12 +210,13 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
     const DiagnoseStep& s = r.steps[i];
     if (s.ranking.empty()) continue;
     o << "### Candidates from step " << i << " (ranked by validation RMS)\n\n";
-    o << "| rank | effect | parameters | est. RMS | val. RMS | fit % | BIC | note |\n|---|---|---|---|---|---|---|---|\n";
+    o << "| rank | effect | parameters | est. RMS | val. RMS | fit % | BIC | note "
+         "|\n|---|---|---|---|---|---|---|---|\n";
     for (std::size_t j = 0; j < s.ranking.size(); ++j) {
       const Candidate& c = s.ranking[j];
       o << "| " << j + 1 << " | " << effect_name(c.kind) << " | " << params_text(c.params) << " | "
-        << format_number(c.estimation_rms, 4) << " | " << format_number(c.validation_rms, 4) << " | " << format_number(c.fit_percent, 4) << " | "
-        << format_number(c.bic, 6) << " | " << c.note << " |\n";
+        << format_number(c.estimation_rms, 4) << " | " << format_number(c.validation_rms, 4) << " | "
+        << format_number(c.fit_percent, 4) << " | " << format_number(c.bic, 6) << " | " << c.note << " |\n";
     }
     o << "\n";
   }
@@ -248,10 +252,9 @@ void write_tables(const std::string& dir, const DiagnoseResult& r, const Record&
     Eigen::MatrixXd t(F, 7);
     t << a.frequency_hz.head(F), a.residual_psd.head(F), b.residual_psd.head(F), a.residual_to_input.head(F),
         b.residual_to_input.head(F), a.coherence.head(F), b.coherence.head(F);
-    write_table(dir + "/spectra.csv",
-                {"f_hz", "psd_before", "psd_after", "e_to_u_before", "e_to_u_after", "coherence_before",
-                 "coherence_after"},
-                t);
+    write_table(
+        dir + "/spectra.csv",
+        {"f_hz", "psd_before", "psd_after", "e_to_u_before", "e_to_u_after", "coherence_before", "coherence_after"}, t);
   }
   {
     Eigen::MatrixXd t(val.size(), 4);
@@ -283,8 +286,8 @@ void write_tables(const std::string& dir, const DiagnoseResult& r, const Record&
 }
 
 void print_steps(const DiagnoseResult& r, const std::string& dir) {
-  std::printf("%-4s %-11s %-44s %12s %12s %8s %10s\n", "step", "effect", "parameters", "est. RMS", "val. RMS",
-              "fit %", "whiteness");
+  std::printf("%-4s %-11s %-44s %12s %12s %8s %10s\n", "step", "effect", "parameters", "est. RMS", "val. RMS", "fit %",
+              "whiteness");
   for (std::size_t i = 0; i < r.steps.size(); ++i) {
     const DiagnoseStep& s = r.steps[i];
     std::printf("%-4zu %-11s %-44s %12.5g %12.5g %8.3f %10s\n", i, s.effect.c_str(), params_text(s.params).c_str(),

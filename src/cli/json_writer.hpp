@@ -58,22 +58,17 @@ inline std::string json_string(std::string_view s) {
       }
       continue;
     }
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\b': out += "\\b"; break;
-      case '\f': out += "\\f"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
-      default:
-        if (c < 0x20) {
-          char buf[8];
-          std::snprintf(buf, sizeof buf, "\\u%04x", c);
-          out += buf;
-        } else {
-          out += static_cast<char>(c);
-        }
+    // The characters with a two-character escape, and their letters.
+    constexpr std::string_view kEscaped = "\"\\\b\f\n\r\t", kLetters = "\"\\bfnrt";
+    if (const auto e = kEscaped.find(static_cast<char>(c)); e != std::string_view::npos) {
+      out += '\\';
+      out += kLetters[e];
+    } else if (c < 0x20) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\u%04x", c);
+      out += buf;
+    } else {
+      out += static_cast<char>(c);
     }
     ++i;
   }
@@ -144,8 +139,10 @@ class JsonWriter {
   // Commas (and line breaks) between the elements of a container.
   void separate() {
     Level& l = stack_.back();
-    if (!l.empty) out_ += l.lines ? ",\n  " : ", ";
-    else if (l.lines) out_ += "\n  ";
+    if (!l.empty)
+      out_ += l.lines ? ",\n  " : ", ";
+    else if (l.lines)
+      out_ += "\n  ";
     l.empty = false;
   }
   void open_value() {
