@@ -13,6 +13,7 @@
 
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
+#include "modalwatch/io/records.hpp"
 
 namespace fs = std::filesystem;
 
