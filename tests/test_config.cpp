@@ -1008,8 +1008,8 @@ TEST(ConfigRoundTrip, EveryShippedConfig) {
     try {
       c = modalwatch::load_config(file.string());
     } catch (const InputError& e) {
-      // A signal file from the measured-data folder beside the repository.
-      if (std::string(e.what()).find("/shared/data/") == std::string::npos) throw;
+      // A signal file from the measured-data folder, which may be absent.
+      if (std::string(e.what()).find(MODALWATCH_SHARED_DATA) == std::string::npos) throw;
       skipped.push_back(file.filename().string() + " (" + e.what() + ")");
       continue;
     }

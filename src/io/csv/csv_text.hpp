@@ -172,7 +172,7 @@ class TableParser {
 };
 
 // Blank lines are accepted only at the end, so that data row k is file line k + 2.
-// `lines`: a LineReader, or RecordStream's reader (next(line), number()).
+// `lines`: a LineReader, or CsvRecordStream's reader (next(line), number()).
 template <class Lines>
 inline void check_trailing_blank(const std::string& path, Lines& lines) {
   std::string_view line;
