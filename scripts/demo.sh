@@ -6,50 +6,47 @@
 # replays the record onto LCM faster than real time, prints the estimates and
 # the fault flags as they arrive (`modalwatch watch`), then stops the daemon
 # with SIGTERM (drain, checkpoint, exit 0).
-#   scripts/demo.sh [config]          SPEED=2 (times real time), DEMO_DIR=dir
+#   scripts/demo.sh [config]          SPEED=2 (times real time), DEMO_DIR=dir, BUILD_DIR=build
 set -euo pipefail
 cd "$(dirname "$0")/.."
+source scripts/lib/daemon.sh
 config="${1:-config/flexible-beam-drift.yaml}"
 speed="${SPEED:-2}"
-for b in modalwatch modalwatchd; do
-  [ -x "build/$b" ] || { scripts/setup.sh; break; }
-done
+mw_ensure_build "${BUILD_DIR:-build}"
+build=$MW_BUILD
 out="${DEMO_DIR:-$(mktemp -d)}"
 mkdir -p "$out"
 
 # The daemon's own copy of the config, with a checkpoint in the demo directory.
-sed -e '/^daemon:/a\  checkpoint: {path: '"$out"'/modalwatchd.ckpt, period: 10}' "$config" > "$out/daemon.yaml"
+mw_config "$config" "$out/daemon.yaml" daemon.checkpoint="{path: $out/modalwatchd.ckpt, period: 10}"
 rm -f "$out/modalwatchd.ckpt"
 
 echo "== simulate: $config -> $out/record.csv (60 s at 4096 Hz; flex mode -15 % stiffness at t = 30..32 s)"
-build/modalwatch simulate --config "$config" --out "$out/record.csv" --truth "$out/truth.csv"
+"$build/modalwatch" simulate --config "$config" --out "$out/record.csv" --truth "$out/truth.csv"
 
 echo "== start: modalwatchd --config $out/daemon.yaml (log: $out/modalwatchd.log)"
-build/modalwatchd --config "$out/daemon.yaml" 2> >(tee "$out/modalwatchd.log" | grep --line-buffered -E "modalwatchd:|FLAG|flag cleared|baseline|warm-up|reset|gap|stale|SIGTERM|checkpoint|stopped" | sed -u 's/^/   [daemon] /' >&2) &
-daemon=$!
-cleanup() { kill "$daemon" "${watcher:-}" 2>/dev/null || true; }
+mw_start_daemon "$out/daemon.yaml" "$out/modalwatchd.log" \
+  "modalwatchd:|FLAG|flag cleared|baseline|warm-up|reset|gap|stale|SIGTERM|checkpoint|stopped"
+cleanup() { mw_kill_daemon; kill "${watcher:-}" 2>/dev/null || true; }
 trap cleanup EXIT
-sleep 1
-kill -0 "$daemon" 2>/dev/null || { echo "modalwatchd did not start:"; cat "$out/modalwatchd.log"; exit 1; }
+mw_wait_ready "$out/modalwatchd.log"
 
 echo "== watch: modalwatch watch (every 10th message: one line per second of sample time per channel)"
-build/modalwatch watch --config "$out/daemon.yaml" --every 10 &
+"$build/modalwatch" watch --config "$out/daemon.yaml" --every 10 &
 watcher=$!
 sleep 0.5
 
 echo "== replay: modalwatch replay $out/record.csv at ${speed}x real time"
-build/modalwatch replay --config "$out/daemon.yaml" --data "$out/record.csv" --speed "$speed" --batch 64 \
+"$build/modalwatch" replay --config "$out/daemon.yaml" --data "$out/record.csv" --speed "$speed" --batch 64 \
   --start-utime 0 >/dev/null
 sleep 1.5
 
 echo "== stop: SIGTERM"
-kill -TERM "$daemon"
-status=0
-wait "$daemon" || status=$?
+mw_stop_daemon
 kill "$watcher" 2>/dev/null || true
 wait "$watcher" 2>/dev/null || true
 trap - EXIT
-echo "== modalwatchd exited with code $status; checkpoint: $(ls "$out"/modalwatchd.ckpt 2>/dev/null || echo none)"
+echo "== modalwatchd exited with code $MW_DAEMON_RC; checkpoint: $(ls "$out"/modalwatchd.ckpt 2>/dev/null || echo none)"
 echo "== flag changes logged by the daemon:"
 grep -E "FLAG RAISED|flag cleared" "$out/modalwatchd.log" | sed 's/^/   /' || echo "   (none)"
-exit "$status"
+exit "$MW_DAEMON_RC"

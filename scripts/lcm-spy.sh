@@ -6,13 +6,13 @@
 #   scripts/lcm-spy.sh --check                  # only check that Java finds every class
 # Needs (Debian): liblcm-bin (lcm-spy), liblcm-java (lcm.jar), libjchart2d-java,
 # a JDK (javac, to build the types jar); scripts/setup.sh installs them. The jar
-# is built by CMake (lcmtypes/CMakeLists.txt) when javac and lcm.jar exist:
-#   cmake --build build --target modalwatch_lcmtypes_jar
-# Debian quirks (DESIGN.md): lcm-spy 1.3.1 passes -Xincgc, which Java 17 rejects
-# unless -XX:+IgnoreUnrecognizedVMOptions is set; it finds types on CLASSPATH.
+# is a CMake target (lcmtypes/CMakeLists.txt), defined when javac and lcm.jar
+# exist at configure time; this script builds it in BUILD_DIR (build) when missing.
+# Debian's lcm-spy 1.3.1 passes -Xincgc, which Java 17 rejects unless
+# -XX:+IgnoreUnrecognizedVMOptions is set; it finds the types on CLASSPATH.
 set -euo pipefail
-here="$(cd "$(dirname "$0")/.." && pwd)"
-build_dir="${BUILD_DIR:-$here/build}"
+source "$(dirname "$0")/lib/daemon.sh"
+build_dir="${BUILD_DIR:-$MW_ROOT/build}"
 jar="$build_dir/lcmtypes/modalwatch_lcmtypes.jar"
 lcm_jar=/usr/share/java/lcm.jar
 jchart_jar=/usr/share/java/jchart2d.jar
@@ -27,9 +27,8 @@ if ((${#missing[@]})); then
   echo "lcm-spy.sh: scripts/setup.sh installs them" >&2
   exit 1
 fi
-if [ ! -f "$jar" ]; then
-  echo "lcm-spy.sh: no $jar; build it: cmake --build ${build_dir} --target modalwatch_lcmtypes_jar" >&2
-  echo "  (CMake builds it only when it found javac and $lcm_jar at configure time: re-run cmake after installing them)" >&2
+if [ ! -f "$jar" ] && ! mw_build "$build_dir" modalwatch_lcmtypes_jar; then
+  echo "lcm-spy.sh: could not build $jar (the target exists only when CMake found javac and $lcm_jar)" >&2
   exit 1
 fi
 

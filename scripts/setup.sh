@@ -13,6 +13,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   liblcm-dev liblcm-bin libglib2.0-dev libsystemd-dev
   python3 python3-numpy python3-matplotlib
+  help2man pandoc  # the man pages (built only when both are found)
 )
 # Only for scripts/lcm-spy.sh (the types jar and lcm-spy itself): optional.
 if [ "${NO_JAVA:-0}" != 1 ]; then

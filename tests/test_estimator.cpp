@@ -238,7 +238,7 @@ TEST(RecursiveEstimator, TracksTheSeedExample) {
   // The thresholds, exactly. With theta(t0), P(t0) as the paper gives them,
   // its lambda and a random walk per mode (config/paper-sim.yaml), these hold for
   // every one of eleven draws of the 2 % start on this record
-  // (scripts/seed_example.sh): everything but mode 3's frequency median.
+  // (scripts/study/seed_example.sh): everything but mode 3's frequency median.
   for (int i = 0; i < 3; ++i) {
     if (i != 2) {
       EXPECT_LT(tb.percentile(tb.wn[i], 0.5), 0.5) << "mode " << i + 1;
@@ -453,7 +453,7 @@ TEST(RecursiveEstimator, AvxFmaKernelGivesThePortableEstimatesToRoundOff) {
     EXPECT_EQ(RecursiveEstimator(c.model, c.estimator).step_kernel(), StepKernel::avx2_fma);
   }
   // The seed's record with the shipped settings: closed loop, random walks, the
-  // P bound clamping, mode filter banks (the path scripts/bench.sh counts).
+  // P bound clamping, mode filter banks (the path scripts/measure/bench.sh counts).
   const KernelRun shipped{"paper-sim.yaml, closed loop", c.estimator, simulate(*c.plant, *c.experiment).record};
   expect_kernels_agree(c.model, shipped, 1e-12);
   // Open loop, PRBS, warm-up fit, M_l = 2 and M_s = 2 (the refinement path).

@@ -1,6 +1,6 @@
 // SpscRing: single-thread semantics, then a producer and a consumer thread
 // hammering it (lossless with back-off, and lossy with drop counting). The
-// threaded tests are the ones scripts/sanitize.sh runs under TSan.
+// threaded tests are the ones scripts/check/sanitize.sh runs under TSan.
 //
 // Stress size: MODALWATCH_STRESS_ITEMS (environment) if set, else 10 million,
 // scaled down automatically under TSan and ASan.

@@ -225,7 +225,7 @@ Stats monte_carlo(int runs, bool closed) {
   return st;
 }
 
-// CI runs 20; scripts/monte_carlo.sh sets MODALWATCH_MC_RUNS=100 for the full study.
+// CI runs 20; scripts/study/monte_carlo.sh sets MODALWATCH_MC_RUNS=100 for the full study.
 int monte_carlo_runs() {
   const char* env = std::getenv("MODALWATCH_MC_RUNS");
   return env ? std::max(3, std::atoi(env)) : 20;

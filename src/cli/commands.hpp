@@ -54,7 +54,7 @@ struct DiagnoseArgs {
   std::string validate_samples;        // "A:B" rows of the validation record
   std::string report;                  // output directory
   std::string effects;                 // comma-separated library (default: all)
-  std::string plot_script;             // scripts/plot_diagnose.py, run when given
+  std::string plot_script;             // scripts/plot/plot_diagnose.py, run when given
   std::string t_column = "t", y_column = "y";  // record columns (e.g. n, y2)
   std::string input_hold = "zoh";     // zoh, or foh: held value (u_k + u_k+1)/2 (open loop)
   int substeps = 1;                    // integration substeps per sample

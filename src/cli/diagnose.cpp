@@ -1,7 +1,7 @@
 // `modalwatch diagnose`: the residual analysis and model augmentation of
 // include/modalwatch/diagnose.hpp on a record, and its report: DIR/report.md,
 // DIR/summary.json, DIR/model.yaml (the augmented model) and the CSV tables
-// that scripts/plot_diagnose.py turns into the PNGs the report links.
+// that scripts/plot/plot_diagnose.py turns into the PNGs the report links.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -194,7 +194,7 @@ std::string report_md(const DiagnoseResult& r, const DiagnoseArgs& args, const C
     o << "![Simulated against measured, validation part](validation.png)\n\n";
     o << "![Bode of both models](bode.png)\n";
   } else {
-    o << "Not made (run `scripts/plot_diagnose.py " << args.report << "`): residual_spectrum.png, validation.png, "
+    o << "Not made (run `scripts/plot/plot_diagnose.py " << args.report << "`): residual_spectrum.png, validation.png, "
       << "bode.png from the CSV files here.\n";
   }
   return o.str();

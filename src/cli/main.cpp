@@ -8,10 +8,12 @@
 #include <CLI/CLI.hpp>
 
 #include "commands.hpp"
+#include "modalwatch_version.hpp"
 
 int main(int argc, char** argv) {
   using namespace modalwatch::cli;
   CLI::App app{"modalwatch: identification of continuous-time modal models (additive RSRIVC)"};
+  app.set_version_flag("--version", "modalwatch " MODALWATCH_VERSION);
   app.require_subcommand(1);
 
   SimulateArgs sim;
@@ -63,7 +65,7 @@ int main(int argc, char** argv) {
   diagnose_cmd->add_option("--validate-samples", diag.validate_samples, "FIRST:END rows to validate on");
   diagnose_cmd->add_option("--report,-r", diag.report, "directory for report.md, summary.json, model.yaml")->required();
   diagnose_cmd->add_option("--effects", diag.effects, "comma-separated candidate effects (default: all)");
-  diagnose_cmd->add_option("--plot-script", diag.plot_script, "run this scripts/plot_diagnose.py on the report");
+  diagnose_cmd->add_option("--plot-script", diag.plot_script, "run this scripts/plot/plot_diagnose.py on the report");
   diagnose_cmd->add_option("--t-column", diag.t_column, "time column of the records (e.g. n: sample index)");
   diagnose_cmd->add_option("--y-column", diag.y_column, "output column of the records (e.g. y2)");
   diagnose_cmd->add_option("--input-hold", diag.input_hold, "zoh (held input) or foh (band-limited input, open loop)")
@@ -87,6 +89,8 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
   } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
     app.exit(e);

@@ -20,6 +20,7 @@
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/daemon/daemon.hpp"
 #include "modalwatch/error.hpp"
+#include "modalwatch_version.hpp"
 
 namespace {
 
@@ -95,6 +96,7 @@ int main(int argc, char** argv) {
   set_up_logging();
   CLI::App app{"modalwatchd: online modal estimation and fault flags from LCM samples"};
   std::string config_path;
+  app.set_version_flag("--version", "modalwatchd " MODALWATCH_VERSION);
   app.add_option("--config", config_path, "YAML configuration (config/README.md)")->required();
   try {
     app.parse(argc, argv);

@@ -1,5 +1,5 @@
 // Speed of the recursive estimator and of `modalwatch track` (issue 3,
-// acceptance 6). Measured and reported, never asserted: scripts/bench.sh
+// acceptance 6). Measured and reported, never asserted: scripts/measure/bench.sh
 // builds Release and runs this, callgrind on step_driver and track on a
 // 2M-sample record.
 //

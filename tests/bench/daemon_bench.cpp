@@ -1,5 +1,5 @@
 // modalwatch_daemon_bench: drives a running modalwatchd over LCM for
-// scripts/daemon_bench.sh (records are published by `modalwatch replay`).
+// scripts/measure/daemon_bench.sh (records are published by `modalwatch replay`).
 //
 //   latency  --config C --data D.csv --rate R --seconds S
 //            one sample_t per packet at R Hz (cycling the record); sample k has

@@ -1,6 +1,6 @@
 // A minimal driver for instruction counts (valgrind --tool=callgrind): the
 // seed paper's K = 3 closed-loop case with M_s = 0, warm-up (1000 samples,
-// offline fit) and then N steps. scripts/bench.sh runs it for two N and takes
+// offline fit) and then N steps. scripts/measure/bench.sh runs it for two N and takes
 // (Ir(N2) - Ir(N1)) / (N2 - N1) as the instructions per sample of step().
 //
 //   step_driver [N [KERNEL]]   (N default: $MODALWATCH_STEPS, else 100000;

@@ -1,4 +1,4 @@
-// libFuzzer target: decode_checkpoint on any bytes (scripts/fuzz.sh). Built with
+// libFuzzer target: decode_checkpoint on any bytes (scripts/check/fuzz.sh). Built with
 // FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION, which makes the decoder skip the
 // CRC comparison so that mutations reach the payload parser. Properties: only
 // InputError escapes; a decoded checkpoint re-encodes to the same bytes (CRC

@@ -1,4 +1,4 @@
-// libFuzzer target: parse_lcm_log on any bytes (scripts/fuzz.sh). Properties:
+// libFuzzer target: parse_lcm_log on any bytes (scripts/check/fuzz.sh). Properties:
 // only InputError escapes; a parsed record has one offset per sample, equal
 // column lengths, t from 0 and strictly increasing.
 #include <cstddef>

@@ -1,6 +1,6 @@
 // Replays the inputs the fuzzers found (tests/fuzz/regressions/<harness>/)
 // through the harness's LLVMFuzzerTestOneInput in the ordinary test build, so
-// that every finding stays a test; under ASan+UBSan (scripts/sanitize.sh, CI)
+// that every finding stays a test; under ASan+UBSan (scripts/check/sanitize.sh, CI)
 // the same memory and undefined-behaviour checks apply as while fuzzing.
 //   replay_fuzz_<harness> DIR
 #include <algorithm>

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Plot the estimates of `modalwatch track` against time.
 
-    scripts/plot_track.py est.csv [--truth truth.csv] [--out est.png]
+    scripts/plot/plot_track.py est.csv [--truth truth.csv] [--out est.png]
 
 One row of subplots per submodel, columns wn [rad/s], zeta and gain: the
 estimate with a +-2 sigma band and, given the truth CSV written by

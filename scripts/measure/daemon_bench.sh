@@ -17,35 +17,32 @@
 # another modalwatchd build (an A/B comparison; the bench stays this tree's).
 # MACHINE_SECONDS (10; 0 skips) runs `modalwatch_daemon_bench machine` first: the
 # machine's own wake-up latency and CPU preemption, the floor under the figures.
-#   scripts/daemon_bench.sh            LOOPS="2000 10000" SECONDS_PER_RUN=30 BUILD_DIR=build-release JOBS=2 RT_PRIORITY=0
+#   scripts/measure/daemon_bench.sh    LOOPS="2000 10000" SECONDS_PER_RUN=30 BUILD_DIR=build-release JOBS=2 RT_PRIORITY=0
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
+source scripts/lib/daemon.sh
 build="${BUILD_DIR:-build-release}"
 loops="${LOOPS:-2000 10000}"
 rt="${RT_PRIORITY:-0}"
 skip="${SKIP_SECONDS:-10}"  # the warm-up (5 s), its fit and the catch-up on the input held meanwhile
 run_s="${SECONDS_PER_RUN:-30}"
 work="$(mktemp -d)"
-trap 'kill "${daemon:-}" 2>/dev/null || true; rm -rf "$work"' EXIT
+trap 'mw_kill_daemon; rm -rf "$work"' EXIT
 port=$((7900 + $$ % 90))
 
-# Release, with the benchmark drivers; the same tree scripts/bench.sh uses.
-if ! { cmake -S . -B "$build" -DCMAKE_BUILD_TYPE=Release -DMODALWATCH_BENCHMARKS=ON &&
-       cmake --build "$build" -j"${JOBS:-2}" --target modalwatch modalwatchd modalwatch_daemon_bench; } \
-       > "$work/build.log" 2>&1; then
-  cat "$work/build.log"
-  exit 1
-fi
+# Release, with the benchmark drivers; the same tree scripts/measure/bench.sh uses.
+mw_build "$build" "modalwatch modalwatchd modalwatch_daemon_bench" -DCMAKE_BUILD_TYPE=Release -DMODALWATCH_BENCHMARKS=ON
+MW_DAEMON_BIN=${DAEMON:-}
 
 # The drift config on its own port; 10 s of record to cycle.
-sed -e "s#url: udpm://239.255.76.67:7667?ttl=0#url: \"udpm://239.255.76.67:${port}?ttl=0\"#" \
-    config/flexible-beam-drift.yaml > "$work/base.yaml"
-grep -q "239.255.76.67:${port}" "$work/base.yaml"
+config=config/flexible-beam-drift.yaml
+url="lcm.url=udpm://239.255.76.67:${port}?ttl=0"
+mw_config "$config" "$work/base.yaml" "$url"
 "$build/modalwatch" simulate --config "$work/base.yaml" --duration 10 --out "$work/record.csv" >/dev/null
 config_for() {  # loop rate, publish period
-  sed -e "s#loop_rate_hz: 2000 #loop_rate_hz: $1 #" -e "s#publish_period: 0.1 #publish_period: $2 #" \
-    "$work/base.yaml" > "$work/bench.yaml"
-  if [ "$rt" -gt 0 ]; then sed -i -e "s#^daemon:#daemon:\n  realtime_priority: $rt#" "$work/bench.yaml"; fi
+  local realtime=()
+  if [ "$rt" -gt 0 ]; then realtime=(daemon.realtime_priority="$rt"); fi
+  mw_config "$config" "$work/bench.yaml" "$url" daemon.loop_rate_hz="$1" daemon.publish_period="$2" "${realtime[@]}"
 }
 bench() {
   if [ "$rt" -gt 0 ]; then chrt -f $((rt + 1)) "$build/tests/bench/modalwatch_daemon_bench" "$@"
@@ -61,14 +58,9 @@ thread_ticks() {
 }
 
 start_daemon() {
-  "${DAEMON:-$build/modalwatchd}" --config "$work/bench.yaml" 2> "$work/daemon.log" &
-  daemon=$!
-  sleep 0.5
-}
-stop_daemon() {
-  kill -TERM "$daemon"
-  wait "$daemon" || true
-  daemon=""
+  mw_start_daemon "$work/bench.yaml" "$work/daemon.log"
+  mw_wait_ready "$work/daemon.log"
+  daemon=$MW_DAEMON_PID
 }
 
 echo "== machine: $(nproc) cores, load average $(cut -d' ' -f1-3 /proc/loadavg); realtime priority ${rt} (0: off)"
@@ -92,7 +84,7 @@ for loop_hz in $loops; do
     END { sub(/,$/, "", line); print "    per thread (%):" line }' "$work/threads0" "$work/threads1"
   echo "  load average now: $(cut -d' ' -f1-3 /proc/loadavg)"
   grep -o "warm-up over.*" "$work/daemon.log" | sed 's/^/  daemon: /' || true
-  stop_daemon
+  mw_stop_daemon
 done
 config_for 2000 0.1
 
@@ -101,6 +93,6 @@ for rate in ${RATES-50000 100000 150000 200000 300000 400000}; do
   start_daemon
   line=$(bench rate --config "$work/bench.yaml" --data "$work/record.csv" \
            --rate "$rate" --seconds 3 --batch 256 | grep "daemon:")
-  stop_daemon
+  mw_stop_daemon
   echo "  $rate samples/s: $line"
 done

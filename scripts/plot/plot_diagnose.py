@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """PNGs for a `modalwatch diagnose` report directory.
 
-Usage: scripts/plot_diagnose.py REPORT_DIR
+Usage: scripts/plot/plot_diagnose.py REPORT_DIR
 
 Reads spectra.csv, validation.csv and bode.csv written by `modalwatch diagnose`
 and writes residual_spectrum.png, validation.png and bode.png next to them

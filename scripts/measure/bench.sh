@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Speed of the recursive estimator and of `modalwatch track` (issue 3,
-# acceptance 6). Measures and prints; asserts nothing.
+# Speed of the recursive estimator and of `modalwatch track`. Measures and
+# prints; asserts nothing.
 #
-#   scripts/bench.sh
+#   scripts/measure/bench.sh
 #
 # 1. Builds Release in build-release (benchmarks on) and runs bench_estimator
 #    (Google Benchmark: step() for K=2/3, open/closed loop, M_s=0/2; the CSV
@@ -19,7 +19,8 @@
 # benchmark), N1/N2 (20000/120000), TRACK_SAMPLES (2000000), BENCH_FILTER
 # (a --benchmark_filter regex).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
+source scripts/lib/daemon.sh
 
 BUILD=${BUILD:-build-release}
 JOBS=${JOBS:-2}
@@ -33,11 +34,7 @@ WORK=$(mktemp -d "${TMPDIR:-/tmp}/modalwatch_bench.XXXXXX")
 trap 'rm -rf "$WORK"' EXIT
 
 echo "== build ($BUILD, Release)"
-if ! { cmake -S . -B "$BUILD" -DCMAKE_BUILD_TYPE=Release -DMODALWATCH_BENCHMARKS=ON &&
-       cmake --build "$BUILD" -j"$JOBS" --target modalwatch bench_estimator step_driver; } >"$WORK/build.log" 2>&1; then
-  cat "$WORK/build.log"
-  exit 1
-fi
+mw_build "$BUILD" "modalwatch bench_estimator step_driver" -DCMAKE_BUILD_TYPE=Release -DMODALWATCH_BENCHMARKS=ON
 CLI="$BUILD/modalwatch"
 BENCH="$BUILD/tests/bench/bench_estimator"
 DRIVER="$BUILD/tests/bench/step_driver"

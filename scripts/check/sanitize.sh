@@ -1,12 +1,11 @@
 #!/usr/bin/env bash
-# Sanitizer runs (issue 6): the test suite under ASan+UBSan, the threaded tests
-# under TSan. Prints a summary; exits non-zero if any step fails.
+# Sanitizer runs: the test suite under ASan+UBSan, the threaded tests under
+# TSan. Prints a summary; exits non-zero if any step fails.
 #
-#   scripts/sanitize.sh                 # both (ASan build: 830 s of compile CPU at -O1 -g1,
-#                                       #  15 min at -j2 on a loaded 2-core machine; tests 4 min)
-#   SKIP_ASAN=1 scripts/sanitize.sh     # TSan only (~2 min)
-#   ASAN_TARGETS="test_messages test_csv" ASAN_TESTS="Messages|Csv" scripts/sanitize.sh
-#                                       # ASan+UBSan on some suites only (.ci/run)
+#   scripts/check/sanitize.sh                 # both (the ASan build is the long part)
+#   SKIP_ASAN=1 scripts/check/sanitize.sh     # TSan only
+#   ASAN_TARGETS="test_messages test_csv" ASAN_TESTS="Messages|Csv" scripts/check/sanitize.sh
+#                                             # ASan+UBSan on some suites only
 #
 # 1. ASan+UBSan: configures build-asan with -DMODALWATCH_SANITIZE=ON (benchmarks
 #    off: they are not tests), builds everything (or ASAN_TARGETS), runs ctest
@@ -26,7 +25,7 @@
 # smaller default under sanitizers), and ASAN_OPTIONS / UBSAN_OPTIONS /
 # TSAN_OPTIONS to override the defaults below.
 set -uo pipefail
-cd "$(dirname "$0")/.." || exit 1
+cd "$(dirname "$0")/../.." || exit 1
 
 JOBS=${JOBS:-2}
 ASAN_DIR=${ASAN_DIR:-build-asan}

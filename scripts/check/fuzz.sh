@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # Runs every libFuzzer harness in tests/fuzz for a given time and reports the
-# executions and findings of each (issue 6).
+# executions and findings of each; exits non-zero when there is a finding.
 #
-#   scripts/fuzz.sh                 # 60 s per harness
-#   scripts/fuzz.sh 600             # 10 min per harness
-#   FUZZERS="fuzz_config" scripts/fuzz.sh 30
-#   RUNS=10000000 scripts/fuzz.sh 86400   # until 10 M executions each (or the time)
-#   NICE=19 scripts/fuzz.sh 600     # on a shared machine
+#   scripts/check/fuzz.sh                 # 60 s per harness
+#   scripts/check/fuzz.sh 600             # 10 min per harness
+#   FUZZERS="fuzz_config" scripts/check/fuzz.sh 30
+#   RUNS=10000000 scripts/check/fuzz.sh 86400   # until 10 M executions each (or the time)
+#   NICE=19 scripts/check/fuzz.sh 600     # on a shared machine
 #
 # Harnesses: fuzz_messages (LCM sample/batch decode), fuzz_config (YAML loader),
 # fuzz_csv (CSV reader), fuzz_lcm_log (lcm-logger files), fuzz_checkpoint
@@ -27,7 +27,7 @@
 # fuzzing (malloc_context_size=0: recording them took ~9 % of the YAML harness's
 # time); replay a finding under the normal ASan build for the full report.
 set -uo pipefail
-cd "$(dirname "$0")/.." || exit 1
+cd "$(dirname "$0")/../.." || exit 1
 
 SECONDS_EACH=${1:-60}
 DIR=${FUZZ_DIR:-build-fuzz}

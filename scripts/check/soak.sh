@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Soak (issue 6). Two parts, each on a plant that does not drift:
+# Soak: long runs on a plant that does not drift, in two parts:
 #   1. the estimator: HOURS (24) of simulated 4096 Hz data (about 350 million
 #      samples) through RecursiveEstimator and FaultDetector, faster than real
 #      time (tests/bench/soak_estimator: RSS per simulated hour, NaN, flags,
@@ -9,14 +9,22 @@
 #      every 10 s into $OUT/daemon_rss.csv; at the end: no flag change, no reset,
 #      no NaN in any estimate, the final estimates within 1 % (frequency) of
 #      the truth, RSS after the first 5 min flat within 1 MiB.
+# Exits non-zero when a check fails.
 #
-#   scripts/soak.sh                         # both (about 8 min + 1 h)
-#   HOURS=1 DAEMON_SECONDS=300 scripts/soak.sh
+#   scripts/check/soak.sh                   # both (about 8 min + 1 h)
+#   HOURS=1 DAEMON_SECONDS=300 scripts/check/soak.sh
 #   SKIP_ESTIMATOR=1 / SKIP_DAEMON=1        # one part only
-# Needs a build with benchmarks (scripts/setup.sh's default): build/.
+# Needs a build in BUILD_DIR (build), with benchmarks (scripts/setup.sh's default)
+# for part 1; builds it when missing.
 set -uo pipefail
-cd "$(dirname "$0")/.." || exit 1
-build=${BUILD_DIR:-build}
+cd "$(dirname "$0")/../.." || exit 1
+source scripts/lib/daemon.sh
+if [ "${SKIP_ESTIMATOR:-0}" != 1 ]; then
+  mw_ensure_build "${BUILD_DIR:-build}" tests/bench/soak_estimator || exit 1
+else
+  mw_ensure_build "${BUILD_DIR:-build}" || exit 1
+fi
+build=$MW_BUILD
 HOURS=${HOURS:-24}
 DAEMON_SECONDS=${DAEMON_SECONDS:-3600}
 OUT=${OUT:-$(mktemp -d /tmp/modalwatch-soak.XXXXXX)}
@@ -33,19 +41,17 @@ if [ "${SKIP_DAEMON:-0}" != 1 ]; then
   echo "== daemon soak: $DAEMON_SECONDS s at real time over LCM (files in $OUT)"
   # The drifting demo config without its drift, with a checkpoint, on a port of its own.
   port=$((7700 + RANDOM % 200))
-  sed -e '/trajectory:/,/gain: \[\[/d' \
-      -e "s#^  url: .*#  url: udpm://239.255.76.67:$port?ttl=0#" \
-      -e '/^daemon:/a\  checkpoint: {path: '"$OUT"'/soak.ckpt, period: 60}' \
-      -e "s/^  duration: .*/  duration: $DAEMON_SECONDS/" \
-      config/flexible-beam-drift.yaml >"$OUT/soak.yaml"
-  grep -q trajectory "$OUT/soak.yaml" && { echo "soak.sh: could not remove the drift"; exit 1; }
+  mw_config config/flexible-beam-drift.yaml "$OUT/soak.yaml" --no-drift \
+    lcm.url="udpm://239.255.76.67:$port?ttl=0" daemon.checkpoint="{path: $OUT/soak.ckpt, period: 60}" \
+    simulation.duration="$DAEMON_SECONDS" || exit 1
   "$build/modalwatch" simulate --config "$OUT/soak.yaml" --out "$OUT/record.csv" >/dev/null || exit 1
-  "$build/modalwatchd" --config "$OUT/soak.yaml" 2>"$OUT/daemon.log" &
-  daemon=$!
+  mw_start_daemon "$OUT/soak.yaml" "$OUT/daemon.log"
+  daemon=$MW_DAEMON_PID
+  trap 'mw_kill_daemon; kill ${watcher:-} ${sampler:-} 2>/dev/null' EXIT
+  mw_wait_ready "$OUT/daemon.log" || exit 1
   "$build/modalwatch" watch --config "$OUT/soak.yaml" --every 100 >"$OUT/watch.log" 2>&1 &
   watcher=$!
-  trap 'kill $daemon $watcher ${sampler:-} 2>/dev/null' EXIT
-  sleep 1
+  sleep 0.5
   ( echo "wall_s,rss_kib"; t0=$SECONDS
     while kill -0 "$daemon" 2>/dev/null; do
       echo "$((SECONDS - t0)),$(awk '/VmRSS/ {print $2}' /proc/$daemon/status 2>/dev/null)"; sleep 10
@@ -54,9 +60,9 @@ if [ "${SKIP_DAEMON:-0}" != 1 ]; then
   "$build/modalwatch" replay --config "$OUT/soak.yaml" --data "$OUT/record.csv" --speed 1 --batch 16 \
     >"$OUT/replay.log" 2>&1 || failed=1
   sleep 2
-  kill -TERM "$daemon"; wait "$daemon"; rc=$?
+  mw_stop_daemon
   kill "$watcher" "$sampler" 2>/dev/null; trap - EXIT
-  [ "$rc" -eq 0 ] || { echo "FAIL: modalwatchd exited with $rc"; failed=1; }
+  [ "$MW_DAEMON_RC" -eq 0 ] || { echo "FAIL: modalwatchd exited with $MW_DAEMON_RC"; failed=1; }
   /usr/bin/python3 - "$OUT" <<'PY' || failed=1
 import csv, re, sys
 out = sys.argv[1]

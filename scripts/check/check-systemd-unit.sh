@@ -1,16 +1,18 @@
 #!/usr/bin/env bash
-# Checks systemd/modalwatch@.service offline, without a running systemd, as
-# shipped and with the opt-in drop-in systemd/realtime.conf:
+# Checks the unit a build installs (systemd/modalwatch@.service.in with its
+# paths filled in by CMake) offline, without a running systemd, as shipped and
+# with the opt-in drop-in systemd/realtime.conf:
+#   scripts/check/check-systemd-unit.sh [UNIT]   # default build/systemd/modalwatch@.service
 #   - systemd-analyze security --offline=true rates it <= 2.0 (MAX_EXPOSURE);
 #   - systemd-analyze verify reports nothing but the missing binary
-#     (/usr/local/bin/modalwatchd exists only once installed);
+#     (<prefix>/bin/modalwatchd exists only once installed);
 #   - with the drop-in, the unit allows realtime scheduling and the
 #     @resources calls (sched_setscheduler) that the shipped unit denies.
 # Exit 0 pass, 1 fail, 77 skipped (no systemd-analyze); ctest runs it as
 # systemd_unit. Prints the exposure score.
 set -euo pipefail
-cd "$(dirname "$0")/.."
-unit=systemd/modalwatch@.service
+unit="$(realpath "${1:-$(dirname "$0")/../../build/systemd/modalwatch@.service}")"
+cd "$(dirname "$0")/../.."
 max="${MAX_EXPOSURE:-2.0}"
 
 if ! command -v systemd-analyze >/dev/null; then
@@ -44,7 +46,7 @@ check() {
   fi
   local verify rest
   verify=$(systemd-analyze verify "$file" 2>&1 || true)
-  rest=$(grep -v 'Command /usr/local/bin/modalwatchd is not executable' <<<"$verify" | sed '/^$/d' || true)
+  rest=$(grep -v 'Command /.*/modalwatchd is not executable' <<<"$verify" | sed '/^$/d' || true)
   if [ -n "$rest" ]; then
     echo "$rest"
     echo "FAIL: systemd-analyze verify reports problems ($label)"
