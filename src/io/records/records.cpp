@@ -115,7 +115,15 @@ std::size_t RecordReader::read(Record& block, std::size_t max_samples) {
   if (held == nullptr) return std::get<CsvRecordStream>(impl_->reader).read(block, max_samples);
   const Eigen::Index count =
       std::min(static_cast<Eigen::Index>(max_samples), held->record.size() - held->next);
-  block = held->record.segment(held->next, count);
+  const Record& rec = held->record;
+  // Assigned member by member, so that a block of the last one's size keeps its storage.
+  block.t = rec.t.segment(held->next, count);
+  block.u = rec.u.segment(held->next, count);
+  block.y = rec.y.segment(held->next, count);
+  if (rec.has_reference())
+    block.r = rec.r.segment(held->next, count);
+  else
+    block.r.resize(0);
   held->next += count;
   return static_cast<std::size_t>(count);
 }
