@@ -23,6 +23,7 @@
 
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
+#include "modalwatch/io/records.hpp"
 #include "modalwatch/io/messages.hpp"
 
 namespace modalwatch::test_support {

@@ -1,7 +1,5 @@
 // The modalwatch command line as a user meets it: real files, the real binary,
 // exit codes, and messages that say where the problem is.
-#include <array>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -13,6 +11,7 @@
 
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
+#include "modalwatch/io/records.hpp"
 
 namespace fs = std::filesystem;
 
@@ -82,16 +81,14 @@ void expect_rejected(const Cli& t, const std::string& csv_text, const std::strin
   EXPECT_FALSE(fs::exists(out));
 }
 
-std::string good_rows(int n, int skip = -1) {
+std::string good_rows(int n) {
   std::ostringstream s;
-  for (int k = 0; k < n; ++k)
-    if (k != skip) s << k * 0.05 << ",0.1," << (k % 3) * 0.2 << "," << (k % 5) * 0.1 << "\n";
+  for (int k = 0; k < n; ++k) s << k * 0.05 << ",0.1," << (k % 3) * 0.2 << "," << (k % 5) * 0.1 << "\n";
   return s.str();
 }
 
 TEST_F(Cli, RecordWithNaNIsRejectedNamingRowAndColumn) {
-  expect_rejected(*this, "t,r,u,y\n" + good_rows(3) + "0.15,0.1,0.2,nan\n" + good_rows(30).substr(0, 0), "row 5",
-                  "'y'");
+  expect_rejected(*this, "t,r,u,y\n" + good_rows(3) + "0.15,0.1,0.2,nan\n", "row 5", "'y'");
 }
 
 TEST_F(Cli, RecordWithNonNumericFieldIsRejectedNamingRowAndColumn) {

@@ -3,12 +3,14 @@
 // the round trip through config_to_yaml.
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <random>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -992,11 +994,35 @@ TEST(ConfigRoundTrip, PaperSim) {
   expect_same_config(round_trip(c, c.model), c);
 }
 
+// Every section the parser reads is written: parse(config_to_yaml(c)) == c.
 TEST(ConfigRoundTrip, EveryShippedConfig) {
-  for (const char* name : {"paper-sim.yaml", "flexible-beam.yaml", "motion-stage.yaml"}) {
-    SCOPED_TRACE(name);
-    const Config c = modalwatch::load_config(std::string(MODALWATCH_SOURCE_DIR "/config/") + name);
-    expect_same_config(round_trip(c, c.model), c);
+  std::vector<fs::path> files;
+  for (const auto& entry : fs::directory_iterator(MODALWATCH_SOURCE_DIR "/config"))
+    if (entry.path().extension() == ".yaml") files.push_back(entry.path());
+  std::sort(files.begin(), files.end());
+  ASSERT_GE(files.size(), 7u);
+  std::vector<std::string> skipped;
+  for (const fs::path& file : files) {
+    SCOPED_TRACE(file.filename().string());
+    Config c;
+    try {
+      c = modalwatch::load_config(file.string());
+    } catch (const InputError& e) {
+      // A signal file from the measured-data folder, which may be absent.
+      if (std::string(e.what()).find(MODALWATCH_SHARED_DATA) == std::string::npos) throw;
+      skipped.push_back(file.filename().string() + " (" + e.what() + ")");
+      continue;
+    }
+    const std::string yaml = modalwatch::config_to_yaml(c, c.model);
+    Config back = round_trip(c, c.model);
+    expect_same_config(back, c);
+    back.source = c.source;  // the file name, not a setting
+    EXPECT_TRUE(back == c) << yaml;
+  }
+  if (!skipped.empty()) {
+    std::string list;
+    for (const auto& s : skipped) list += "\n  " + s;
+    GTEST_SKIP() << "measured data not found for:" << list;
   }
 }
 

@@ -15,6 +15,7 @@
 #include "support.hpp"
 
 #include "modalwatch/io/csv.hpp"
+#include "modalwatch/io/records.hpp"
 #include "modalwatch/error.hpp"
 
 namespace fs = std::filesystem;
@@ -158,7 +159,7 @@ TEST_F(CsvTest, ReadRecordWithOtherColumnNames) {
   cols.t = "time";
   cols.u = "voltage";
   cols.y = "position";
-  const auto rec = read_record(file("n.csv", "time,voltage,position\n0,1,2\n1,3,4\n"), cols);
+  const auto rec = read_record({file("n.csv", "time,voltage,position\n0,1,2\n1,3,4\n"), cols});
   EXPECT_EQ(rec.y(1), 4.0);
 }
 
@@ -193,15 +194,15 @@ TEST_F(CsvTest, ReadOptionsAllowNonFiniteSamplesButNotTime) {
   modalwatch::RecordReadOptions options;
   options.allow_nonfinite = true;
   const auto p = file("nan.csv", "t,u,y,r\n0,nan,1,2\n1,1,inf,-inf\n2,1,2,3\n");
-  const auto rec = read_record(p, {}, options);
+  const auto rec = read_record(p, options);
   EXPECT_TRUE(std::isnan(rec.u(0)));
   EXPECT_TRUE(std::isinf(rec.y(1)));
   EXPECT_TRUE(std::isinf(rec.r(1)));
   EXPECT_CONTAINS(error_of([&] { read_record(p); }), "row 2, column 'u'");  // default: rejected
   const auto bad_t = file("nant.csv", "t,u,y\n0,1,1\nnan,1,1\n");
-  EXPECT_CONTAINS(error_of([&] { read_record(bad_t, {}, options); }), "row 3, column 't'");
+  EXPECT_CONTAINS(error_of([&] { read_record(bad_t, options); }), "row 3, column 't'");
   // Non-numeric text stays an error.
-  EXPECT_CONTAINS(error_of([&] { read_record(file("txt.csv", "t,u,y\n0,x,1\n"), {}, options); }),
+  EXPECT_CONTAINS(error_of([&] { read_record(file("txt.csv", "t,u,y\n0,x,1\n"), options); }),
                   "row 2, column 'u'");
 }
 
@@ -210,18 +211,18 @@ TEST_F(CsvTest, ReadOptionsAllowGaps) {
   options.allow_gaps = true;
   // A gap of 3 steps after t = 2 (row 4 -> row 5), otherwise steps of 1.
   const auto p = file("gap.csv", "t,u,y\n0,0,0\n1,0,0\n2,0,0\n5,0,0\n6,0,0\n7,0,0\n");
-  EXPECT_EQ(read_record(p, {}, options).size(), 6);
+  EXPECT_EQ(read_record(p, options).size(), 6);
   EXPECT_CONTAINS(error_of([&] { read_record(p); }), "uneven sampling");
   // A step shorter than the nominal one is still an error, with the median or a given step.
   const auto short_step = file("short.csv", "t,u,y\n0,0,0\n1,0,0\n1.5,0,0\n2.5,0,0\n3.5,0,0\n");
-  const auto msg = error_of([&] { read_record(short_step, {}, options); });
+  const auto msg = error_of([&] { read_record(short_step, options); });
   EXPECT_CONTAINS(msg, "row 4, column 't'");
   EXPECT_CONTAINS(msg, "shorter than the nominal step 1 ");
   options.sample_time = 2.0;
-  EXPECT_CONTAINS(error_of([&] { read_record(p, {}, options); }), "row 3, column 't'");
+  EXPECT_CONTAINS(error_of([&] { read_record(p, options); }), "row 3, column 't'");
   // Time must still increase.
   options.sample_time = 0.0;
-  EXPECT_CONTAINS(error_of([&] { read_record(file("dec.csv", "t,u,y\n0,0,0\n1,0,0\n1,0,0\n"), {}, options); }),
+  EXPECT_CONTAINS(error_of([&] { read_record(file("dec.csv", "t,u,y\n0,0,0\n1,0,0\n1,0,0\n"), options); }),
                   "does not increase");
 }
 
@@ -327,7 +328,7 @@ TEST_F(CsvTest, TextEntryPointsMatchTheFileReaders) {
   modalwatch::RecordReadOptions tolerant;
   tolerant.allow_nonfinite = true;
   tolerant.allow_gaps = true;
-  const modalwatch::Record from_file = read_record(file("r.csv", text), {}, tolerant);
+  const modalwatch::Record from_file = read_record(file("r.csv", text), tolerant);
   const modalwatch::Record from_text = parse_record(text, "r.csv", {}, tolerant);
   ASSERT_EQ(from_text.size(), 4);
   EXPECT_EQ(from_text.t, from_file.t);
@@ -338,13 +339,13 @@ TEST_F(CsvTest, TextEntryPointsMatchTheFileReaders) {
   EXPECT_EQ(error_of([&] { parse_record(text, "mem.csv"); }), "mem.csv: row 3, column 'u': not a finite number (got 'nan')");
 }
 
-// RecordStream (`modalwatch track`'s reader): the same rows and the same
+// RecordReader (`modalwatch track`'s reader): the same rows and the same
 // errors as read_record, a block at a time, whatever the block size and
 // wherever the file's 1 MiB reads split a line.
 namespace {
 
-using modalwatch::RecordBlock;
-using modalwatch::RecordStream;
+using modalwatch::Record;
+using modalwatch::RecordReader;
 
 modalwatch::RecordReadOptions stream_options(double sample_time) {
   modalwatch::RecordReadOptions o;
@@ -357,12 +358,12 @@ modalwatch::RecordReadOptions stream_options(double sample_time) {
 // All rows of the stream, read max_rows at a time, as a Record.
 modalwatch::Record read_streamed(const std::string& path, std::size_t max_rows, double sample_time,
                                  std::vector<std::size_t>* sizes = nullptr) {
-  RecordStream stream(path, {}, stream_options(sample_time));
+  RecordReader stream(path, stream_options(sample_time));
   std::vector<double> t, u, y, r;
-  RecordBlock block;
+  Record block;
   std::size_t n = 0;
   while ((n = stream.read(block, max_rows)) > 0) {
-    EXPECT_EQ(n, block.size());
+    EXPECT_EQ(n, static_cast<std::size_t>(block.size()));
     EXPECT_LE(n, max_rows);
     if (sizes != nullptr) sizes->push_back(n);
     t.insert(t.end(), block.t.begin(), block.t.end());
@@ -371,7 +372,7 @@ modalwatch::Record read_streamed(const std::string& path, std::size_t max_rows, 
     r.insert(r.end(), block.r.begin(), block.r.end());
   }
   EXPECT_EQ(stream.read(block, max_rows), 0u);  // stays at the end
-  EXPECT_EQ(stream.bytes_read(), stream.file_size());
+  EXPECT_EQ(stream.fraction_read(), 1.0);
   const auto vec = [](const std::vector<double>& v) {
     return Eigen::VectorXd(Eigen::Map<const Eigen::VectorXd>(v.data(), static_cast<Eigen::Index>(v.size())));
   };
@@ -400,7 +401,7 @@ std::string long_record_text(int rows) {
 TEST_F(CsvTest, StreamDeliversTheRowsOfReadRecordInBlocksOfAnySize) {
   const int rows = 40001;  // 2.8 MB: three 1 MiB reads, lines split at their ends
   const std::string p = file("long.csv", long_record_text(rows));
-  const modalwatch::Record whole = read_record(p, {}, stream_options(1e-3));
+  const modalwatch::Record whole = read_record(p, stream_options(1e-3));
   ASSERT_EQ(whole.size(), rows);
   for (const std::size_t max_rows : {std::size_t{1}, std::size_t{7}, std::size_t{4096}, std::size_t{100000}}) {
     std::vector<std::size_t> sizes;
@@ -420,7 +421,7 @@ TEST_F(CsvTest, StreamAcceptsWhatReadRecordAccepts) {
   // BOM, CRLF, padded fields, '+' signs, no final newline; trailing blank lines.
   const std::string text = "\xEF\xBB\xBFt , u,y\r\n0, +1.5 ,-2\r\n0.1,nan,4E1\r\n0.3,inf,2";
   const std::string p = file("a.csv", text);
-  const modalwatch::Record whole = read_record(p, {}, stream_options(0.1));
+  const modalwatch::Record whole = read_record(p, stream_options(0.1));
   const modalwatch::Record streamed = read_streamed(p, 2, 0.1);
   ASSERT_EQ(streamed.size(), 3);
   EXPECT_EQ(streamed.t, whole.t);
@@ -443,7 +444,7 @@ TEST_F(CsvTest, StreamErrorsNameFileLineAndColumnAsReadRecordDoes) {
     return error_of([&] { read_streamed(file(name, text), 3, 1.0); });
   };
   const auto file_error = [&](const std::string& name, const std::string& text) {
-    return error_of([&] { read_record(file(name, text), {}, stream_options(1.0)); });
+    return error_of([&] { read_record(file(name, text), stream_options(1.0)); });
   };
   for (const auto& [name, text] : std::vector<std::pair<std::string, std::string>>{
            {"empty.csv", ""},
@@ -464,7 +465,7 @@ TEST_F(CsvTest, StreamErrorsNameFileLineAndColumnAsReadRecordDoes) {
     EXPECT_FALSE(streamed.empty()) << name;
     EXPECT_EQ(streamed, file_error(name, text)) << name;
   }
-  EXPECT_CONTAINS(error_of([&] { RecordStream stream(path("missing.csv"), {}, stream_options(1.0)); }),
+  EXPECT_CONTAINS(error_of([&] { RecordReader stream(path("missing.csv"), stream_options(1.0)); }),
                   "missing.csv: cannot open");
 }
 
@@ -475,8 +476,8 @@ TEST_F(CsvTest, StreamNamesAMalformedRowDeepInTheRecordAfterTheRowsBeforeIt) {
   for (int line = 1; line < 30002; ++line) at = text.find('\n', at) + 1;
   text.replace(text.rfind(',', text.find('\n', at)) + 1, 1, "x");
   const std::string p = file("deep.csv", text);
-  RecordStream stream(p, {}, stream_options(1e-3));
-  RecordBlock block;
+  RecordReader stream(p, stream_options(1e-3));
+  Record block;
   std::size_t rows = 0;
   std::string message;
   try {
@@ -486,5 +487,5 @@ TEST_F(CsvTest, StreamNamesAMalformedRowDeepInTheRecordAfterTheRowsBeforeIt) {
   }
   EXPECT_EQ(rows, 7u * 4096u);  // the blocks wholly before the row
   EXPECT_CONTAINS(message, "deep.csv: row 30002, column 'y': not a number");
-  EXPECT_EQ(message, error_of([&] { read_record(p, {}, stream_options(1e-3)); }));
+  EXPECT_EQ(message, error_of([&] { read_record(p, stream_options(1e-3)); }));
 }

@@ -19,6 +19,7 @@
 
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
+#include "modalwatch/io/records.hpp"
 #include "modalwatch/diagnose.hpp"
 #include "modalwatch/simulator.hpp"
 #include "support.hpp"
@@ -527,7 +528,7 @@ TEST(DiagnoseMeasured, F16AddsModesAtTheFrfPeaks) {
   SKIP_WITHOUT_SHARED("f16_fullmsine_level1.csv");
   RecordColumns columns;
   columns.y = "y2";
-  const Record full = read_record(kShared + "/f16_fullmsine_level1.csv", columns);
+  const Record full = read_record({kShared + "/f16_fullmsine_level1.csv", columns});
   const Eigen::Index n_est = 2 * 8192;
   const Record est = full.segment(0, n_est);
   const Record val = full.segment(0, n_est + 8192);  // simulated from rest, scored after n_est

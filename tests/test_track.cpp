@@ -102,7 +102,7 @@ TEST_F(Track, SimulatedRecordGivesOneFiniteRowPerSample) {
   EXPECT_EQ(files().size(), 2u);  // d.csv and est.csv, no temporary left behind
 }
 
-// The record of acceptance point 5: a NaN sample, a 10 s gap, a sample of 1e12
+// A record with a NaN sample, a 10 s gap, a sample of 1e12
 // and 60 s of zero input (and setpoint) in the simulated closed-loop record.
 std::string damaged_record(const std::string& clean_csv) {
   const Table d = read_table(clean_csv);

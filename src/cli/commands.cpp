@@ -1,6 +1,6 @@
 #include "commands.hpp"
 #include "guarded.hpp"
-#include "records.hpp"
+#include "modalwatch/io/records.hpp"
 #include "table.hpp"
 
 #include <cmath>
@@ -40,7 +40,7 @@ Window window(const Record& r, const FitArgs& args) {
 
 int simulate(const SimulateArgs& args) {
   return guarded("simulate", [&] {
-    const Config config = load_cli_config(args.config);
+    const Config config = load_config(args.config);
     if (!config.plant || !config.experiment)
       throw InputError(args.config, "simulate needs the 'plant' and 'simulation' sections");
     ExperimentSpec experiment = *config.experiment;
@@ -93,20 +93,16 @@ void print_identifiability(const FitResult& result) {
 
 int fit(const FitArgs& args) {
   return guarded("fit", [&] {
-    const Config config = load_cli_config(args.config);
-    const Record full = load_record({args.data, args.channel, config.closed_loop, {}});
+    const Config config = load_config(args.config);
+    const Record full = read_record(RecordSource(args.data, {}, args.channel, config.closed_loop));
     const auto [data, settle] = window(full, args);
     const Eigen::Index used = data.size() - settle;
     const int nb = config.model.n_beta();
     if (used < 2 * nb + 2)
       throw InputError(args.data, std::to_string(used) + " samples (rows) for " + std::to_string(nb) +
                                       " parameters: need at least " + std::to_string(2 * nb + 2));
+    check_record(data, args.data, config.sample_time, config.closed_loop, config.source);
     const double T = data.sample_time();
-    if (std::abs(T - config.sample_time) > 0.01 * config.sample_time)
-      throw InputError(args.data, "column 't': sample time " + std::to_string(T) + " s does not match sample_rate_hz " +
-                                      std::to_string(1.0 / config.sample_time) + " of " + config.source);
-    if (config.closed_loop && !data.has_reference())
-      throw InputError(args.data, "closed loop (model.loop) needs a column 'r'");
     SrivcOptions options;
     options.closed_loop = config.closed_loop;
     options.controller = config.controller;

@@ -5,7 +5,7 @@
 
 #include "commands.hpp"
 #include "diagnose_report.hpp"
-#include "records.hpp"
+#include "modalwatch/io/records.hpp"
 #include "guarded.hpp"
 
 #include "modalwatch/io/config.hpp"
@@ -59,17 +59,17 @@ std::vector<EffectKind> parse_effects(const std::string& list) {
 
 int diagnose(const DiagnoseArgs& args) {
   return guarded("diagnose", [&] {
-    const Config config = load_cli_config(args.config);
+    const Config config = load_config(args.config);
     if (!args.validate.empty() && args.split) throw InputError("--split", "give --validate or --split, not both");
     RecordColumns columns;
     columns.t = args.t_column;
     columns.y = args.y_column;
-    const Record full = load_record({args.data, args.channel, config.closed_loop, columns});
+    const Record full = read_record(RecordSource(args.data, columns, args.channel, config.closed_loop));
     Record est, val;
     Eigen::Index lead_in = 0;
     if (!args.validate.empty()) {
       est = samples(full, args.estimate_samples, "--estimate-samples", args.data);
-      val = samples(load_record({args.validate, args.channel, config.closed_loop, columns}), args.validate_samples,
+      val = samples(read_record(RecordSource(args.validate, columns, args.channel, config.closed_loop)), args.validate_samples,
                     "--validate-samples", args.validate);
     } else if (!args.estimate_samples.empty() || !args.validate_samples.empty()) {
       if (args.estimate_samples.empty() || args.validate_samples.empty())
@@ -86,15 +86,9 @@ int diagnose(const DiagnoseArgs& args) {
       val = full;
       lead_in = n;
     }
-    for (const Record* r : {&est, &val}) {
-      const double T = r->sample_time();
-      if (std::abs(T - config.sample_time) > 0.01 * config.sample_time)
-        throw InputError(r == &est ? args.data : (args.validate.empty() ? args.data : args.validate),
-                         "column 't': sample time " + format_number(T) + " s does not match sample_rate_hz " +
-                             format_number(1.0 / config.sample_time) + " of " + config.source);
-      if (config.closed_loop && !r->has_reference())
-        throw InputError(r == &est ? args.data : args.validate, "closed loop (model.loop) needs a column 'r'");
-    }
+    check_record(est, args.data, config.sample_time, config.closed_loop, config.source);
+    check_record(val, args.validate.empty() ? args.data : args.validate, config.sample_time, config.closed_loop,
+                 config.source);
     if (args.input_hold == "foh") {
       if (config.closed_loop) throw InputError("--input-hold", "foh is for open-loop records (u is simulated in closed loop)");
     }

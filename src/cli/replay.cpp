@@ -12,7 +12,7 @@
 
 #include "commands.hpp"
 #include "guarded.hpp"
-#include "records.hpp"
+#include "modalwatch/io/records.hpp"
 
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/error.hpp"
@@ -48,12 +48,12 @@ void sleep_until(const timespec& start, double seconds) {
 
 int replay(const ReplayArgs& args) {
   return guarded("replay", [&] {
-    const Config config = load_cli_config(args.config);
+    const Config config = load_config(args.config);
     RecordReadOptions read_options;  // the daemon counts NaN samples and gaps: pass them on
     read_options.allow_nonfinite = true;
     read_options.allow_gaps = true;
     read_options.sample_time = config.sample_time;
-    const Record rec = load_record({args.data, args.channel, config.closed_loop, {}}, read_options);
+    const Record rec = read_record(RecordSource(args.data, {}, args.channel, config.closed_loop), read_options);
     if (config.closed_loop && !rec.has_reference())
       throw InputError(args.data, "closed loop (model.loop) needs a column 'r'");
     if (args.batch < 1) throw InputError("--batch", "must be >= 1");

@@ -2,9 +2,9 @@
 // estimates per input sample.
 //
 // The record is read leniently (NaN/Inf samples and time gaps are passed on to
-// the estimator, which counts them). A CSV record is streamed: a reader thread
-// parses it a block of rows at a time while the estimation loop runs (an LCM
-// log is read whole first). est.csv is formatted by two threads (t and the
+// the estimator, which counts them) and streamed: a reader thread reads it a
+// block of samples at a time (RecordReader) while the estimation loop runs.
+// est.csv is formatted by two threads (t and the
 // estimates shortest round-trip, their standard deviations to 6 digits:
 // number_format.hpp), a block of rows at a time into preallocated buffers,
 // written in order to a temporary file and renamed at the end, so a failure
@@ -36,7 +36,7 @@
 #include "commands.hpp"
 #include "guarded.hpp"
 #include "number_format.hpp"
-#include "records.hpp"
+#include "modalwatch/io/records.hpp"
 #include "table.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
@@ -51,46 +51,7 @@ using Clock = std::chrono::steady_clock;
 
 
 
-// The record's step must be the configured one (gaps aside): at least half of
-// the steps within 1 % of the sample time. Counted as the samples go by (a CSV
-// record is streamed, never held whole) and checked after the first block (a
-// wrong rate fails at once) and at the end; only the message needs all steps.
-class SampleTimeCheck {
- public:
-  explicit SampleTimeCheck(double T) : T_(T) {}
-  void add(double t) {
-    if (samples_ > 0 && std::abs(t - last_ - T_) <= 0.01 * T_) ++matching_;
-    last_ = t;
-    ++samples_;
-  }
-  bool passed() const { return samples_ < 3 || 2 * matching_ >= samples_ - 1; }
-  // Throws naming the median step of `times` (the record's, read again).
-  [[noreturn]] void fail(const std::string& path, const std::vector<double>& times,
-                         const std::string& which = "median step") const {
-    std::vector<double> steps;
-    for (std::size_t k = 1; k < times.size(); ++k) steps.push_back(times[k] - times[k - 1]);
-    if (steps.empty()) throw InputError(path, "column 't': the record changed while it was read");
-    const auto mid = steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2);
-    std::nth_element(steps.begin(), mid, steps.end());
-    throw InputError(path, "column 't': sample time " + std::to_string(*mid) +
-                               " s (" + which + ") does not match sample_rate_hz " + std::to_string(1.0 / T_));
-  }
-
- private:
-  double T_;
-  double last_ = 0.0;
-  std::uint64_t samples_ = 0, matching_ = 0;
-};
-
-// The times of a CSV record, read again for SampleTimeCheck::fail.
-std::vector<double> record_times(RecordStream stream) {
-  std::vector<double> times;
-  RecordBlock block;
-  while (stream.read(block, 1 << 16) > 0) times.insert(times.end(), block.t.begin(), block.t.end());
-  return times;
-}
-
-// Reads a CSV record on its own thread, a block of rows at a time handed to the
+// Reads the record on its own thread, a block of samples at a time handed to the
 // estimation loop through a bounded queue, so that reading overlaps estimation
 // and formatting. The blocks are reused; the threads wait on condition
 // variables, never spin (two cores for the reader, the estimation loop and two
@@ -100,7 +61,7 @@ class BlockReader {
   static constexpr std::size_t kRowsPerBlock = 4096;
   static constexpr std::size_t kBlocks = 4;
 
-  explicit BlockReader(RecordStream& stream) : stream_(stream), slots_(kBlocks) {
+  explicit BlockReader(RecordReader& stream) : stream_(stream), slots_(kBlocks) {
     for (auto& slot : slots_) free_.push_back(&slot);
     thread_ = std::thread([this] { run(); });
   }
@@ -115,10 +76,10 @@ class BlockReader {
     thread_.join();
   }
 
-  // The next block of rows, valid until the next call; nullptr at the end of
-  // the record. A reading error (a malformed row) is rethrown here once the
+  // The next block of samples, valid until the next call; nullptr at the end
+  // of the record. A reading error (a malformed row) is rethrown here once the
   // rows before it have been taken.
-  const RecordBlock* next() {
+  const Record* next() {
     std::unique_lock<std::mutex> lock(mutex_);
     if (current_ != nullptr) {
       free_.push_back(current_);
@@ -134,13 +95,13 @@ class BlockReader {
     filled_.pop_front();
     return &current_->rows;
   }
-  // Bytes of the file up to the end of the block last returned (progress).
-  std::uint64_t bytes_read() const { return current_ != nullptr ? current_->bytes_read : 0; }
+  // Fraction of the record up to the end of the block last returned (progress).
+  double fraction_read() const { return current_ != nullptr ? current_->fraction_read : 0.0; }
 
  private:
   struct Slot {
-    RecordBlock rows;
-    std::uint64_t bytes_read = 0;
+    Record rows;
+    double fraction_read = 0.0;
   };
 
   void run() {
@@ -157,7 +118,7 @@ class BlockReader {
       std::exception_ptr error;
       try {
         rows = stream_.read(slot->rows, kRowsPerBlock);
-        slot->bytes_read = stream_.bytes_read();
+        slot->fraction_read = stream_.fraction_read().value_or(0.0);
       } catch (...) {
         error = std::current_exception();
       }
@@ -176,7 +137,7 @@ class BlockReader {
     }
   }
 
-  RecordStream& stream_;
+  RecordReader& stream_;
   std::vector<Slot> slots_;
   Slot* current_ = nullptr;  // the estimation loop's
   std::mutex mutex_;
@@ -378,8 +339,8 @@ class RowPipeline {
 };
 
 // `\r[#####     ] 45% 1.2e6 samples/s` on stderr, at most 10 times a second,
-// only when stderr is a terminal. Done and total are in any unit (bytes of a
-// streamed CSV record, samples of an LCM log); the rate is in samples.
+// only when stderr is a terminal and the record's size is known. Done and total
+// are in any unit; the rate is in samples.
 class ProgressBar {
  public:
   ProgressBar(bool enabled, double total)
@@ -444,24 +405,18 @@ double seconds_between(Clock::time_point a, Clock::time_point b) { return std::c
 int track(const TrackArgs& args) {
   return guarded("track", [&] {
     const auto t_start = Clock::now();
-    const Config config = load_cli_config(args.config);
+    const Config config = load_config(args.config);
     const EstimatorSettings& settings = config.estimator;  // completed by load_config
 
     RecordReadOptions read_options;
     read_options.allow_nonfinite = true;
     read_options.allow_gaps = true;
     read_options.sample_time = config.sample_time;
-    const RecordSource source{args.data, args.channel, config.closed_loop, {}};
-    SampleTimeCheck sample_time(config.sample_time);
-    std::optional<RecordStream> stream = open_csv_stream(source, read_options);  // header and columns checked
-    Record whole;  // an LCM log, read whole
-    if (!stream) {
-      whole = load_record(source, read_options);
-      for (Eigen::Index k = 0; k < whole.size(); ++k) sample_time.add(whole.t(k));
-      if (!sample_time.passed()) sample_time.fail(args.data, std::vector<double>(whole.t.begin(), whole.t.end()));
-    }
-    const bool with_r = stream ? stream->has_reference() : whole.has_reference();
+    const RecordSource source(args.data, {}, args.channel, config.closed_loop);
+    RecordReader reader_source(source, read_options);  // a CSV's header and columns checked
+    const bool with_r = reader_source.has_reference();
     if (config.closed_loop && !with_r) throw InputError(args.data, "closed loop (model.loop) needs a column 'r'");
+    RecordCheck check(args.data, config.sample_time, config.closed_loop, config.source);
     const auto t_read = Clock::now();
 
     RecursiveEstimator estimator(config.model, settings);
@@ -478,62 +433,42 @@ int track(const TrackArgs& args) {
 
     std::uint64_t n = 0;
     double last_t = 0.0;
-    ProgressBar progress(args.progress,
-                         stream ? static_cast<double>(stream->file_size()) : static_cast<double>(whole.size()));
+    ProgressBar progress(args.progress && reader_source.fraction_read().has_value(), 1.0);
     std::vector<ColumnFormat> formats;
     for (const auto& c : columns) formats.push_back(c.format);
     RowPipeline rows(file, std::move(formats));
-    // One row of estimates per sample (r: nullptr in open loop).
-    const auto estimate = [&](const double* t, const double* u, const double* y, const double* r, std::size_t count) {
-      for (std::size_t k = 0; k < count; ++k) {
-        const unsigned flags = estimator.step(Sample{t[k], u[k], y[k], r != nullptr ? r[k] : 0.0});
-        double* row = rows.next_row();
-        *row++ = t[k];
-        for (int i = 0; i < K; ++i) {
-          const ModeEstimate m = estimator.mode(i);
-          row[0] = m.value.wn;
-          row[1] = m.value.zeta;
-          row[2] = m.value.gain;
-          row[3] = m.std.wn;
-          row[4] = m.std.zeta;
-          row[5] = m.std.gain;
-          row += 6;
+    {
+      BlockReader reader(reader_source);
+      while (const Record* block = reader.next()) {
+        check.add(*block);  // a wrong sample_rate_hz fails on the first block
+        const std::size_t count = static_cast<std::size_t>(block->size());
+        const double *t = block->t.data(), *u = block->u.data(), *y = block->y.data();
+        const double* r = with_r ? block->r.data() : nullptr;
+        // One row of estimates per sample.
+        for (std::size_t k = 0; k < count; ++k) {
+          const unsigned flags = estimator.step(Sample{t[k], u[k], y[k], r != nullptr ? r[k] : 0.0});
+          double* row = rows.next_row();
+          *row++ = t[k];
+          for (int m = 0; m < K; ++m) {
+            const ModeEstimate e = estimator.mode(m);
+            row[0] = e.value.wn;
+            row[1] = e.value.zeta;
+            row[2] = e.value.gain;
+            row[3] = e.std.wn;
+            row[4] = e.std.zeta;
+            row[5] = e.std.gain;
+            row += 6;
+          }
+          row[0] = estimator.residual_rms();
+          row[1] = static_cast<double>(flags);
+          row[2] = static_cast<double>(estimator.status().resets);
         }
-        row[0] = estimator.residual_rms();
-        row[1] = static_cast<double>(flags);
-        row[2] = static_cast<double>(estimator.status().resets);
-      }
-      n += count;
-      if (count > 0) last_t = t[count - 1];
-    };
-    if (stream) {
-      {
-        BlockReader reader(*stream);
-        bool first_block = true;
-        while (const RecordBlock* block = reader.next()) {
-          for (const double t : block->t) sample_time.add(t);
-          // A wrong sample_rate_hz shows in the first block already: say so
-          // now rather than after estimating the whole record.
-          if (first_block && !sample_time.passed())
-            sample_time.fail(args.data, block->t,
-                             "median step of the first " + std::to_string(block->size()) + " rows");
-          first_block = false;
-          estimate(block->t.data(), block->u.data(), block->y.data(), with_r ? block->r.data() : nullptr,
-                   block->size());
-          progress.maybe_draw(static_cast<double>(reader.bytes_read()), n);
-        }
-      }
-      if (!sample_time.passed())  // nothing written: the temporary file goes
-        sample_time.fail(args.data, record_times(RecordStream(args.data, {}, read_options)));
-    } else {
-      const std::size_t total = static_cast<std::size_t>(whole.size());
-      for (std::size_t k = 0; k < total; k += BlockReader::kRowsPerBlock) {
-        const std::size_t count = std::min(BlockReader::kRowsPerBlock, total - k);
-        estimate(whole.t.data() + k, whole.u.data() + k, whole.y.data() + k, with_r ? whole.r.data() + k : nullptr,
-                 count);
-        progress.maybe_draw(static_cast<double>(k + count), n);
+        n += count;
+        if (count > 0) last_t = t[count - 1];
+        progress.maybe_draw(reader.fraction_read(), n);
       }
     }
+    check.finish(source, read_options);  // nothing written on failure: the temporary file goes
     rows.finish();
     file.commit();
     progress.finish(n);
@@ -545,15 +480,10 @@ int track(const TrackArgs& args) {
     std::fprintf(stderr, "modalwatch track: %llu samples at %g Hz (%s loop, %d submodels) -> %s\n",
                  static_cast<unsigned long long>(n), 1.0 / config.sample_time, config.closed_loop ? "closed" : "open",
                  K, args.out.c_str());
-    if (stream)
-      std::fprintf(stderr, "  time: %.3f s (start-up %.3f s, then read, estimate and write together %.3f s)\n", total,
-                   seconds_between(t_start, t_read), loop);
-    else
-      std::fprintf(stderr, "  time: %.3f s (read %.3f s, estimate and write %.3f s)\n", total,
-                   seconds_between(t_start, t_read), loop);
-    std::fprintf(stderr, "  samples/s: %.4g end to end, %.4g after %s\n",
-                 total > 0.0 ? static_cast<double>(n) / total : 0.0, loop > 0.0 ? static_cast<double>(n) / loop : 0.0,
-                 stream ? "start-up" : "reading");
+    std::fprintf(stderr, "  time: %.3f s (start-up %.3f s, then read, estimate and write together %.3f s)\n", total,
+                 seconds_between(t_start, t_read), loop);
+    std::fprintf(stderr, "  samples/s: %.4g end to end, %.4g after start-up\n",
+                 total > 0.0 ? static_cast<double>(n) / total : 0.0, loop > 0.0 ? static_cast<double>(n) / loop : 0.0);
     std::fprintf(stderr, "  samples processed: %llu\n", static_cast<unsigned long long>(st.samples));
     std::fprintf(stderr, "  updates: %llu\n", static_cast<unsigned long long>(st.updates));
     if (st.resets > 0)

@@ -13,7 +13,6 @@
 
 #include "commands.hpp"
 #include "guarded.hpp"
-#include "records.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/error.hpp"
 
@@ -105,7 +104,7 @@ void on_fault_status(const lcm_recv_buf_t* rbuf, const char*, void* user) {
 
 int watch(const WatchArgs& args) {
   return guarded("watch", [&] {
-    const Config config = load_cli_config(args.config);
+    const Config config = load_config(args.config);
     if (args.every < 1) throw std::invalid_argument("--every must be >= 1");
     lcm_t* lcm = lcm_create(config.lcm.url.c_str());
     if (!lcm) throw InputError(args.config, "key 'lcm.url': cannot open LCM provider '" + config.lcm.url + "'");

@@ -20,7 +20,7 @@
 
 #include "bench_common.hpp"
 #include "commands.hpp"
-#include "modalwatch/io/csv.hpp"
+#include "modalwatch/io/records.hpp"
 
 namespace modalwatch::bench {
 namespace {
@@ -106,7 +106,7 @@ void BM_ReadRecord(benchmark::State& state) {
   o.sample_time = paper_config().sample_time;
   Eigen::Index rows = 0;
   for (auto _ : state) {
-    const Record r = read_record(path, {}, o);
+    const Record r = read_record(path, o);
     rows += r.size();
     benchmark::DoNotOptimize(r.y.data());
   }

@@ -50,7 +50,7 @@
 #include <modalwatch/fault_status_t.hpp>
 
 #include "modalwatch/io/config.hpp"
-#include "modalwatch/io/csv.hpp"
+#include "modalwatch/io/records.hpp"
 #include "modalwatch/error.hpp"
 #include "modalwatch/io/messages.hpp"
 
@@ -260,7 +260,7 @@ int main(int argc, char** argv) {
     const Config config = load_config(config_path);
     RecordReadOptions opts;
     opts.sample_time = config.sample_time;
-    const Record rec = read_record(data_path, {}, opts);
+    const Record rec = read_record(data_path, opts);
     lcm_t* lcm = lcm_create(config.lcm.url.c_str());
     if (!lcm) throw InputError(config_path, "cannot open LCM provider " + config.lcm.url);
     Listener listener;

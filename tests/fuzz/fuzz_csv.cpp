@@ -5,6 +5,7 @@
 #include <string_view>
 
 #include "modalwatch/io/csv.hpp"
+#include "modalwatch/io/records.hpp"
 #include "modalwatch/error.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

@@ -4,12 +4,10 @@
 // documented in config/README.md; an unknown key, a wrong type or an invalid
 // value is an InputError naming the key and its line.
 #include <array>
-#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
 
-#include "modalwatch/io/csv.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/fault_detector.hpp"
 #include "modalwatch/model.hpp"
@@ -87,16 +85,11 @@ struct Config {
   bool operator==(const Config&) const = default;
 };
 
-// Reads a file that the config names as a signal (`type: csv` under
-// simulation.input or simulation.reference): a table with a time column 't'.
-// `channel` is the key's `channel` (empty when absent). The default reads CSV
-// only (read_table) and refuses a channel; the CLI passes one that also reads
-// LCM logs, which modalwatch_io does not know.
-using SignalFileReader = std::function<Table(const std::string& path, const std::string& channel)>;
-
-Config load_config(const std::string& path, const SignalFileReader& read_signal_file = {});
-Config parse_config(const std::string& yaml_text, const std::string& source_name,
-                    const SignalFileReader& read_signal_file = {});
+// Signal files that the config names (`type: csv` under simulation.input or
+// simulation.reference) are read as records.hpp's read_signal_file reads them:
+// a CSV table with a time column 't', or an LCM log's samples (key `channel`).
+Config load_config(const std::string& path);
+Config parse_config(const std::string& yaml_text, const std::string& source_name);
 
 // The configuration as YAML, with `model` in place of the configured one (for
 // `fit --out`: a fitted model that seeds the other commands).
