@@ -1,54 +1,16 @@
 // The guards of the recursive estimator that act on its whole state: the
-// stability projection of A, the restart of the filters after a gap, and the
-// last good state it saves now and then and returns to on a reset (a
-// divergence, a non-finite model or update). The per-sample checks that
-// trigger them (outliers, divergence, excitation) are steps 2 and 3 of
-// step.cpp.
+// restart of the filters after a gap, and the last good state it saves now and
+// then and returns to on a reset (a divergence, a non-finite model or update).
+// The per-sample checks that trigger them (outliers, divergence, excitation)
+// are steps 2 and 3 of step.cpp; the stability projection is update.hpp's.
 #include <cmath>
 #include <cstdint>
 
 #include <Eigen/Core>
 
-#include "modalwatch/polynomial.hpp"
 #include "impl.hpp"
 
 namespace modalwatch {
-
-namespace detail {
-
-// Orders 1 and 2 in closed form without allocation; higher orders through the
-// general routine (allocates, only when A is unstable).
-bool project(double* a_part, int n) {
-  constexpr double margin = 1e-6;
-  if (n == 1) {
-    if (a_part[0] > 0.0) return false;
-    a_part[0] = a_part[0] < 0.0 ? -a_part[0] : margin;
-    return true;
-  }
-  if (n == 2) {
-    double& a1 = a_part[0];
-    double& a2 = a_part[1];
-    if (a1 > 0.0 && a2 > 0.0) return false;
-    if (a2 > 0.0) {
-      // Both roots in the closed right half plane: reflecting both flips their sum.
-      a1 = a1 < 0.0 ? -a1 : 2.0 * margin * std::sqrt(a2);
-    } else if (a2 < 0.0) {
-      // Real roots of opposite sign: reflect the positive one.
-      a1 = std::sqrt(a1 * a1 - 4.0 * a2);
-      a2 = -a2;
-    } else {
-      return false;  // degenerate (order drop): caller rejects
-    }
-    return true;
-  }
-  Eigen::Map<Eigen::VectorXd> part(a_part, n);
-  Eigen::VectorXd a = part;
-  if (!project_stable(a)) return false;
-  part = a;
-  return true;
-}
-
-}  // namespace detail
 
 void RecursiveEstimator::Impl::reset_filters() {
   for (auto& b : blocks) {

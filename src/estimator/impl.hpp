@@ -25,12 +25,6 @@ inline constexpr char kResetDiverged[] =
     "output error diverged (residual RMS above divergence_ratio x its last good value)";
 inline constexpr char kResetDegenerate[] = "non-finite or degenerate update (NaN/Inf in theta, P or the gain)";
 
-namespace detail {
-// Stability projection of an anti-monic A (section 4.7), in place: false when
-// A was stable or cannot be projected (guards.cpp).
-bool project(double* a_part, int n);
-}  // namespace detail
-
 struct WarmupFit::Context {
   AdditiveModel initial;
   EstimatorSettings cfg;

@@ -4,12 +4,49 @@
 // the per-sample path: included by step.cpp only (hot_path.hpp).
 #include <cmath>
 
+#include <Eigen/Core>
+
+#include "modalwatch/polynomial.hpp"
 #include "impl.hpp"
 
 namespace modalwatch {
 namespace {
 
 using detail::kMaxTheta;
+
+// Stability projection of an anti-monic A (section 4.7), in place: false when A
+// was stable or cannot be projected. Orders 1 and 2 in closed form without
+// allocation; higher orders through the general routine (allocates, only when
+// A is unstable). Out of line, with the per-sample path (never inlined there).
+bool project(double* a_part, int n) {
+  constexpr double margin = 1e-6;
+  if (n == 1) {
+    if (a_part[0] > 0.0) return false;
+    a_part[0] = a_part[0] < 0.0 ? -a_part[0] : margin;
+    return true;
+  }
+  if (n == 2) {
+    double& a1 = a_part[0];
+    double& a2 = a_part[1];
+    if (a1 > 0.0 && a2 > 0.0) return false;
+    if (a2 > 0.0) {
+      // Both roots in the closed right half plane: reflecting both flips their sum.
+      a1 = a1 < 0.0 ? -a1 : 2.0 * margin * std::sqrt(a2);
+    } else if (a2 < 0.0) {
+      // Real roots of opposite sign: reflect the positive one.
+      a1 = std::sqrt(a1 * a1 - 4.0 * a2);
+      a2 = -a2;
+    } else {
+      return false;  // degenerate (order drop): caller rejects
+    }
+    return true;
+  }
+  Eigen::Map<Eigen::VectorXd> part(a_part, n);
+  Eigen::VectorXd a = part;
+  if (!project_stable(a)) return false;
+  part = a;
+  return true;
+}
 
 // eqs. (23)-(25) on raw column-major storage (P is nt x nt, leading dimension nt):
 // K = P psi / (lambda + phi^T P psi), theta += K (y_f - phi^T theta),
@@ -77,7 +114,7 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
   // A mode with a_1, a_2 > 0 is stable: the common case, decided here.
   const bool stable_mode = b.n == 2 && theta[0] > 0.0 && theta[1] > 0.0;
   if (b.n > 0 && !stable_mode) {
-    if (detail::project(theta, b.n)) ++status.projections;
+    if (project(theta, b.n)) ++status.projections;
     if (theta[b.n - 1] == 0.0) return false;
   }
   // Guards: random walk (CONTSID's Kalman-filter adaptation), bounded trace.
