@@ -575,10 +575,10 @@ TEST_F(DaemonProcess, SigtermCheckpointsAndRestartResumesWithoutWarmup) {
   EXPECT_NE(log1.find("checkpoint written"), std::string::npos) << log1;
   const modalwatch::Checkpoint ck = modalwatch::read_checkpoint(path("state.ckpt"));
   EXPECT_EQ(ck.last_seq, n1 - 1) << "the final checkpoint includes every sample sent";
-  ASSERT_EQ(ck.estimator.model.submodels.size(), 2u);
+  ASSERT_EQ(ck.estimator.model().submodels.size(), 2u);
   // The checkpoint holds the estimate after the last sample, the last message the
   // one at the last 0.1 s boundary before it: close, not equal.
-  EXPECT_NEAR(modal_parameters(ck.estimator.model.submodels[kFlex]).wn, before.modes[kFlex].wn, 2e-3 * before.modes[kFlex].wn);
+  EXPECT_NEAR(modal_parameters(ck.estimator.model().submodels[kFlex]).wn, before.modes[kFlex].wn, 2e-3 * before.modes[kFlex].wn);
 
   // Restart: resumes from the checkpoint, no warm-up: the first estimates are the
   // checkpointed ones carried on, not the configured initial guess.

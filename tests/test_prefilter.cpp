@@ -121,7 +121,7 @@ TEST(Prefilter, HeldSineMatchesSuperpositionOfAnalyticSteps) {
 }
 
 TEST(Prefilter, TopDerivativeMakesTheDenominatorSumEqualTheInputExactly) {
-  // sum_j d_j p^j w_f(t_k) = w(t_k) whatever the hold (DESIGN.md point 1).
+  // sum_j d_j p^j w_f(t_k) = w(t_k) whatever the hold (the top derivative is algebraic, not integrated).
   const Eigen::VectorXd d = mode_denominator(20.0, 0.1);
   for (Hold h : {Hold::zoh, Hold::foh}) {
     Prefilter f(d, 0.05, h);
@@ -235,117 +235,6 @@ TEST(Prefilter, SecondOrderClosedFormStaysExactForStiffOverdampedFilters) {
   }
 }
 
-TEST(Prefilter, SecondOrderBankMatchesOnePrefilterPerSignalWhileTheDenominatorChanges) {
-  // The recursive estimator's mode prefilters: one shared discretisation,
-  // re-discretised every sample, against four Prefilters given the same
-  // denominators. wn T sweeps 0.025..1.25 (series and closed-form branches).
-  const double T = 0.05;
-  const int n = 3000;
-  auto denominator = [&](int k) { return mode_denominator(0.5 + 24.5 * k / n, 0.02 + 0.3 * k / n); };
-  std::vector<Prefilter> reference;
-  for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i) reference.emplace_back(denominator(0), T, Hold::zoh);
-  SecondOrderFilterBank bank;
-  double worst = 0.0;
-  for (int k = 0; k < n; ++k) {
-    const Eigen::VectorXd d = denominator(k);
-    bank.set_denominator(d(0), d(1), d(2), T);
-    for (auto& f : reference) f.set_denominator(d);
-    for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i) {
-      const double w = std::sin(0.37 * k * (i + 1)) + 0.2 * i;
-      const double* got;
-      if (i == 3) {  // two-phase, as the closed-loop instrument input
-        bank.advance(i);
-        reference[i].advance();
-        bank.complete(i, 0.0);
-        reference[i].complete(0.0);
-        got = bank.complete(i, w);
-        reference[i].complete(w);
-      } else {
-        got = bank.step(i, w);
-        reference[i].step(w);
-      }
-      const FilterVector& want = reference[i].derivatives();
-      ASSERT_EQ(got, bank.derivatives(i));
-      for (int j = 0; j <= 2; ++j) {
-        const double scale = 1.0 + std::abs(want(j));
-        ASSERT_NEAR(got[j], want(j), 1e-12 * scale) << "k=" << k << " signal " << i << " derivative " << j;
-        worst = std::max(worst, std::abs(got[j] - want(j)) / scale);
-      }
-    }
-  }
-  EXPECT_LT(worst, 1e-12);
-  bank.reset();
-  for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i)
-    for (int j = 0; j <= 2; ++j) EXPECT_EQ(bank.derivatives(i)[j], 0.0);
-}
-
-TEST(Prefilter, SecondOrderBankAdvancingAllSignalsAtOnceMatchesOnePrefilterPerSignal) {
-  // The estimator's order of work: advance_all() moves the four held-input
-  // states to t_k, then complete() takes each sample. Against four Prefilters
-  // stepped one by one, with the denominator changing every sample across the
-  // series and closed-form branches (wn T = 0.025..2.5).
-  const double T = 0.05;
-  const int n = 3000;
-  auto denominator = [&](int k) { return mode_denominator(0.5 + 49.5 * k / n, 0.02 + 0.5 * k / n); };
-  std::vector<Prefilter> reference;
-  for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i) reference.emplace_back(denominator(0), T, Hold::zoh);
-  SecondOrderFilterBank bank;
-  const Eigen::VectorXd d_start = denominator(0);
-  bank.set_denominator(d_start(0), d_start(1), d_start(2), T);
-  double worst = 0.0;
-  for (int k = 0; k < n; ++k) {
-    bank.advance_all();
-    for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i) {
-      const double w = std::cos(0.23 * k * (i + 1)) - 0.1 * i;
-      const double* got = bank.complete(i, w);
-      const FilterVector& want = reference[i].step(w);
-      for (int j = 0; j <= 2; ++j) {
-        const double scale = 1.0 + std::abs(want(j));
-        ASSERT_NEAR(got[j], want(j), 1e-12 * scale) << "k=" << k << " signal " << i << " derivative " << j;
-        worst = std::max(worst, std::abs(got[j] - want(j)) / scale);
-      }
-    }
-    const Eigen::VectorXd d = denominator(k + 1);
-    bank.set_denominator(d(0), d(1), d(2), T);
-    for (auto& f : reference) f.set_denominator(d);
-  }
-  EXPECT_LT(worst, 1e-12);
-}
-
-TEST(Prefilter, SecondOrderBankCompleteStateGivesTheStateAndKeepsTheFilterOnTrack) {
-  // The estimator's u and z of a mode (B = b0) need [w_f, p w_f] only:
-  // complete_state() leaves p^2 w_f out but must hold the input as complete()
-  // does, so that the state at the next sample is the same. Signals 0 and 1 take
-  // complete(), 2 and 3 complete_state(), all against one Prefilter each, with
-  // the discretisation handed in (the estimator's set_denominator overload).
-  const double T = 0.05;
-  const int n = 2000;
-  auto denominator = [&](int k) { return mode_denominator(0.5 + 24.5 * k / n, 0.02 + 0.3 * k / n); };
-  std::vector<Prefilter> reference;
-  for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i) reference.emplace_back(denominator(0), T, Hold::zoh);
-  SecondOrderFilterBank bank;
-  const Eigen::VectorXd d_start = denominator(0);
-  bank.set_denominator(d_start(0), d_start(1), d_start(2), discretize_second_order(d_start(0), d_start(1), d_start(2), T));
-  double worst = 0.0;
-  for (int k = 0; k < n; ++k) {
-    bank.advance_all();
-    for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i) {
-      const double w = std::sin(0.31 * k * (i + 1)) + 0.3 * i;
-      const double* got = i < 2 ? bank.complete(i, w) : bank.complete_state(i, w);
-      const FilterVector& want = reference[i].step(w);
-      for (int j = 0; j <= (i < 2 ? 2 : 1); ++j) {
-        const double scale = 1.0 + std::abs(want(j));
-        ASSERT_NEAR(got[j], want(j), 1e-12 * scale) << "k=" << k << " signal " << i << " derivative " << j;
-        worst = std::max(worst, std::abs(got[j] - want(j)) / scale);
-      }
-    }
-    const Eigen::VectorXd d = denominator(k + 1);
-    bank.set_denominator(d(0), d(1), d(2), discretize_second_order(d(0), d(1), d(2), T));
-    for (auto& f : reference) f.set_denominator(d);
-  }
-  EXPECT_LT(worst, 1e-12);
-}
-
 TEST(Prefilter, RigidBodyDoubleIntegratorIsExact) {
   Eigen::VectorXd d(3);
   d << 0.0, 0.0, 1.0;  // 1/p^2
@@ -359,7 +248,7 @@ TEST(Prefilter, RigidBodyDoubleIntegratorIsExact) {
 }
 
 TEST(Prefilter, NormalisedTimeGivesTheSameFilterAt700HzAnd10kHzAsAt1RadPerSecond) {
-  // DESIGN.md point 3: scaling time by ws maps a 700 Hz mode at 10 kHz onto a
+  // Normalised time: scaling time by ws maps a 700 Hz mode at 10 kHz onto a
   // 1 rad/s problem; outputs must agree once derivatives are rescaled by ws^j.
   const double wn = 2.0 * std::numbers::pi * 700.0, zeta = 0.01, T = 1e-4;
   Prefilter physical(mode_denominator(wn, zeta), T, Hold::zoh);

@@ -22,6 +22,7 @@
 //     est.apply_warmup_fit(std::move(job));   // theta(t0), P(t0); filters over the window
 //   }                                         // then step() the samples held meanwhile
 // which gives the estimates of the synchronous path bit for bit.
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -60,7 +61,8 @@ struct EstimatorSettings {
   std::vector<Eigen::VectorXd> initial_covariance;
   double initial_covariance_relative = 0.1;
 
-  // Guards (DESIGN.md point 4).
+  // Guards against what a recursive update cannot recover from by itself:
+  // covariance wind-up, divergence, gaps, outliers, unexciting input.
   double random_walk = 0.0;        // Q = random_walk^2 diag(theta'^2) added to P at each update
   // Per submodel (empty: random_walk for every one): like the forgetting factor,
   // the drift a mode may follow is a property of that mode.
@@ -119,42 +121,89 @@ struct ModeEstimate {
   ModalParameters std;
 };
 
-// The reasons status().last_reset_reason can hold (besides ""): static strings,
-// so that a checkpoint can carry them as an index.
-const std::vector<const char*>& reset_reasons();
+// The serialisation an EstimatorState is written through and read back from
+// (the daemon's checkpoint file supplies one). The state writes its values in
+// a fixed order and reads them back in the same order; `what` names each value
+// for error messages.
+class StateWriter {
+ public:
+  virtual ~StateWriter() = default;
+  virtual void flag(bool value, const char* what) = 0;
+  virtual void count(std::size_t value, const char* what) = 0;  // of the submodels that follow
+  virtual void name(const std::string& value, const char* what) = 0;
+  virtual void integer(std::int32_t value, const char* what) = 0;
+  virtual void counter(std::uint64_t value, const char* what) = 0;
+  virtual void real(double value, const char* what) = 0;
+  virtual void reals(const Eigen::VectorXd& value, const char* what) = 0;
+  virtual void matrix(const Eigen::MatrixXd& value, const char* what) = 0;  // square
+};
 
-// Everything needed to resume estimation without a new warm-up (a checkpoint):
-// the estimate, P as the estimator keeps it (normalised time, see time_scale),
-// the last good state it returns to on a reset, the noise, residual and
-// excitation statistics, the counters and the time of the last sample. Not the
-// prefilter or controller states: after restore() they restart from rest, as
-// after a gap.
-struct EstimatorState {
-  // False while the estimator was still warming up: then only the counters and
-  // the time are carried and the warm-up starts again after restore().
-  bool warmed_up = false;
-  AdditiveModel model;                       // current theta, physical units
-  std::vector<Eigen::MatrixXd> P;            // per submodel, P-bar_i (normalised)
-  std::vector<double> time_scale;            // per submodel: theta' = diag(ws^j) theta
-  std::vector<Eigen::VectorXd> P_bound;      // per submodel: bound on diag(P-bar_i)
-  std::vector<Eigen::VectorXd> good_theta;   // last good theta_i, physical units
-  std::vector<Eigen::MatrixXd> good_P;       // last good P-bar_i
+// Every read throws (the reader's own exception type) on what it cannot read;
+// fail() is how the state reports a value that is readable but not valid.
+class StateReader {
+ public:
+  virtual ~StateReader() = default;
+  virtual bool flag(const char* what) = 0;
+  virtual std::size_t count(const char* what) = 0;
+  virtual std::string name(const char* what) = 0;
+  virtual std::int32_t integer(const char* what, std::int32_t lo, std::int32_t hi) = 0;  // in [lo, hi]
+  virtual std::uint64_t counter(const char* what) = 0;
+  virtual double real(const char* what) = 0;  // finite
+  virtual Eigen::VectorXd reals(Eigen::Index size, const char* what) = 0;
+  virtual Eigen::MatrixXd matrix(Eigen::Index size, const char* what) = 0;  // size x size
+  [[noreturn]] virtual void fail(const std::string& what) = 0;
+};
 
+// Everything needed to resume estimation without a new warm-up (a checkpoint),
+// as an opaque value: the estimate, its covariance as the estimator keeps it
+// (normalised time), the last good state it returns to on a reset, the noise,
+// residual and excitation statistics, the counters and the time of the last
+// sample. Not the prefilter or controller states: after restore() they restart
+// from rest, as after a gap. A state written while the estimator was still
+// warming up carries only the counters and the time: the warm-up starts again
+// after restore().
+class EstimatorState {
+ public:
+  EstimatorState() = default;  // no submodels, not warmed up
+
+  bool warmed_up() const noexcept { return warmed_up_; }
+  const AdditiveModel& model() const noexcept { return model_; }  // current theta, physical units
+  const EstimatorStatus& status() const noexcept { return status_; }
+  double last_sample_time() const noexcept { return last_t_; }  // s
+
+  // The values in a fixed order. read() checks what the state itself can
+  // (orders, time scales, the reset reason); restore() checks the rest against
+  // the estimator's structure.
+  void write(StateWriter& out) const;
+  static EstimatorState read(StateReader& in);
+
+  bool operator==(const EstimatorState& other) const;  // exact, bit for bit
+
+ private:
+  friend class RecursiveEstimator;
+
+  bool warmed_up_ = false;
+  AdditiveModel model_;
+  // Per submodel, when warmed up: the time scale (theta' = diag(ws^j) theta),
+  // P-bar (normalised), the bound on its diagonal, the last good theta
+  // (physical units) and P-bar.
+  std::vector<double> time_scale_;
+  std::vector<Eigen::MatrixXd> P_;
+  std::vector<Eigen::VectorXd> P_bound_;
+  std::vector<Eigen::VectorXd> good_theta_;
+  std::vector<Eigen::MatrixXd> good_P_;
   // Output-error statistics (variance over the residual window, short window
   // for divergence, its value at the last good state) and excitation power.
-  double noise_variance = 0.0, residual_short = 0.0, noise_variance_good = 0.0;
-  std::uint64_t residual_count = 0;
-  std::uint64_t rearm = 0;
-  double input_power = 0.0, input_power_reference = 0.0;
-  std::uint64_t input_power_count = 0;
-  std::uint64_t since_update = 0, updates_since_good = 0;
-
-  bool have_last_sample = false;
-  double last_t = 0.0;                       // s, time of the newest sample
-  double last_u = 0.0, last_r = 0.0;         // held in place of a non-finite sample
-
-  EstimatorStatus status;                    // counters (last_reset_reason: one of the
-                                             // estimator's own reasons, or "")
+  double noise_variance_ = 0.0, residual_short_ = 0.0, noise_variance_good_ = 0.0;
+  std::uint64_t residual_count_ = 0;
+  std::uint64_t rearm_ = 0;
+  double input_power_ = 0.0, input_power_reference_ = 0.0;
+  std::uint64_t input_power_count_ = 0;
+  std::uint64_t since_update_ = 0, updates_since_good_ = 0;
+  bool have_last_sample_ = false;
+  double last_t_ = 0.0;
+  double last_u_ = 0.0, last_r_ = 0.0;  // held in place of a non-finite sample
+  EstimatorStatus status_;  // last_reset_reason: one of the estimator's own, or ""
 };
 
 // The offline additive SRIVC on the warm-up window and the initial state it

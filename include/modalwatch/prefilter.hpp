@@ -1,5 +1,6 @@
 #pragma once
-// Continuous-time prefilters on sampled data (DESIGN.md point 1).
+// Continuous-time prefilters on sampled data: the filters 1/A(p) and
+// 1/(p^l A(p)) through which the estimator sees the signals (eqs. 19-20).
 //
 // The filter 1/D(p), D(p) = d_0 + d_1 p + ... + d_N p^N (for a submodel,
 // D = p^l A(p)), is simulated in controllable canonical form: its state is
@@ -12,8 +13,14 @@
 // exactly (matrix exponential) for the assumed intersample behaviour of w:
 // held (ZOH) or linearly interpolated (FOH).
 //
-// Time scaling (DESIGN.md point 3) is the caller's: pass D and T in normalised
-// time (t' = ws t) and the derivatives come out in that time unit.
+// Time scaling is the caller's: pass D and T in normalised time (t' = ws t,
+// which keeps the coefficients of D near 1 and the discretisation well
+// conditioned) and the derivatives come out in that time unit.
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+
 #include <Eigen/Core>
 
 namespace modalwatch {
@@ -40,108 +47,144 @@ struct Discretization {
 // the matrix exponential of an augmented matrix.
 Discretization discretize(const Eigen::Ref<const Eigen::VectorXd>& denominator, double T, Hold hold);
 
-// The closed form for N = 2, d_0 != 0, as plain numbers: for callers that
-// re-discretise at every sample (the recursive estimator's modes), where
-// Eigen's dynamic-size storage costs more than the arithmetic. discretize()
-// returns exactly these numbers for such a D. gamma1 is the FOH term (a ZOH
-// caller ignores it). Unchecked: d_0 != 0, d_2 != 0 and T > 0 are the caller's.
+// The closed form for N = 2, d_0 != 0, as plain numbers (discretize_second_order
+// below): for callers that re-discretise at every sample (the recursive
+// estimator's modes), where Eigen's dynamic-size storage costs more than the
+// arithmetic. discretize() returns exactly these numbers for such a D. gamma1
+// is the FOH term (a ZOH caller ignores it). Unchecked: d_0 != 0, d_2 != 0 and
+// T > 0 are the caller's.
 struct SecondOrderDiscretization {
   double phi[2][2];
   double gamma0[2];
   double gamma1[2];
 };
-SecondOrderDiscretization discretize_second_order(double d0, double d1, double d2, double T) noexcept;
 
-// Prefilters 1/D(p) of one second-order D = d0 + d1 p + d2 p^2 (d0, d2 != 0)
-// on kSignals held (ZOH) signals, sharing one discretisation: a mode's four
-// prefilters in the recursive estimator, re-discretised at every update. Fixed
-// size, the discretisation computed in place and never copied. The arithmetic
-// is a Prefilter's per signal, in the same order, but for the top derivative:
-// a product with 1/d2 in place of a division by d2 (equal to round-off).
-// The states are stored signal by signal in arrays (x0[i], x1[i]), so that
-// advance_all() moves the four of them in one loop the compiler vectorises.
-class SecondOrderFilterBank {
- public:
-  static constexpr int kSignals = 4;
+namespace detail {
 
-  // Keeps the states (the parameters change only at sampling instants).
-  // Unchecked: d0 != 0, d2 != 0, T > 0 (discretize_second_order).
-  void set_denominator(double d0, double d1, double d2, double T) noexcept {
-    set_denominator(d0, d1, d2, discretize_second_order(d0, d1, d2, T));
-  }
-  // The same with disc = discretize_second_order(d0, d1, d2, T) computed by the
-  // caller (the estimator inlines it into its per-sample path).
-  void set_denominator(double d0, double d1, double d2, const SecondOrderDiscretization& disc) noexcept {
-    d_[0] = d0;
-    d_[1] = d1;
-    d_[2] = d2;
-    inv_d2_ = 1.0 / d2;
-    disc_ = disc;
-  }
-  void reset() noexcept {
-    for (int i = 0; i < kSignals; ++i) {
-      x0_[i] = x1_[i] = w_prev_[i] = 0.0;
-      for (double& d : out_[i]) d = 0.0;
-    }
-  }
-  // Prefilter::advance, complete, step and derivatives for signal i.
-  // x(t_k) = phi x(t_{k-1}) + gamma0 w_{k-1}.
-  void advance(int i) noexcept {
-    const double x0 = disc_.gamma0[0] * w_prev_[i] + disc_.phi[0][0] * x0_[i] + disc_.phi[0][1] * x1_[i];
-    const double x1 = disc_.gamma0[1] * w_prev_[i] + disc_.phi[1][0] * x0_[i] + disc_.phi[1][1] * x1_[i];
-    x0_[i] = x0;
-    x1_[i] = x1;
-  }
-  // advance(i) for every signal: the inputs are held, so all four states can
-  // move to t_k before any of the new samples is known.
-  void advance_all() noexcept {
-    const double g0 = disc_.gamma0[0], g1 = disc_.gamma0[1];
-    const double p00 = disc_.phi[0][0], p01 = disc_.phi[0][1], p10 = disc_.phi[1][0], p11 = disc_.phi[1][1];
-    // Component by component, so that the loops run across the signals.
-    double x0[kSignals], x1[kSignals];
-    for (int i = 0; i < kSignals; ++i) x0[i] = g0 * w_prev_[i] + p00 * x0_[i] + p01 * x1_[i];
-    for (int i = 0; i < kSignals; ++i) x1[i] = g1 * w_prev_[i] + p10 * x0_[i] + p11 * x1_[i];
-    for (int i = 0; i < kSignals; ++i) {
-      x0_[i] = x0[i];
-      x1_[i] = x1[i];
-    }
-  }
-  // [w_f, p w_f, p^2 w_f] at t_k with p^2 w_f = (w_k - d0 w_f - d1 p w_f) / d2.
-  const double* complete(int i, double w) noexcept {
-    double* out = out_[i];
-    out[0] = x0_[i];
-    out[1] = x1_[i];
-    out[2] = (w - d_[0] * x0_[i] - d_[1] * x1_[i]) * inv_d2_;
-    w_prev_[i] = w;
-    return out;
-  }
-  // complete(i, w) but for the top derivative (derivatives(i)[2] is left as it
-  // was): for a signal whose use needs only [w_f, p w_f], such as u and the
-  // instrument input z of a mode whose B has degree < 2.
-  const double* complete_state(int i, double w) noexcept {
-    double* out = out_[i];
-    out[0] = x0_[i];
-    out[1] = x1_[i];
-    w_prev_[i] = w;
-    return out;
-  }
-  const double* step(int i, double w) noexcept {
-    advance(i);
-    return complete(i, w);
-  }
-  const double* derivatives(int i) const noexcept { return out_[i]; }
-
- private:
-  double d_[3] = {1.0, 0.0, 1.0};
-  double inv_d2_ = 1.0;
-  SecondOrderDiscretization disc_{};
-  // Per signal: the state [w_f, p w_f] at t_k, the held input, and the
-  // derivatives [w_f, p w_f, p^2 w_f] at t_k.
-  double x0_[kSignals] = {0.0, 0.0, 0.0, 0.0};
-  double x1_[kSignals] = {0.0, 0.0, 0.0, 0.0};
-  double w_prev_[kSignals] = {0.0, 0.0, 0.0, 0.0};
-  double out_[kSignals][3] = {};
+// 2x2 matrices as four scalars: the per-sample re-discretisation of a mode runs
+// in the recursive estimator's inner loop, where dynamic-size Eigen costs more
+// than the arithmetic.
+struct M2 {
+  double a, b, c, d;  // [[a, b], [c, d]]
 };
+
+// 1/k! and 1e-18 k! for k = 0..39: the series below without divisions.
+struct FactorialTables {
+  double inverse[40];
+  double tolerance[40];
+};
+constexpr FactorialTables factorial_tables() {
+  FactorialTables t{};
+  double f = 1.0;
+  for (int k = 0; k < 40; ++k) {
+    if (k > 0) f *= k;
+    t.inverse[k] = 1.0 / f;
+    t.tolerance[k] = 1e-18 * f;
+  }
+  return t;
+}
+inline constexpr FactorialTables kFactorial = factorial_tables();
+
+// The length of phi's series, sum_{k <= J} (AT)^k/k!, by quarter binade of
+// |AT| < 2: for |AT| = 2^-i (1 + f) with q = floor(4 f), the J at the interval's
+// top, u = 2^-i (1 + (q + 1)/4), whose next term, u^(J+1)/(J+1)!, is below 1e-18
+// (the term count then costs one table look-up instead of a loop, and is never
+// more than a quarter binade's worth above what |AT| itself needs).
+struct SeriesLengths {
+  int last_term[64 * 4];
+};
+constexpr SeriesLengths series_lengths() {
+  SeriesLengths t{};
+  double binade = 1.0;  // 2^-i
+  for (int i = 0; i < 64; ++i) {
+    for (int q = 0; q < 4; ++q) {
+      const double top = binade * (1.0 + (q + 1) / 4.0);
+      int J = 0;
+      for (double power = top; J < 34 && power >= kFactorial.tolerance[J + 1]; power *= top) ++J;
+      t.last_term[4 * i + q] = J;
+    }
+    binade *= 0.5;
+  }
+  return t;
+}
+inline constexpr SeriesLengths kSeriesLength = series_lengths();
+// Index of |AT| in (0, 2) into SeriesLengths: 4 i + q from the exponent and the
+// top two mantissa bits (below 2^-63 the last entry, which over-covers).
+inline int series_index(double norm) {
+  const std::uint64_t bits = std::bit_cast<std::uint64_t>(norm);
+  const int i = 1023 - static_cast<int>((bits >> 52) & 0x7ff);  // norm in [2^-i, 2^(1-i)): i >= 0
+  return i > 63 ? 4 * 63 + 3 : 4 * i + static_cast<int>((bits >> 50) & 3);
+}
+
+// The branch for |A T| >= 2 (exp and sincos of the eigenvalues), out of line:
+// the estimator's modes stay below (normalised time, |A T| ~ w T).
+SecondOrderDiscretization discretize_second_order_closed_form(double d0, double d1, double d2, double T) noexcept;
+
+}  // namespace detail
+
+// N = 2, d_0 != 0. For |A T| < 2 the Taylor series of exp(A T) and of the
+// input integrals (below 1 the A^{-1} forms would cancel; up to 2 the series is
+// still exact to round-off and costs less than exp and sincos); above, the
+// closed form. B = [0, 1/d2]. Inline: the recursive estimator compiles its
+// per-sample path once per instruction set (portable and AVX2+FMA) and needs
+// the body where it re-discretises.
+[[gnu::always_inline]] inline SecondOrderDiscretization discretize_second_order(double d0, double d1, double d2,
+                                                                               double T) noexcept {
+  const double bB = 1.0 / d2;
+  const detail::M2 AT{0.0, T, -d0 / d2 * T, -d1 / d2 * T};
+  const double norm = std::max(std::abs(AT.b), std::abs(AT.c) + std::abs(AT.d));
+  if (!(norm < 2.0)) return detail::discretize_second_order_closed_form(d0, d1, d2, T);
+  SecondOrderDiscretization z;
+  // Taylor: phi = sum (AT)^k/k!, Psi0 = sum (AT)^k/(k+1)!, Psi1 = sum (AT)^k/(k+2)!,
+  // phi's terms while |AT|^k/k! >= 1e-18 (J <= 25). Only the second
+  // columns are needed (B = e2/d2), in Horner form: s1 = Psi1 e2, then
+  // s0 = Psi0 e2 = e2 + AT s1 and phi e2 = e2 + AT s0; the first column of phi
+  // from phi = c0 I + c1 AT (Cayley-Hamilton): c1 = phi_01/T, c0 = phi_11 - c1 AT_11.
+  // Up to |AT| = 2 the terms stay below 2 and their sum below e^2, so the
+  // series is as accurate as the closed form and cheaper than its
+  // exp and sincos (the estimator's fastest mode sits at |AT| ~ 1.2).
+  const int J = detail::kSeriesLength.last_term[detail::series_index(norm)];  // phi's last term (AT)^J/J!
+  // Psi1's last term (AT)^K/(K+2)!. The first components of the columns start
+  // at order |AT| (gamma0_0, gamma1_0 ~ T^2): K = J + 1 keeps them accurate
+  // relative to themselves, not only to the largest entry.
+  //
+  // Horner: (v0, v1) <- AT (v0, v1) + e2/(k+2)! for k = K-1..0 from
+  // (0, 1/(K+2)!). As AT's first row is [0, T], v0 is always T times the
+  // previous v1, so v1 alone follows the two-term recurrence
+  //   u_k = (AT_10 T) u_{k+2} + AT_11 u_{k+1} + 1/(k+2)!,  u_K = 1/(K+2)!, u_{K+1} = 0,
+  // and s1 = (T u_1, u_0). K is rounded up to even (the extra term is below
+  // 1e-18) so that the steps go two at a time, and after the first two when
+  // K = 2 mod 4, four at a time.
+  const int K = (J + 2) & ~1;
+  const double cb = AT.c * AT.b;
+  double u2 = 0.0, u1 = detail::kFactorial.inverse[K + 2];  // u_{k+2}, u_{k+1}
+  int k = K - 1;
+  if (K & 2) {
+    u2 = cb * u2 + AT.d * u1 + detail::kFactorial.inverse[k + 2];  // u_k
+    u1 = cb * u1 + AT.d * u2 + detail::kFactorial.inverse[k + 1];  // u_{k-1}
+    k -= 2;
+  }
+  for (; k > 0; k -= 4) {
+    u2 = cb * u2 + AT.d * u1 + detail::kFactorial.inverse[k + 2];  // u_k
+    u1 = cb * u1 + AT.d * u2 + detail::kFactorial.inverse[k + 1];  // u_{k-1}
+    u2 = cb * u2 + AT.d * u1 + detail::kFactorial.inverse[k];      // u_{k-2}
+    u1 = cb * u1 + AT.d * u2 + detail::kFactorial.inverse[k - 1];  // u_{k-3}
+  }
+  const double v0 = AT.b * u2, v1 = u1;  // s1 = Psi1 e2
+  const double s0 = AT.b * v1, s1 = 1.0 + AT.c * v0 + AT.d * v1;  // Psi0 e2
+  const double p01 = AT.b * s1, p11 = 1.0 + AT.c * s0 + AT.d * s1;  // phi e2
+  const double c1 = p01 / AT.b, c0 = p11 - c1 * AT.d;
+  z.phi[0][0] = c0;
+  z.phi[0][1] = p01;
+  z.phi[1][0] = c1 * AT.c;
+  z.phi[1][1] = p11;
+  z.gamma0[0] = T * s0 * bB;
+  z.gamma0[1] = T * s1 * bB;
+  z.gamma1[0] = T * v0 * bB;
+  z.gamma1[1] = T * v1 * bB;
+  return z;
+}
+
 
 class Prefilter {
  public:

@@ -6,8 +6,6 @@
 
 #include <unsupported/Eigen/MatrixFunctions>
 
-#include "second_order.hpp"
-
 namespace modalwatch {
 namespace {
 
@@ -38,10 +36,6 @@ Discretization first_order(const Eigen::Ref<const Eigen::VectorXd>& d, double T)
 }
 
 }  // namespace
-
-SecondOrderDiscretization discretize_second_order(double d0, double d1, double d2, double T) noexcept {
-  return detail::discretize_second_order_inline(d0, d1, d2, T);
-}
 
 namespace detail {
 

@@ -1,7 +1,6 @@
-// Speed of the recursive estimator and of `modalwatch track` (issue 3,
-// acceptance 6). Measured and reported, never asserted: scripts/measure/bench.sh
-// builds Release and runs this, callgrind on step_driver and track on a
-// 2M-sample record.
+// Speed of the recursive estimator and of `modalwatch track`. Measured and
+// reported, never asserted: scripts/measure/bench.sh builds Release and runs this,
+// callgrind on step_driver and track on a 2M-sample record.
 //
 //   BM_Step/K/closed/Ms/fma step() after warm-up; items_per_second = samples/s (fma 1: the
 //                           AVX2+FMA kernel, 0: portable)
@@ -70,12 +69,12 @@ BENCHMARK(BM_Step)
     ->Unit(benchmark::kNanosecond);
 
 // Files for the reader and track benchmarks, removed at exit.
-class Scratch {
+class BenchFiles {
  public:
-  Scratch() : dir_(std::filesystem::temp_directory_path() / ("modalwatch_bench_" + std::to_string(::getpid()))) {
+  BenchFiles() : dir_(std::filesystem::temp_directory_path() / ("modalwatch_bench_" + std::to_string(::getpid()))) {
     std::filesystem::create_directories(dir_);
   }
-  ~Scratch() {
+  ~BenchFiles() {
     std::error_code ec;
     std::filesystem::remove_all(dir_, ec);
   }
@@ -85,14 +84,14 @@ class Scratch {
   std::filesystem::path dir_;
 };
 
-Scratch& scratch() {
-  static Scratch s;
-  return s;
+BenchFiles& bench_files() {
+  static BenchFiles files;
+  return files;
 }
 
 // A K = 3 closed-loop record of `samples` rows, written once.
 std::string record_file(Eigen::Index samples) {
-  const std::string path = scratch().path("paper_" + std::to_string(samples) + ".csv");
+  const std::string path = bench_files().path("paper_" + std::to_string(samples) + ".csv");
   if (!std::filesystem::exists(path))
     write_record(path, simulate_paper(3, true, static_cast<double>(samples) * paper_config().sample_time));
   return path;
@@ -145,7 +144,7 @@ void BM_Track(benchmark::State& state) {
   cli::TrackArgs args;
   args.config = std::string(MODALWATCH_SOURCE_DIR) + "/config/paper-sim.yaml";
   args.data = record_file(state.range(0));
-  args.out = scratch().path("est.csv");
+  args.out = bench_files().path("est.csv");
   args.progress = false;
   int code = 0;
   for (auto _ : state) {

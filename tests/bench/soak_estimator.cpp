@@ -1,4 +1,4 @@
-// Soak of the estimator (issue 6): hours of simulated data at the config's rate
+// Soak of the estimator: hours of simulated data at the config's rate
 // through RecursiveEstimator and FaultDetector, faster than real time, on a plant
 // that does not drift. Prints the resident set size and the estimates once per
 // simulated hour and fails (exit 1) on a NaN, a fault flag, a reset, RSS growth

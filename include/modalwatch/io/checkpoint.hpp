@@ -1,13 +1,14 @@
 #pragma once
 // The daemon's checkpoint: the estimator state, the fault detector's baselines
 // and the newest sample they include, so that a restart resumes without a new
-// warm-up (issue 4, "Lifecycle").
+// warm-up.
 //
 // File format (version 1), little-endian throughout:
 //   offset 0   8 bytes  magic "MWCHKPT\0"
 //          8   u32      format version (1)
 //         12   u64      payload length L (at most kMaxCheckpointPayload)
-//         20   L bytes  payload (see checkpoint.cpp: encode order = decode order)
+//         20   L bytes  payload: fingerprint, last utime and sequence number,
+//                       the estimator state (EstimatorState::write), baselines
 //       20+L   u32      CRC-32 (IEEE 802.3, as zlib) of bytes [0, 20+L)
 // Doubles are IEEE-754 binary64 bit patterns, so a round trip is exact.
 #include <cstdint>
@@ -53,8 +54,5 @@ Checkpoint decode_checkpoint(std::span<const std::uint8_t> bytes, const std::str
 void write_checkpoint(const std::string& path, const Checkpoint& c);
 // InputError for a missing or unreadable file as well as for bad contents.
 Checkpoint read_checkpoint(const std::string& path);
-
-// CRC-32 (reflected polynomial 0xEDB88320, initial and final XOR 0xFFFFFFFF).
-std::uint32_t crc32(std::span<const std::uint8_t> bytes);
 
 }  // namespace modalwatch

@@ -10,7 +10,7 @@
 
 #include "modalwatch/error.hpp"
 #include "modalwatch/io/atomic_file.hpp"
-#include "modalwatch/prefilter.hpp"
+#include "crc32.hpp"
 
 namespace modalwatch {
 namespace {
@@ -20,8 +20,6 @@ constexpr std::size_t kHeaderSize = 8 + 4 + 8;
 constexpr std::uint32_t kMaxSubmodels = 64;
 constexpr std::uint32_t kMaxName = 256;
 constexpr std::uint32_t kMaxBaselines = 64;
-// Orders as the estimator allows them (n + l <= kMaxFilterOrder, m <= n + l).
-constexpr int kMaxOrder = kMaxFilterOrder;
 
 constexpr std::array<std::uint32_t, 256> make_crc_table() {
   std::array<std::uint32_t, 256> t{};
@@ -62,23 +60,29 @@ class Writer {
   }
 };
 
-int reason_index(const char* reason) {
-  if (!reason || !*reason) return -1;
-  const auto& all = reset_reasons();
-  for (std::size_t i = 0; i < all.size(); ++i)
-    if (std::strcmp(all[i], reason) == 0) return static_cast<int>(i);
-  return -1;
-}
+// The estimator state's values into the payload.
+class StateBytes final : public StateWriter {
+ public:
+  explicit StateBytes(Writer& w) : w_(w) {}
+  void flag(bool v, const char*) override { w_.u8(v); }
+  void count(std::size_t v, const char*) override {
+    if (v > kMaxSubmodels)
+      throw std::invalid_argument("checkpoint: more than " + std::to_string(kMaxSubmodels) + " submodels or baselines");
+    w_.u32(static_cast<std::uint32_t>(v));
+  }
+  void name(const std::string& v, const char*) override {
+    if (v.size() > kMaxName) throw std::invalid_argument("checkpoint: submodel name longer than 256 bytes");
+    w_.str(v);
+  }
+  void integer(std::int32_t v, const char*) override { w_.i32(v); }
+  void counter(std::uint64_t v, const char*) override { w_.u64(v); }
+  void real(double v, const char*) override { w_.f64(v); }
+  void reals(const Eigen::VectorXd& v, const char*) override { w_.vec(v); }
+  void matrix(const Eigen::MatrixXd& v, const char*) override { w_.mat(v); }
 
-void put_status(Writer& w, const EstimatorStatus& s) {
-  for (std::uint64_t v : {s.samples, s.updates, s.rejected_nonfinite, s.rejected_out_of_order, s.gaps, s.outliers,
-                          s.low_excitation_samples, s.projections, s.covariance_clamps, s.resets})
-    w.u64(v);
-  w.i32(reason_index(s.last_reset_reason));
-  w.u8(s.warming_up);
-  w.u8(s.low_excitation);
-  w.u8(s.warmup_fit_used);
-}
+ private:
+  Writer& w_;
+};
 
 // ---------------------------------------------------------------- reading
 
@@ -155,12 +159,13 @@ class Reader {
       for (Eigen::Index j = 0; j < n; ++j) m(i, j) = f64(what);
     return m;
   }
-  int order(const char* what) {
+  std::int32_t integer(const char* what, std::int32_t lo, std::int32_t hi) {
     const std::size_t at = pos_;
     const std::int32_t v = i32(what);
-    if (v < 0 || v > kMaxOrder) {
+    if (v < lo || v > hi) {
       pos_ = at;
-      fail(std::string(what) + " " + std::to_string(v) + " outside [0, " + std::to_string(kMaxOrder) + "]");
+      fail(std::string(what) + " " + std::to_string(v) + " outside [" + std::to_string(lo) + ", " +
+           std::to_string(hi) + "]");
     }
     return v;
   }
@@ -172,6 +177,26 @@ class Reader {
   std::size_t base_;
   std::size_t pos_ = 0;
   const std::string& source_;
+};
+
+// The estimator state's values from the payload, each checked as it is read.
+class StateFromBytes final : public StateReader {
+ public:
+  explicit StateFromBytes(Reader& r) : r_(r) {}
+  bool flag(const char* what) override { return r_.flag(what); }
+  std::size_t count(const char* what) override { return r_.count(what, kMaxSubmodels); }
+  std::string name(const char* what) override { return r_.str(what, kMaxName); }
+  std::int32_t integer(const char* what, std::int32_t lo, std::int32_t hi) override {
+    return r_.integer(what, lo, hi);
+  }
+  std::uint64_t counter(const char* what) override { return r_.u64(what); }
+  double real(const char* what) override { return r_.f64(what); }
+  Eigen::VectorXd reals(Eigen::Index size, const char* what) override { return r_.vec(size, what); }
+  Eigen::MatrixXd matrix(Eigen::Index size, const char* what) override { return r_.mat(size, what); }
+  [[noreturn]] void fail(const std::string& what) override { r_.fail(what); }
+
+ private:
+  Reader& r_;
 };
 
 // FNV-1a, 64 bit.
@@ -228,49 +253,19 @@ std::uint64_t checkpoint_fingerprint(const Config& config) {
 }
 
 std::vector<std::uint8_t> encode_checkpoint(const Checkpoint& c) {
-  // Refuse what decode_checkpoint would refuse, rather than write a file that cannot be read.
-  const EstimatorState& st = c.estimator;
-  if (st.model.submodels.size() > kMaxSubmodels || c.baselines.size() > kMaxBaselines)
+  // Refuse what decode_checkpoint would refuse, rather than write a file that
+  // cannot be read (StateBytes refuses the estimator state's part).
+  if (c.baselines.size() > kMaxBaselines)
     throw std::invalid_argument("checkpoint: more than " + std::to_string(kMaxSubmodels) + " submodels or baselines");
-  for (const Submodel& s : st.model.submodels)
-    if (s.name.size() > kMaxName) throw std::invalid_argument("checkpoint: submodel name longer than 256 bytes");
   Writer w;
-  w.bytes.insert(w.bytes.end(), kMagic.begin(), kMagic.end());
+  w.bytes.assign(kMagic.begin(), kMagic.end());
   w.u32(kCheckpointVersion);
   w.u64(0);  // payload length, filled in below
   w.u64(c.config_fingerprint);
   w.i64(c.last_utime);
   w.i64(c.last_seq);
-
-  const EstimatorState& e = c.estimator;
-  w.u8(e.warmed_up);
-  w.u32(static_cast<std::uint32_t>(e.model.submodels.size()));
-  for (const Submodel& s : e.model.submodels) {
-    w.str(s.name);
-    w.i32(s.n);
-    w.i32(s.m);
-    w.i32(s.rigid_poles);
-    w.vec(s.a);
-    w.vec(s.b);
-  }
-  if (e.warmed_up) {
-    for (std::size_t i = 0; i < e.model.submodels.size(); ++i) {
-      w.f64(e.time_scale.at(i));
-      w.mat(e.P.at(i));
-      w.vec(e.P_bound.at(i));
-      w.vec(e.good_theta.at(i));
-      w.mat(e.good_P.at(i));
-    }
-  }
-  for (double v : {e.noise_variance, e.residual_short, e.noise_variance_good, e.input_power, e.input_power_reference})
-    w.f64(v);
-  for (std::uint64_t v : {e.residual_count, e.rearm, e.input_power_count, e.since_update, e.updates_since_good})
-    w.u64(v);
-  w.u8(e.have_last_sample);
-  w.f64(e.last_t);
-  w.f64(e.last_u);
-  w.f64(e.last_r);
-  put_status(w, e.status);
+  StateBytes state(w);
+  c.estimator.write(state);
 
   w.u32(static_cast<std::uint32_t>(c.baselines.size()));
   for (const auto& b : c.baselines) {
@@ -325,60 +320,8 @@ Checkpoint decode_checkpoint(std::span<const std::uint8_t> bytes, const std::str
   c.config_fingerprint = r.u64("config fingerprint");
   c.last_utime = r.i64("last utime");
   c.last_seq = r.i64("last sequence number");
-  EstimatorState& e = c.estimator;
-  e.warmed_up = r.flag("warmed_up");
-  const std::uint32_t K = r.count("submodel count", kMaxSubmodels);
-  for (std::uint32_t i = 0; i < K; ++i) {
-    Submodel s;
-    s.name = r.str("submodel name length", kMaxName);
-    s.n = r.order("submodel order n");
-    s.m = r.order("submodel order m");
-    s.rigid_poles = r.order("submodel rigid poles");
-    if (s.n + s.rigid_poles > kMaxOrder || s.m > s.n + s.rigid_poles)
-      r.fail("submodel '" + s.name + "': orders n=" + std::to_string(s.n) + ", m=" + std::to_string(s.m) +
-             ", l=" + std::to_string(s.rigid_poles) + " are not a valid submodel");
-    s.a = r.vec(s.n, "coefficients a");
-    s.b = r.vec(s.m + 1, "coefficients b");
-    e.model.submodels.push_back(std::move(s));
-  }
-  if (e.warmed_up) {
-    for (const Submodel& s : e.model.submodels) {
-      const Eigen::Index nt = s.n_theta();
-      e.time_scale.push_back(r.f64("time scale"));
-      if (!(e.time_scale.back() > 0.0)) r.fail("time scale must be > 0");
-      e.P.push_back(r.mat(nt, "P"));
-      e.P_bound.push_back(r.vec(nt, "P bound"));
-      e.good_theta.push_back(r.vec(nt, "last good theta"));
-      e.good_P.push_back(r.mat(nt, "last good P"));
-    }
-  }
-  e.noise_variance = r.f64("noise variance");
-  e.residual_short = r.f64("short residual variance");
-  e.noise_variance_good = r.f64("last good noise variance");
-  e.input_power = r.f64("input power");
-  e.input_power_reference = r.f64("input power reference");
-  e.residual_count = r.u64("residual count");
-  e.rearm = r.u64("rearm");
-  e.input_power_count = r.u64("input power count");
-  e.since_update = r.u64("samples since update");
-  e.updates_since_good = r.u64("updates since good");
-  e.have_last_sample = r.flag("have_last_sample");
-  e.last_t = r.f64("last sample time");
-  e.last_u = r.f64("last u");
-  e.last_r = r.f64("last r");
-  EstimatorStatus& st = e.status;
-  for (std::uint64_t* v : {&st.samples, &st.updates, &st.rejected_nonfinite, &st.rejected_out_of_order, &st.gaps,
-                           &st.outliers, &st.low_excitation_samples, &st.projections, &st.covariance_clamps,
-                           &st.resets})
-    *v = r.u64("status counter");
-  const std::int32_t reason = r.i32("last reset reason");
-  const auto& reasons = reset_reasons();
-  if (reason < -1 || reason >= static_cast<std::int32_t>(reasons.size()))
-    r.fail("last reset reason " + std::to_string(reason) + " unknown");
-  st.last_reset_reason = reason < 0 ? "" : reasons[static_cast<std::size_t>(reason)];
-  st.warming_up = r.flag("warming_up");
-  st.low_excitation = r.flag("low_excitation");
-  st.warmup_fit_used = r.flag("warmup_fit_used");
+  StateFromBytes state(r);
+  c.estimator = EstimatorState::read(state);
 
   const std::uint32_t nb = r.count("baseline count", kMaxBaselines);
   for (std::uint32_t i = 0; i < nb; ++i) {

@@ -1,0 +1,143 @@
+#pragma once
+// A block (one submodel of the additive model) as the recursive estimator
+// keeps it: theta-bar and P-bar in normalised time, and its four prefilters.
+#include <Eigen/Core>
+
+#include "modalwatch/prefilter.hpp"
+#include "hot_path.hpp"
+#include "second_order_filter_bank.hpp"
+
+namespace modalwatch::detail {
+
+// theta_i has at most n + m + 1 <= 2 kMaxFilterOrder + 1 entries; fixed capacity
+// keeps step() free of heap allocation.
+constexpr int kMaxTheta = 2 * kMaxFilterOrder + 1;
+using ThetaVec = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxTheta, 1>;
+using ThetaMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxTheta, kMaxTheta>;
+
+// The prefilters of a block (eqs. 19-20, 29, 32-33): 1/A on the residual
+// output (kY) and on the auxiliary output (kX, the instrument), 1/(p^l A) on u
+// (kU) and on the instrument input z (kZ).
+enum Channel { kY = 0, kX = 1, kU = 2, kZ = 3 };
+
+// A block's four prefilters. A mode (n = 2, no rigid poles) with a held output
+// (ZOH) filters all four signals through 1/A(p) with the same hold, so one
+// discretisation serves them (the signal enters only through the held input,
+// so the filter's matrices are the same for all four): a SecondOrderFilterBank,
+// re-discretised in place at every update (the estimator's inner loop).
+// Otherwise four Prefilters (rigid-body submodels, FOH output, other orders).
+struct BlockFilters {
+  bool shared = false;
+  // The block's output B/(p^l A) w uses p^N w_f of u and z only when biproper
+  // (m = n + l); the shared bank leaves it out otherwise.
+  bool input_top = true;
+  SecondOrderFilterBank mode;
+  Prefilter f[4];
+
+  void init(const FilterVector& a, const FilterVector& den, double T, Hold output_hold, bool biproper) {
+    shared = a.size() == 3 && den.size() == 3 && output_hold == Hold::zoh;
+    input_top = biproper || !shared;
+    if (shared) {
+      if (a(2) == 0.0) throw std::invalid_argument("discretize: leading coefficient is zero");
+      mode = SecondOrderFilterBank{};
+      mode.set_denominator(a(0), a(1), a(2), T);
+      for (auto& p : f) p = Prefilter();
+      return;
+    }
+    f[kY] = Prefilter(a, T, output_hold);
+    f[kX] = Prefilter(a, T, output_hold);
+    f[kU] = Prefilter(den, T, Hold::zoh);
+    f[kZ] = Prefilter(den, T, Hold::zoh);
+  }
+  void reset() {
+    if (shared) {
+      mode.reset();
+      return;
+    }
+    for (auto& p : f) p.reset();
+  }
+  // A sample t_k in two phases. begin_sample() moves the held-input states to
+  // t_k: all four at once for a mode (one vectorised loop); Prefilters (a FOH
+  // output needs w_k) wait for their sample. take(c, w) then gives channel c's
+  // derivatives at t_k for w_k (Prefilter::step for those that waited).
+  // advance_held(c) + complete(c, w) is take() split for the instrument input,
+  // whose w_k is solved for after its free response is known.
+  MODALWATCH_HOT void begin_sample() {
+    if (shared) mode.advance_all();
+  }
+  MODALWATCH_HOT const double* take(Channel c, double w) { return shared ? mode.complete(c, w) : f[c].step(w).data(); }
+  MODALWATCH_HOT void advance_held(Channel c) {
+    if (!shared) f[c].advance();
+  }
+  MODALWATCH_HOT const double* complete(Channel c, double w) { return shared ? mode.complete(c, w) : f[c].complete(w).data(); }
+  // take() and complete() for the input channels kU and kZ, whose derivatives
+  // the block uses up to p^m only (fill(), output()).
+  MODALWATCH_HOT const double* take_input(Channel c, double w) {
+    return input_top ? take(c, w) : mode.complete_state(c, w);
+  }
+  MODALWATCH_HOT const double* complete_input(Channel c, double w) {
+    return input_top ? complete(c, w) : mode.complete_state(c, w);
+  }
+  MODALWATCH_HOT const double* derivatives(Channel c) const { return shared ? mode.derivatives(c) : f[c].derivatives().data(); }
+};
+
+struct Block {
+  int n = 0, m = 0, l = 0, nt = 0;
+  bool biproper = false;  // m = n + l: the output has a direct feedthrough
+  double ws = 1.0, lambda = 1.0;
+  double random_walk = 0.0;  // relative std of theta's drift per update (Q, CONTSID's Kalman-filter adaptation)
+  ThetaVec scale;  // theta' = scale .* theta (physical)
+  ThetaVec theta;  // theta-bar, normalised
+  ThetaMat P;      // P-bar, normalised
+  ThetaVec p_bound;  // per-direction bound on diag(P): covariance_bound x diag(P(t0))
+  BlockFilters filters;
+  double xu = 0.0, xz = 0.0;  // B/(p^l A) driven by u and by z, at t_k
+  ThetaVec good_theta;
+  ThetaMat good_P;
+  ThetaVec phi, psi;
+
+  FilterVector a_poly() const {
+    FilterVector c(n + 1);
+    c(0) = 1.0;
+    c.tail(n) = theta.head(n);
+    return c;
+  }
+  FilterVector denominator() const {
+    FilterVector c = FilterVector::Zero(n + l + 1);
+    c.tail(n + 1) = a_poly();
+    return c;
+  }
+  // B/(p^l A) w from the filter's derivatives d = [w_f, p w_f, ...].
+  MODALWATCH_HOT double output(const double* d) const {
+    if (m == 0) return theta(n) * d[0];  // a mode's B = b0 (the common case)
+    double s = 0.0;
+    for (int j = 0; j <= m; ++j) s += theta(n + j) * d[j];
+    return s;
+  }
+  // Regressor (eqs. 19, 33) and instrument (eqs. 20, 29, 32) from the filtered
+  // residual output dy, auxiliary output dx, input du and instrument input dz.
+  MODALWATCH_HOT void fill(const double* dy, const double* dx, const double* du, const double* dz) {
+    if (n == 2 && m == 0) {  // a mode (the common case), without the loops
+      phi(0) = -dy[1];
+      phi(1) = -dy[2];
+      phi(2) = du[0];
+      psi(0) = -dx[1];
+      psi(1) = -dx[2];
+      psi(2) = dz[0];
+      return;
+    }
+    for (int j = 1; j <= n; ++j) {
+      phi(j - 1) = -dy[j];
+      psi(j - 1) = -dx[j];
+    }
+    for (int j = 0; j <= m; ++j) {
+      phi(n + j) = du[j];
+      psi(n + j) = dz[j];
+    }
+  }
+  MODALWATCH_HOT double feedthrough() const {
+    return biproper ? theta(n + m) / (n > 0 ? theta(n - 1) : 1.0) : 0.0;
+  }
+};
+
+}  // namespace modalwatch::detail

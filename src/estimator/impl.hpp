@@ -1,0 +1,107 @@
+#pragma once
+// The recursive estimator's state (RecursiveEstimator::Impl), shared by its
+// sources: estimator.cpp (construction, step(), the accessors), step.cpp (the
+// per-sample path), guards.cpp, warmup_fit.cpp and state.cpp.
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "modalwatch/estimator.hpp"
+#include "modalwatch/model.hpp"
+#include "modalwatch/record.hpp"
+#include "modalwatch/transfer_function.hpp"
+#include "block.hpp"
+#include "hot_path.hpp"
+
+namespace modalwatch {
+
+// Why the estimator went back to its last good state (status().last_reset_reason):
+// arrays, so that every source sees one address per reason.
+inline constexpr char kResetNonFiniteModel[] = "non-finite auxiliary model or instrument output";
+inline constexpr char kResetUnstableLoop[] = "the instrument's closed loop with the current model is unstable";
+inline constexpr char kResetDiverged[] =
+    "output error diverged (residual RMS above divergence_ratio x its last good value)";
+inline constexpr char kResetDegenerate[] = "non-finite or degenerate update (NaN/Inf in theta, P or the gain)";
+
+struct WarmupFit::Context {
+  AdditiveModel initial;
+  EstimatorSettings cfg;
+};
+
+struct RecursiveEstimator::Impl {
+  EstimatorSettings cfg;
+  AdditiveModel initial;
+  std::shared_ptr<const WarmupFit::Context> fit_context;  // immutable, shared with the jobs
+  std::vector<detail::Block> blocks;
+  std::vector<detail::BlockFilters> snapshot;  // filters at t_{k-1}, for refinements
+  DiscreteTransferFunction controller;  // C_d(q) of the instrument's loop (eqs. 9, 29)
+  EstimatorStatus status;
+
+  // Warm-up window, preallocated; a WarmupFit job holds it while it runs.
+  Eigen::VectorXd wt, wu, wy, wr;
+  int buffered = 0;
+  bool fit_pending = false;      // window full, its fit not applied yet (defer_warmup_fit)
+  bool fit_taken = false;        // ... and the window is out in a job
+  std::uint64_t fit_generation = 0;  // tells a stale job (restore() since) from the pending one
+
+  double t_prev = 0.0;
+  bool have_prev = false;
+  bool just_restored = false;  // restore() ran and no sample has come since
+  double last_u = 0.0, last_r = 0.0;  // held in place of a non-finite sample
+  std::uint64_t since_update = 0;
+  std::uint64_t updates_since_good = 0;
+
+  double e_var = 0.0;        // output-error variance (EWMA over the residual window)
+  double e_alpha = 0.0;      // its forgetting
+  std::uint64_t e_count = 0;
+  double e_short = 0.0;      // the same over a few samples: divergence detector
+  double e_short_alpha = 0.0;
+  double e_var_good = 0.0;   // e_var when the last good state was saved
+  std::uint64_t rearm = 0;   // samples until the divergence detector is armed again
+  std::uint64_t settling = 0;  // after a filter restart: samples left to catch up (no update meanwhile)
+  int outlier_run = 0;       // consecutive samples replaced as outliers
+  double pow_short = 0.0, pow_ref = 0.0, pow_alpha = 0.0, pow_ref_alpha = 0.0;
+  std::uint64_t pow_count = 0;
+
+  // The per-sample path, one compilation per instruction set (hot_path.hpp),
+  // chosen once: advance() calls through kernel.
+  using Kernel = unsigned (Impl::*)(const Sample&, bool);
+  Kernel kernel = &Impl::advance_portable;
+  StepKernel kernel_id = StepKernel::portable;
+
+  void build(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>* fit_covariance, double fit_sigma2,
+             double y_var);
+  MODALWATCH_HOT void rediscretise(detail::Block& b);
+  void rediscretise_prefilters(detail::Block& b, double Ts);
+  void allocate_window() {
+    for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) w->resize(cfg.warmup_samples);
+  }
+  void reset_filters();
+  void restart_filters();
+  void save_good();
+  void restore_good(const char* reason);
+  unsigned advance(const Sample& s, bool allow_update) { return (this->*kernel)(s, allow_update); }
+  unsigned advance_portable(const Sample& s, bool allow_update);
+  MODALWATCH_TARGET_AVX2_FMA unsigned advance_avx2_fma(const Sample& s, bool allow_update);
+  MODALWATCH_HOT unsigned advance_body(const Sample& s, bool allow_update);
+  bool select_kernel(StepKernel k) noexcept;
+  MODALWATCH_HOT unsigned finish_update();
+  MODALWATCH_HOT bool update_block(detail::Block& b, double y_f);
+  template <int N>
+  MODALWATCH_HOT bool update_block_n(detail::Block& b, double y_f);
+  void finish_warmup(const WarmupFit& fit);
+};
+
+inline void RecursiveEstimator::Impl::rediscretise(detail::Block& b) {
+  const double Ts = b.ws * cfg.sample_time;
+  if (b.filters.shared) {  // a mode, ZOH: A = 1 + a1 p + a2 p^2 for all four
+    const double a1 = b.theta(0), a2 = b.theta(1);
+    b.filters.mode.set_denominator(1.0, a1, a2, discretize_second_order(1.0, a1, a2, Ts));
+    return;
+  }
+  rediscretise_prefilters(b, Ts);
+}
+
+}  // namespace modalwatch

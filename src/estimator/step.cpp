@@ -1,0 +1,283 @@
+// The per-sample path of the recursive estimator (Algorithm 1): one sample
+// through the instrument, the guards' checks and the block updates, compiled
+// once per instruction set (hot_path.hpp).
+#include <cmath>
+#include <cstdint>
+
+#include <Eigen/Core>
+
+#include "modalwatch/estimator.hpp"
+#include "modalwatch/prefilter.hpp"
+#include "impl.hpp"
+#include "update.hpp"
+
+namespace modalwatch {
+namespace {
+
+// Whether this CPU (and its operating system) runs the AVX2+FMA compilation.
+bool cpu_has_avx2_fma() noexcept {
+#if MODALWATCH_HAVE_AVX2_FMA
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+#else
+  return false;
+#endif
+}
+
+}  // namespace
+
+using namespace detail;
+
+// Out of line: its Eigen temporaries would otherwise cost every mode's
+// rediscretise() a heavier call frame.
+[[gnu::noinline]] void RecursiveEstimator::Impl::rediscretise_prefilters(Block& b, double Ts) {
+  Prefilter* f = b.filters.f;
+  const FilterVector a = b.a_poly();
+  const Discretization da = discretize(a, Ts, cfg.output_hold);
+  f[kY].set_denominator(a, da);
+  f[kX].set_denominator(a, da);
+  if (b.l == 0 && cfg.output_hold == Hold::zoh) {  // p^l A = A: one discretisation serves all four
+    f[kU].set_denominator(a, da);
+    f[kZ].set_denominator(a, da);
+    return;
+  }
+  const FilterVector den = b.denominator();
+  const Discretization dd = discretize(den, Ts, Hold::zoh);
+  f[kU].set_denominator(den, dd);
+  f[kZ].set_denominator(den, dd);
+}
+
+bool RecursiveEstimator::Impl::select_kernel(StepKernel k) noexcept {
+  switch (k) {
+    case StepKernel::portable:
+      kernel = &Impl::advance_portable;
+      break;
+    case StepKernel::avx2_fma:
+#if MODALWATCH_HAVE_AVX2_FMA
+      if (!cpu_has_avx2_fma()) return false;
+      kernel = &Impl::advance_avx2_fma;
+      break;
+#else
+      return false;
+#endif
+  }
+  kernel_id = k;
+  return true;
+}
+
+unsigned RecursiveEstimator::Impl::advance_portable(const Sample& s, bool allow_update) {
+  return advance_body(s, allow_update);
+}
+
+#if MODALWATCH_HAVE_AVX2_FMA
+unsigned RecursiveEstimator::Impl::advance_avx2_fma(const Sample& s, bool allow_update) {
+  return advance_body(s, allow_update);
+}
+#endif
+
+inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool allow_update) {
+  unsigned flags = 0;
+  const bool refine = cfg.refinements > 0 || cfg.block_iterations > 1;
+  if (refine && allow_update) {
+    for (std::size_t i = 0; i < blocks.size(); ++i) snapshot[i] = blocks[i].filters;
+  }
+  for (auto& b : blocks) b.filters.begin_sample();
+  // 1. Instrument input z_k = S_uo(q, t_k) r_k: the noise-free loop with the
+  //    known controller and the current model (eq. 29), solved for a biproper
+  //    controller. In open loop z = u.
+  //    With it, each block's output for u at t_k, and y_hat, their sum.
+  double z = s.u;
+  double y_hat = 0.0;
+  if (cfg.closed_loop) {
+    double free = 0.0, D = 0.0;
+    for (auto& b : blocks) {
+      b.filters.advance_held(kZ);
+      b.xz = b.output(b.filters.complete_input(kZ, 0.0));  // the free response
+      free += b.xz;
+      D += b.feedthrough();  // 0 unless biproper
+    }
+    const double c0 = controller.feedthrough();
+    z = (c0 * (s.r - free) + controller.peek(0.0)) / (1.0 + c0 * D);
+    controller.step(s.r - (free + D * z));
+    for (auto& b : blocks) {
+      const double* dz = b.filters.complete_input(kZ, z);
+      // Strictly proper (m < n + l): the output uses the state alone, not z_k.
+      if (b.biproper) b.xz = b.output(dz);
+      b.xu = b.output(b.filters.take_input(kU, s.u));
+      y_hat += b.xu;
+    }
+  } else {
+    for (auto& b : blocks) {
+      b.xu = b.output(b.filters.take_input(kU, s.u));
+      b.xz = b.xu;
+      y_hat += b.xu;
+    }
+  }
+  if (!std::isfinite(y_hat) || !std::isfinite(z)) {
+    restore_good(kResetNonFiniteModel);
+    return flags | kReset;
+  }
+  // The instrument's loop (eq. 29) runs the current model with the controller; a
+  // wrong model can make that loop unstable even when every mode is stable.
+  if (cfg.closed_loop && pow_ref > 0.0 && z * z > 1e8 * pow_ref) {
+    restore_good(kResetUnstableLoop);
+    return flags | kReset;
+  }
+  // 2. Outliers: a sample far outside the residual spread is replaced by the
+  //    model's output so that it does not enter the filter states.
+  double y = s.y;
+  const double e = std::isfinite(s.y) ? s.y - y_hat : 0.0;
+  bool update = allow_update;
+  // A run of more than kOutlierRun "outliers" is not outliers but a mismatch
+  // (a restart, a changed plant): accept it, or the estimator would lock up.
+  constexpr int kOutlierRun = 10;
+  // Nor is a residual at the round-off of y_hat an outlier: on noise-free data
+  // e_var is round-off too, and a residual ten times it would say no more than
+  // how y_hat was rounded (with FMA or without). kRoundOff, relative to the
+  // outputs summed into y_hat, is 10^4 times their round-off and far below any
+  // sensor's resolution (a 24-bit converter resolves 6e-8 of its range).
+  constexpr double kRoundOff = 1e-12;
+  const auto above_round_off = [&] {
+    double sum = 0.0;
+    for (const auto& b : blocks) sum += std::abs(b.xu);
+    return std::abs(e) > kRoundOff * sum;
+  };
+  if (!std::isfinite(s.y)) {
+    y = y_hat;
+  } else if (e_count > 100 && outlier_run < kOutlierRun && e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var &&
+             above_round_off()) {
+    y = y_hat;
+    ++outlier_run;
+    ++status.outliers;
+    flags |= kOutlier;
+    update = false;
+  } else {
+    outlier_run = 0;
+    e_var = e_count == 0 ? e * e : e_alpha * e_var + (1.0 - e_alpha) * e * e;
+    e_short = e_count == 0 ? e * e : e_short_alpha * e_short + (1.0 - e_short_alpha) * e * e;
+    ++e_count;
+  }
+  // Divergence: the output error an order of magnitude above what it was when
+  // the last good state was saved. Plant changes that the estimator can follow
+  // raise it far less.
+  constexpr double kSettledRatio = 3.0;  // output error RMS within 3x its last good value
+  const bool diverging =
+      allow_update && e_var_good > 0.0 && e_short > cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
+  if (settling > 0) {
+    const bool settled = !(e_short > kSettledRatio * kSettledRatio * e_var_good);
+    settling = settled ? 0 : settling - 1;
+    if (!settled) update = false;
+  } else if (rearm > 0) {
+    --rearm;
+  } else if (diverging) {
+    restore_good(kResetDiverged);
+    return flags | kReset;
+  }
+  // 3. Excitation: without input power the update only winds P up.
+  pow_short = pow_count == 0 ? z * z : pow_alpha * pow_short + (1.0 - pow_alpha) * z * z;
+  ++pow_count;
+  const bool low = pow_ref > 0.0 && pow_short < cfg.low_excitation_ratio * pow_ref;
+  // The reference is the input power over a long window, learned while the
+  // excitation is normal (seeded by the warm-up when there is one).
+  if (!low) pow_ref = pow_ref > 0.0 ? pow_ref_alpha * pow_ref + (1.0 - pow_ref_alpha) * z * z : pow_short;
+  status.low_excitation = low;
+  if (low) {
+    ++status.low_excitation_samples;
+    flags |= kLowExcitation;
+    update = false;
+  }
+  if (update && ++since_update < static_cast<std::uint64_t>(cfg.update_divisor)) update = false;
+  if (!update) {
+    for (auto& b : blocks) {
+      b.filters.take(kY, y - (y_hat - b.xu));
+      b.filters.take(kX, b.xz);
+    }
+    return flags;
+  }
+  since_update = 0;
+
+  // 4. Algorithm 1: M_l block-coordinate iterations, M_s refinements per block.
+  // Block i's residual output (eq. 15) is y minus the other blocks' outputs at
+  // their latest theta: y - (xu_sum - b.xu), the sum kept up to date below.
+  double xu_sum = y_hat;
+  bool healthy = true;
+  if (!refine) {
+    // M_l = 1, M_s = 0 (the paper's setting): one update per block from
+    // theta-bar, P-bar in place, and the block's prefilters re-discretised for
+    // the next sample (this sample is done with them).
+    for (auto& b : blocks) {
+      const double y_tilde = y - (xu_sum - b.xu);
+      const double* dy = b.filters.take(kY, y_tilde);
+      const double* dx = b.filters.take(kX, b.xz);
+      const double* du = b.filters.derivatives(kU);
+      const double* dz = cfg.closed_loop ? b.filters.derivatives(kZ) : du;
+      b.fill(dy, dx, du, dz);
+      if (!update_block(b, dy[0])) {
+        restore_good(kResetDegenerate);
+        return flags | kReset;
+      }
+      const double xu = b.output(du);
+      xu_sum += xu - b.xu;
+      b.xu = xu;
+      rediscretise(b);
+    }
+    return flags | finish_update();
+  }
+  for (int l = 0; l < cfg.block_iterations && healthy; ++l) {
+    for (std::size_t i = 0; i < blocks.size() && healthy; ++i) {
+      Block& b = blocks[i];
+      const ThetaVec theta_bar = b.theta;
+      const ThetaMat P_bar = b.P;
+      ThetaVec theta_iter = theta_bar;
+      ThetaMat P_iter = P_bar;
+      for (int s_it = 0; s_it <= cfg.refinements; ++s_it) {
+        // Residual output of this block (eq. 15), other blocks at their latest b.
+        const double y_tilde = y - (xu_sum - b.xu);
+        if (l > 0 || s_it > 0) {
+          // Refinement: the prefilter is the latest iterate; redo this sample.
+          b.filters = snapshot[i];
+          b.theta = theta_iter;
+          rediscretise(b);
+          b.filters.begin_sample();
+          b.filters.take_input(kU, s.u);
+          if (cfg.closed_loop) b.filters.take_input(kZ, z);
+          b.theta = theta_bar;
+        }
+        const double* dy = b.filters.take(kY, y_tilde);
+        const double* dx = b.filters.take(kX, b.xz);
+        const double* du = b.filters.derivatives(kU);
+        const double* dz = cfg.closed_loop ? b.filters.derivatives(kZ) : du;
+        b.fill(dy, dx, du, dz);
+        b.theta = theta_bar;
+        b.P = P_bar;
+        if (!update_block(b, dy[0])) {
+          healthy = false;
+          break;
+        }
+        theta_iter = b.theta;
+        P_iter = b.P;
+      }
+      if (!healthy) break;
+      b.theta = theta_iter;
+      b.P = P_iter;
+      const double xu = b.output(b.filters.derivatives(kU));  // G_i(theta^{l+1}) u for the next blocks' residuals
+      xu_sum += xu - b.xu;
+      b.xu = xu;
+    }
+  }
+  if (!healthy) {
+    restore_good(kResetDegenerate);
+    return flags | kReset;
+  }
+  for (auto& b : blocks) rediscretise(b);
+  return flags | finish_update();
+}
+
+// After a healthy update of every block: counted, and now and then the last good state.
+inline unsigned RecursiveEstimator::Impl::finish_update() {
+  ++status.updates;
+  if (++updates_since_good >= 256 && e_short < 4.0 * e_var) save_good();
+  return kUpdated;
+}
+
+}  // namespace modalwatch

@@ -1,0 +1,150 @@
+#pragma once
+// The parameter update of one block, eqs. (23)-(25), with the guards that act
+// on its result (stability projection, random walk, covariance bound). Part of
+// the per-sample path: included by step.cpp only (hot_path.hpp).
+#include <cmath>
+
+#include <Eigen/Core>
+
+#include "modalwatch/polynomial.hpp"
+#include "impl.hpp"
+
+namespace modalwatch {
+namespace {
+
+using detail::kMaxTheta;
+
+// Stability projection of an anti-monic A (section 4.7), in place: false when A
+// was stable or cannot be projected. Orders 1 and 2 in closed form without
+// allocation; higher orders through the general routine (allocates, only when
+// A is unstable). Out of line, with the per-sample path (never inlined there).
+bool project(double* a_part, int n) {
+  constexpr double margin = 1e-6;
+  if (n == 1) {
+    if (a_part[0] > 0.0) return false;
+    a_part[0] = a_part[0] < 0.0 ? -a_part[0] : margin;
+    return true;
+  }
+  if (n == 2) {
+    double& a1 = a_part[0];
+    double& a2 = a_part[1];
+    if (a1 > 0.0 && a2 > 0.0) return false;
+    if (a2 > 0.0) {
+      // Both roots in the closed right half plane: reflecting both flips their sum.
+      a1 = a1 < 0.0 ? -a1 : 2.0 * margin * std::sqrt(a2);
+    } else if (a2 < 0.0) {
+      // Real roots of opposite sign: reflect the positive one.
+      a1 = std::sqrt(a1 * a1 - 4.0 * a2);
+      a2 = -a2;
+    } else {
+      return false;  // degenerate (order drop): caller rejects
+    }
+    return true;
+  }
+  Eigen::Map<Eigen::VectorXd> part(a_part, n);
+  Eigen::VectorXd a = part;
+  if (!project_stable(a)) return false;
+  part = a;
+  return true;
+}
+
+// eqs. (23)-(25) on raw column-major storage (P is nt x nt, leading dimension nt):
+// K = P psi / (lambda + phi^T P psi), theta += K (y_f - phi^T theta),
+// P = (P - K phi^T P) / lambda. The IV recursion (eq. 24) does not keep P
+// symmetric; its symmetric part is kept, against round-off that would
+// otherwise make P indefinite over millions of updates:
+// P = (P - (K w^T + w K^T)/2) / lambda with w = P^T phi = P phi (P symmetric on
+// entry), computed on the upper triangle and mirrored. N > 0 fixes the size at
+// compile time so that the loops unroll (N = 3: a mode, the common case); N = 0
+// takes nt at run time.
+template <int N>
+MODALWATCH_HOT bool iv_update(int nt_runtime, double* P, double* theta, const double* phi, const double* psi, double lambda,
+               double y_f) {
+  const int nt = N > 0 ? N : nt_runtime;
+  double Ppsi[kMaxTheta], w[kMaxTheta];
+  for (int i = 0; i < nt; ++i) Ppsi[i] = w[i] = 0.0;
+  for (int j = 0; j < nt; ++j) {  // by columns: P psi and P phi
+    const double* column = P + j * nt;
+    for (int i = 0; i < nt; ++i) {
+      Ppsi[i] += column[i] * psi[j];
+      w[i] += column[i] * phi[j];
+    }
+  }
+  double denom = lambda, eps = y_f;
+  for (int i = 0; i < nt; ++i) {
+    denom += phi[i] * Ppsi[i];
+    eps -= phi[i] * theta[i];
+  }
+  if (!std::isfinite(denom) || std::abs(denom) < 1e-300) return false;
+  const double inv_lambda = 1.0 / lambda;
+  double K_half[kMaxTheta];  // K / 2 (exact): the symmetric part's 1/2 taken once
+  for (int i = 0; i < nt; ++i) {
+    const double K = Ppsi[i] / denom;
+    theta[i] += K * eps;
+    K_half[i] = 0.5 * K;
+  }
+  for (int j = 0; j < nt; ++j) {
+    for (int i = 0; i <= j; ++i) {
+      const double v = (P[i + j * nt] - (K_half[i] * w[j] + K_half[j] * w[i])) * inv_lambda;
+      P[i + j * nt] = v;
+      P[j + i * nt] = v;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+// One block's update from theta-bar(t_{k-1}), P-bar(t_{k-1}); the filtered
+// regressor phi and instrument psi are already in b.
+inline bool RecursiveEstimator::Impl::update_block(detail::Block& b, double y_f) {
+  return b.nt == 3 ? update_block_n<3>(b, y_f) : update_block_n<0>(b, y_f);
+}
+
+// On raw storage, with nt fixed at compile time for N > 0 (as iv_update): at
+// nt = 3 Eigen's dynamic-size copies and row/column operations cost more than
+// the arithmetic.
+template <int N>
+inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_f) {
+  const int nt = N > 0 ? N : b.nt;
+  // In place: on a false return the caller goes back to the last good state.
+  double* P = b.P.data();  // nt x nt, column-major
+  double* theta = b.theta.data();
+  if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), b.lambda, y_f)) return false;
+  // A mode with a_1, a_2 > 0 is stable: the common case, decided here.
+  const bool stable_mode = b.n == 2 && theta[0] > 0.0 && theta[1] > 0.0;
+  if (b.n > 0 && !stable_mode) {
+    if (project(theta, b.n)) ++status.projections;
+    if (theta[b.n - 1] == 0.0) return false;
+  }
+  // Guards: random walk (CONTSID's Kalman-filter adaptation), bounded trace.
+  // Q is a parameter covariance; P carries theta^2 per output^2 (cov = sigma^2 P).
+  if (b.random_walk > 0.0 && e_var > 0.0) {
+    const double q2 = b.random_walk * b.random_walk / e_var;  // Q_jj = q2 theta_j^2
+    for (int j = 0; j < nt; ++j) P[j + j * nt] += q2 * theta[j] * theta[j];
+  }
+  // Per-direction bound: D P D with D = diag(min(1, sqrt(bound/P_jj))) keeps P
+  // symmetric positive definite while stopping wind-up in unexcited directions.
+  // P is symmetric here, so D_jj scales row j and mirrors it into column j, and
+  // P_jj becomes D_jj^2 P_jj = bound_j.
+  bool clamped = false;
+  const double* bound = b.p_bound.data();
+  for (int j = 0; j < nt; ++j) {
+    if (P[j + j * nt] > bound[j]) {
+      const double f = std::sqrt(bound[j] / P[j + j * nt]);
+      for (int k = 0; k < nt; ++k) {
+        if (k == j) continue;
+        P[j + k * nt] *= f;
+        P[k + j * nt] = P[j + k * nt];
+      }
+      P[j + j * nt] = bound[j];
+      clamped = true;
+    }
+  }
+  if (clamped) ++status.covariance_clamps;
+  double trace = 0.0;
+  for (int j = 0; j < nt; ++j) trace += P[j + j * nt] + theta[j];
+  return std::isfinite(trace);
+}
+
+}  // namespace modalwatch

@@ -1,0 +1,161 @@
+// The warm-up fit (section 4.7): the offline additive SRIVC on the warm-up
+// window as a job that may run on another thread (WarmupFit), and the
+// estimator's part, taking the job and applying its result.
+#include <algorithm>
+#include <cmath>
+#include <exception>
+#include <new>
+#include <stdexcept>
+#include <utility>
+#include <vector>
+
+#include <Eigen/LU>
+#include <Eigen/QR>
+
+#include "modalwatch/polynomial.hpp"
+#include "modalwatch/record.hpp"
+#include "modalwatch/srivc.hpp"
+#include "impl.hpp"
+
+namespace modalwatch {
+
+WarmupFit::WarmupFit() = default;
+WarmupFit::~WarmupFit() = default;
+WarmupFit::WarmupFit(WarmupFit&&) noexcept = default;
+WarmupFit& WarmupFit::operator=(WarmupFit&&) noexcept = default;
+
+// The offline part of the initialisation (section 4.7): the fit on the window
+// and theta(t0), P(t0) from it. No estimator state is touched here, so that it
+// can run on another thread (WarmupFit).
+void WarmupFit::run() noexcept {
+  if (!context_ || done_) return;
+  const AdditiveModel& initial = context_->initial;
+  const EstimatorSettings& cfg = context_->cfg;
+  try {
+  const int N = n_;
+  Record window;
+  window.t = t_.head(N);
+  window.u = u_.head(N);
+  window.y = y_.head(N);
+  if (cfg.closed_loop) window.r = r_.head(N);
+  const double y_var = (window.y.array() - window.y.mean()).square().mean();
+  AdditiveModel model = initial;
+  std::vector<Eigen::MatrixXd> cov;
+  double sigma2 = 0.0;
+  bool fit_used = false;
+  if (cfg.fit_on_warmup) {
+    try {
+      SrivcOptions o;
+      o.closed_loop = cfg.closed_loop;
+      o.controller = cfg.controller;
+      o.output_hold = cfg.output_hold;
+      o.max_iterations = cfg.warmup_iterations;
+      const FitResult fit = fit_srivc(window, initial, o);
+      bool ok = fit.model.beta().allFinite() && fit.covariance.allFinite() && fit.noise_variance > 0.0;
+      for (const auto& s : fit.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
+      if (ok) {
+        // theta(t0), P(t0): the configured model as a prior (relative std rho per
+        // parameter) fused with the fit and its covariance C, per submodel:
+        //   C0 = (Cp^-1 + C^-1)^-1,  theta0 = C0 (Cp^-1 theta_cfg + C^-1 theta_fit).
+        // Where the window is informative the fit dominates; along directions it
+        // leaves undetermined (a setpoint with few frequencies) the prior holds.
+        sigma2 = fit.noise_variance;
+        const double rho = cfg.initial_covariance_relative;
+        for (std::size_t i = 0; i < model.submodels.size(); ++i) {
+          const Eigen::VectorXd th_cfg = initial.submodels[i].theta(), th_fit = fit.model.submodels[i].theta();
+          const Eigen::MatrixXd C = fit.theta_covariance(static_cast<int>(i));
+          Eigen::VectorXd prior_var(th_cfg.size());
+          for (Eigen::Index j = 0; j < th_cfg.size(); ++j) prior_var(j) = std::pow(rho * std::max(std::abs(th_cfg(j)), 1e-12), 2);
+          const Eigen::MatrixXd Cinv = C.completeOrthogonalDecomposition().pseudoInverse();
+          Eigen::MatrixXd info = Cinv;
+          info.diagonal() += prior_var.cwiseInverse();
+          const Eigen::MatrixXd C0 = info.inverse();
+          Eigen::VectorXd th0 = C0 * (prior_var.cwiseInverse().cwiseProduct(th_cfg) + Cinv * th_fit);
+          Submodel s = initial.submodels[i];
+          s.set_theta(th0);
+          if (s.n > 0) {
+            Eigen::VectorXd a = s.a;
+            project_stable(a);
+            s.a = a;
+          }
+          model.submodels[i] = s;
+          cov.push_back(0.5 * (C0 + C0.transpose()));
+        }
+        fit_used = true;
+      }
+    } catch (const std::exception&) {
+      // Fall back to the configured model: reported through warmup_fit_used.
+    }
+  }
+  model_ = std::move(model);
+  covariance_ = std::move(cov);
+  sigma2_ = sigma2;
+  y_var_ = y_var;
+  fit_used_ = fit_used;
+  } catch (...) {
+    failed_ = true;  // allocation: apply_warmup_fit() restarts the warm-up
+  }
+  done_ = true;
+}
+
+// The estimator's part: build from the fit's result, then run the filters over
+// the window without updating (section 4.7).
+void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
+  const int N = buffered;
+  const double sigma2 = fit.sigma2_;
+  if (fit.fit_used_) status.warmup_fit_used = true;
+  build(fit.model_, fit.covariance_.empty() ? nullptr : &fit.covariance_, sigma2, fit.y_var_);
+  if (sigma2 > 0.0) {
+    e_var = e_short = e_var_good = sigma2;
+    e_count = 1000;
+  }
+  // Run the filters over the window with theta(t0), without updating (section 4.7).
+  double p = 0.0;
+  for (int k = 0; k < N; ++k) {
+    advance({wt(k), wu(k), wy(k), cfg.closed_loop ? wr(k) : 0.0}, false);
+    p += wu(k) * wu(k);
+  }
+  pow_ref = p / std::max(N, 1);
+  status.warming_up = false;
+}
+
+bool RecursiveEstimator::warmup_fit_pending() const noexcept { return impl_->fit_pending; }
+
+WarmupFit RecursiveEstimator::take_warmup_fit() {
+  Impl& m = *impl_;
+  if (!m.fit_pending || m.fit_taken)
+    throw std::logic_error("RecursiveEstimator::take_warmup_fit: no warm-up fit pending");
+  WarmupFit job;
+  job.context_ = m.fit_context;
+  job.generation_ = m.fit_generation;
+  job.n_ = m.buffered;
+  job.t_.swap(m.wt);  // Eigen swaps the buffers: no copy, no allocation
+  job.u_.swap(m.wu);
+  job.y_.swap(m.wy);
+  job.r_.swap(m.wr);
+  m.fit_taken = true;
+  return job;
+}
+
+void RecursiveEstimator::apply_warmup_fit(WarmupFit&& job) {
+  Impl& m = *impl_;
+  if (!m.fit_pending || !m.fit_taken || job.empty() || job.generation_ != m.fit_generation)
+    throw std::logic_error("RecursiveEstimator::apply_warmup_fit: not this estimator's pending warm-up fit");
+  if (!job.done_) throw std::logic_error("RecursiveEstimator::apply_warmup_fit: the job has not run");
+  m.wt.swap(job.t_);
+  m.wu.swap(job.u_);
+  m.wy.swap(job.y_);
+  m.wr.swap(job.r_);
+  m.fit_pending = m.fit_taken = false;
+  try {
+    if (job.failed_) throw std::bad_alloc();
+    m.finish_warmup(job);
+  } catch (...) {
+    m.blocks.clear();
+    m.status.warming_up = true;
+    m.buffered = 0;  // start the warm-up again
+    throw;
+  }
+}
+
+}  // namespace modalwatch
