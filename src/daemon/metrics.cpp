@@ -7,10 +7,12 @@
 #include <prometheus/histogram.h>
 #include <prometheus/registry.h>
 
-#include <cmath>
+#include <algorithm>
 #include <exception>
+#include <iterator>
 #include <limits>
 #include <numbers>
+#include <stdexcept>
 #include <utility>
 
 #include "modalwatch/error.hpp"
