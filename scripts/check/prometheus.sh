@@ -129,7 +129,7 @@ if [ "$rules_loaded" -lt 1 ]; then
 fi
 
 # Both targets up before any input: the endpoints answer from the start.
-until [ "$(query 'sum(up{job="modalwatch"})' | awk '{print $2}')" = 2 ]; do
+until [ "$(query 'sum(up{job="modalwatch"})' | awk '{print $NF}')" = 2 ]; do
   if ((SECONDS > deadline)); then
     echo "the daemons' endpoints are not both up:" >&2
     query 'up{job="modalwatch"}' >&2
@@ -152,7 +152,7 @@ replay_x=$!
 replay_y=$!
 
 flag_x='modalwatch_mode_flag{axis="x",mode="flex",quantity="wn"}'
-flag_y='modalwatch_mode_flag{axis="y"} > 0'
+flag_y='modalwatch_mode_flag{axis="y"} == 2'
 raised=0
 while ((SECONDS <= deadline)); do
   if [ -n "$(query "$flag_y")" ]; then
@@ -160,7 +160,7 @@ while ((SECONDS <= deadline)); do
     query "$flag_y" >&2
     exit 1
   fi
-  if [ "$(query "$flag_x" | awk '{print $2}')" = 2 ]; then
+  if [ "$(query "$flag_x" | awk '{print $NF}')" = 2 ]; then
     raised=1
     break
   fi
@@ -175,14 +175,16 @@ if [ "$raised" != 1 ]; then
 fi
 echo "   Prometheus sees $flag_x = 2 (after $SECONDS s)"
 
-# Axis y over the whole run: it processed samples and never flagged.
+# Axis y over the whole run: it processed samples and no flag rose (the
+# counter of flag changes also sees a flag raised and cleared between scrapes).
 wait "$replay_y"
 replay_y=""
 sleep 2  # two scrapes after the replay's end
-processed_y=$(query 'modalwatch_samples_processed_total{axis="y"}' | awk '{print $2}')
-ever_y=$(query 'max(max_over_time(modalwatch_mode_flag{axis="y"}[10m]))' | awk '{print $2}')
-echo "   axis y: $processed_y samples processed, highest flag state $ever_y"
-if [ -z "$processed_y" ] || [ "$processed_y" = 0 ] || [ "$ever_y" != 0 ]; then
+processed_y=$(query 'modalwatch_samples_processed_total{axis="y"}' | awk '{print $NF}')
+ever_y=$(query 'max(max_over_time(modalwatch_mode_flag{axis="y"}[10m]))' | awk '{print $NF}')
+changes_y=$(query 'modalwatch_flag_changes_total{axis="y"}' | awk '{print $NF}')
+echo "   axis y: $processed_y samples processed, $changes_y flag changes, highest flag state $ever_y (1: pending)"
+if [ -z "$processed_y" ] || [ "$processed_y" = 0 ] || [ "$changes_y" != 0 ] || [ "$ever_y" = 2 ]; then
   echo "axis y did not run clean" >&2
   exit 1
 fi
