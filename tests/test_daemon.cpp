@@ -3,11 +3,11 @@
 // (config/flexible-beam-drift.yaml, simulated and tracked once per run with
 // the real CLI).
 //
-// - Acceptance 1 and 2 run the Daemon class in process on one shared memq://
+// - DaemonInProcess runs the Daemon class in process on one shared memq://
 //   instance (publisher, daemon and collector), faster than real time: the
 //   test paces its publishing by the daemon's counters, and the daemon runs
 //   on sample time.
-// - Acceptance 3 runs the modalwatchd binary as a child process over udpm on
+// - DaemonProcess runs the modalwatchd binary as a child process over udpm on
 //   loopback (ttl=0, a port of its own) and signals it.
 #include <fcntl.h>
 #include <pthread.h>
@@ -36,6 +36,7 @@
 #include "daemon_support.hpp"
 
 #include "modalwatch/io/checkpoint.hpp"
+#include "daemon/loop_probe.hpp"
 #include "modalwatch/daemon/daemon.hpp"
 
 using namespace modalwatch;
@@ -89,7 +90,7 @@ class DaemonInProcess : public ScratchDir {
 
 }  // namespace
 
-// Acceptance 1: the flexible mode is flagged within 20 s of the drift start,
+// The flexible mode is flagged within 20 s of the drift start,
 // the suspension mode never; the estimates are those of `modalwatch track`.
 TEST_F(DaemonInProcess, FlagsTheDriftingModeOnlyAndMatchesTrack) {
   const DriftData& data = drift_track();
@@ -249,7 +250,8 @@ TEST_F(DaemonInProcess, WarmupFitLongerThanTheWatchdogKeepsPingingAndDropsNothin
   rx.subscribe(lcm, c.lcm);
   DaemonCounters k;
   {
-    Daemon d(c, lcm, &probe);
+    Daemon d(c, lcm);
+    attach_loop_probe(d, probe);
     d.start();
     std::uint64_t published = 0;
     // Up to 4 s of input ahead of the daemon: about 3 s of it arrives during the fit.
@@ -298,7 +300,7 @@ TEST_F(DaemonInProcess, WarmupFitLongerThanTheWatchdogKeepsPingingAndDropsNothin
   EXPECT_NEAR(rx.estimates.back().modes[kSuspension].hz, 6.0, 0.1);
 }
 
-// Acceptance 2: garbage, NaN, duplicates, reordering, silence and a burst.
+// Garbage, NaN, duplicates, reordering, silence and a burst.
 TEST_F(DaemonInProcess, SurvivesBadInputAndCountsIt) {
   const DriftData& data = drift_data();
   Config c = load_config(kDriftConfig);
@@ -433,7 +435,7 @@ TEST_F(DaemonInProcess, SurvivesBadInputAndCountsIt) {
 }
 
 // ============================================================================
-// Acceptance 3: modalwatchd as a child process over udpm on loopback.
+// modalwatchd as a child process over udpm on loopback.
 
 namespace {
 

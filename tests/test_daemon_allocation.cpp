@@ -1,4 +1,4 @@
-// Acceptance 4: no heap allocation on the daemon's estimation thread after
+// No heap allocation on the daemon's estimation thread after
 // start-up. The Daemon runs in process on memq:// over the drifting flexible
 // beam (warm-up, baseline learning, a fault flag rising) and with bad input
 // mixed in (NaN, duplicates, reordering, a gap); a LoopProbe starts counting on
@@ -13,6 +13,7 @@
 #include "allocation_counter.hpp"
 #include "daemon_support.hpp"
 
+#include "daemon/loop_probe.hpp"
 #include "modalwatch/daemon/daemon.hpp"
 
 using namespace modalwatch;
@@ -50,7 +51,8 @@ TEST(DaemonAllocation, NoneOnTheEstimationThreadAfterStartUp) {
   rx.subscribe(lcm, c.lcm);
   CountingProbe probe;
   {
-    Daemon d(c, lcm, &probe);
+    Daemon d(c, lcm);
+    attach_loop_probe(d, probe);
     d.start();
     const auto handled = [&] {
       const DaemonCounters k = d.counters();

@@ -1,26 +1,31 @@
 #pragma once
-// modalwatchd's engine (DESIGN.md, "Data flow in the daemon"): three threads
-// joined by two lock-free SPSC rings.
+// modalwatchd's engine: three threads joined by two lock-free single-producer
+// single-consumer rings, so that the thread on the latency path never waits.
 //
-//   LCM subscriber ──StampedSample──► SpscRing ──► estimation loop ──Snapshot──► SpscRing ──► publisher
-//   (lcm_handle, decode,                          (fixed rate, input policy,                (estimates_t,
-//    validate, never blocks)                       RecursiveEstimator::step,                 fault_status_t,
-//                                                  FaultDetector per publish period)         heartbeat_t, logs)
-//
-// A fourth, control-side thread writes the periodic checkpoint: it pauses the
-// estimation loop (joins it; the input ring buffers meanwhile), copies the
-// state, restarts the loop and writes the file; reload() pauses it the same way.
-// A fifth, the fitter, runs the estimator's warm-up fit (seconds, allocating)
-// so that the loop keeps its tick, the watchdog and the status meanwhile; the
-// loop holds the input in a backlog (daemon.warmup_backlog) and then works it off.
+//   LCM subscriber ──StampedSample──► ring ──► estimation loop ──Snapshot──► ring ──► publisher
+//   (lcm_handle, decode;                      (fixed tick, input policy,              (estimates_t,
+//    a full ring drops)                        RecursiveEstimator::step,               fault_status_t,
+//                                              FaultDetector per publish period)       heartbeat_t, logs)
 //
 // The estimation loop neither locks, allocates nor makes a system call after
 // start-up, apart from its absolute-time sleep (clock_nanosleep on
 // CLOCK_MONOTONIC) and, under systemd with WatchdogSec, sd_notify(WATCHDOG=1).
-// Everything it reports goes through a fixed-size Snapshot; the publisher turns
-// snapshots into messages and log lines. The publisher follows the loop's tick
-// grid (an atomic the loop stores at the end of each tick), so that it picks a
-// snapshot up in the tick it was made even when the tick ran long.
+// Everything it reports goes through a fixed-size snapshot; the publisher,
+// woken by a doorbell the loop rings after each snapshot, turns it into
+// messages and log lines.
+//
+// Two helper threads keep slow work off the loop. The checkpointer writes the
+// periodic checkpoint: it pauses the loop (the input ring buffers meanwhile),
+// copies the state, restarts the loop and writes the file; reload() pauses the
+// loop the same way. The fitter runs the estimator's warm-up fit (seconds,
+// allocating) while the loop keeps its tick, the watchdog and the fault status,
+// and holds the input in a backlog (daemon.warmup_backlog) that it works off
+// afterwards.
+//
+// The estimator, the fault detector and the publish period run on sample time
+// (the samples' utime), so the daemon's estimates equal those of `modalwatch
+// track` on the same record; stale input, the heartbeat and checkpoints run on
+// the wall clock.
 //
 // Usage (modalwatchd's main does this; tests drive the same class in process):
 //   Daemon d(config);             // opens LCM (or uses the caller's lcm_t), restores a checkpoint
@@ -64,19 +69,6 @@ struct DaemonCounters {
   std::uint64_t checkpoint_failures = 0;
 };
 
-// Test hook, called on the estimation thread: warmed_up() at the start of the
-// first tick after the estimator's warm-up is over (its fit applied and the
-// input held meanwhile worked off) and at least one snapshot went out; exiting() after the loop's last tick (the final drain included),
-// each time the loop thread ends (stop, and the pauses of reload and checkpoints).
-class LoopProbe {
- public:
-  virtual ~LoopProbe() = default;
-  virtual void warmed_up() = 0;
-  virtual void exiting() = 0;
-  // On the fitter thread, before the warm-up fit runs (a test makes the fit slow here).
-  virtual void warmup_fit_running() {}
-};
-
 class Daemon {
  public:
   // Opens config.lcm.url, or uses `lcm` (not owned; it must outlive the Daemon
@@ -84,7 +76,7 @@ class Daemon {
   // one memq:// instance. Restores daemon.checkpoint when it exists and matches
   // the config. Throws InputError for an LCM URL that cannot be opened or a
   // model the daemon cannot carry (more than kMaxModes submodels).
-  explicit Daemon(const Config& config, lcm_t* lcm = nullptr, LoopProbe* probe = nullptr);
+  explicit Daemon(const Config& config, lcm_t* lcm = nullptr);
   ~Daemon();  // stop()s
   Daemon(const Daemon&) = delete;
   Daemon& operator=(const Daemon&) = delete;
@@ -119,6 +111,7 @@ class Daemon {
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
+  friend struct DaemonAccess;  // test hooks, outside the public API
 };
 
 }  // namespace modalwatch

@@ -1,0 +1,323 @@
+#include "estimation_loop.hpp"
+
+#include <spdlog/spdlog.h>
+#include <systemd/sd-daemon.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include "loop_probe.hpp"
+#include "realtime.hpp"
+
+namespace modalwatch::daemon_detail {
+namespace {
+
+bool finite(const StampedSample& s) { return std::isfinite(s.u) && std::isfinite(s.y) && std::isfinite(s.r); }
+
+// The fitter thread runs the warm-up fit (see warmup_fitter.hpp).
+EstimatorSettings with_deferred_fit(EstimatorSettings s) {
+  s.defer_warmup_fit = true;
+  return s;
+}
+
+FaultDetectorSettings detector_settings(const Config& c, const std::vector<std::optional<ModalParameters>>& kept) {
+  FaultDetectorSettings s;
+  for (const auto& sub : c.model.submodels) s.mode_names.push_back(sub.name);
+  s.baselines = c.faults.baselines;
+  s.baselines.resize(c.model.submodels.size());
+  for (std::size_t i = 0; i < s.baselines.size() && i < kept.size(); ++i)
+    if (!s.baselines[i] && kept[i]) s.baselines[i] = kept[i];
+  s.learn_window = c.faults.learn_window;
+  s.thresholds = c.faults.thresholds;
+  return s;
+}
+
+}  // namespace
+
+EstimationLoop::EstimationLoop(const Config& config, const std::optional<Checkpoint>& checkpoint,
+                               SpscRing<StampedSample>& input, SpscRing<Snapshot>& output, Doorbell& output_bell,
+                               Counters& counters, std::int64_t start_ns)
+    : config_(config),
+      input_(input),
+      output_(output),
+      output_bell_(output_bell),
+      counters_(counters.loop),
+      all_counters_(counters),
+      start_ns_(start_ns),
+      estimator_(config.model, with_deferred_fit(config.estimator)),
+      fitter_(estimator_) {
+  const auto K = config.model.submodels.size();
+  std::vector<std::optional<ModalParameters>> restored_baselines;
+  if (checkpoint) {
+    try {
+      estimator_.restore(checkpoint->estimator);  // no warm-up; the prefilters restart as after a gap
+      restored_ = true;
+    } catch (const std::invalid_argument& e) {
+      spdlog::warn("checkpoint {} does not fit the estimator ({}): starting with a warm-up",
+                   config.daemon.checkpoint_path, e.what());
+    }
+  }
+  if (restored_) {
+    restored_baselines = checkpoint->baselines;
+    have_seq_ = true;
+    have_ref_time_ = true;
+    last_seq_ = checkpoint->last_seq;
+    last_utime_ = checkpoint->last_utime;
+    spdlog::info("restored checkpoint {}: last sample utime {} us, seq {}; no warm-up", config.daemon.checkpoint_path,
+                 last_utime_, last_seq_);
+  }
+  if (estimator_.status().warming_up) {
+    // Touched here (value-initialised), so that holding input never page-faults on the loop.
+    const double held = std::ceil(config.daemon.warmup_backlog / config.sample_time);
+    backlog_.resize(static_cast<std::size_t>(std::max(1.0, held)));
+  }
+  detector_.emplace(detector_settings(config, restored_baselines));
+  mode_values_.resize(K);
+  mode_stds_.resize(K);
+  flag_changes_.reserve(kQuantities * K);
+}
+
+EstimationLoop::~EstimationLoop() {
+  stop(true);
+  fitter_.stop();
+}
+
+void EstimationLoop::set_probe(LoopProbe* probe) {
+  probe_ = probe;
+  fitter_.set_probe(probe);
+}
+
+void EstimationLoop::start_fitter() {
+  // Before the loop runs: after that only it and the fitter touch the estimator.
+  if (estimator_.status().warming_up) fitter_.start();
+}
+
+void EstimationLoop::start() {
+  if (thread_.joinable()) return;
+  const DaemonSettings& d = config_.daemon;
+  publish_period_us_ = std::max<std::int64_t>(1, std::llround(d.publish_period * 1e6));
+  gap_us_ = std::llround(config_.estimator.gap_factor * config_.sample_time * 1e6);
+  if (have_time_) next_publish_utime_ = last_utime_ + publish_period_us_;
+  tick_period_ns_ = std::max<std::int64_t>(10'000, static_cast<std::int64_t>(std::llround(1e9 / d.loop_rate_hz)));
+  tick_origin_ns_ = mono_ns();
+  stop_.store(keep_running);
+  thread_ = std::thread([this] { run(); });
+}
+
+void EstimationLoop::stop(bool final_stop) {
+  if (!thread_.joinable()) return;
+  stop_.store(final_stop ? stop_requested : pause_requested, std::memory_order_release);
+  thread_.join();
+}
+
+void EstimationLoop::run() noexcept {
+  minimise_timer_slack();
+  name_this_thread("mw-estimate");
+  make_realtime(config_.daemon.realtime_priority);
+  const std::int64_t period_ns = tick_period_ns_;
+  const std::int64_t status_period_ns = static_cast<std::int64_t>(config_.daemon.publish_period * 1e9);
+  std::int64_t tick = 0;  // ticks at tick_origin_ns_ + k period_ns
+  for (;;) {
+    const int request = stop_.load(std::memory_order_acquire);
+    const bool stopping = request != keep_running;
+    const bool final_stop = request == stop_requested;
+    if (fit_in_flight_ && fitter_.take_applied()) fit_in_flight_ = false;  // the estimator is ours again
+    if (probe_ && !probe_fired_ && !fit_in_flight_ && backlog_size_ == 0 && !estimator_.status().warming_up &&
+        read(counters_.snapshots) > 0) {
+      probe_->warmed_up();
+      probe_fired_ = true;
+    }
+    std::int64_t now = mono_ns();
+    work_off_backlog(final_stop ? std::numeric_limits<std::int64_t>::max() : now + period_ns / 2);
+    drain(now);
+    // Without input, the fault status still goes out (with the stale flag).
+    if (now - last_snapshot_ns_ >= status_period_ns) push_snapshot(Snapshot::status_only, now, false);
+    if (watchdog_usec_ > 0 && now - last_watchdog_ns_ >= static_cast<std::int64_t>(watchdog_usec_) * 500) {
+      sd_notify(0, "WATCHDOG=1");
+      last_watchdog_ns_ = now;
+    }
+    if (stopping && !(final_stop && fit_in_flight_)) {
+      drain(mono_ns());
+      if (final_stop) work_off_backlog(std::numeric_limits<std::int64_t>::max());
+      push_snapshot(Snapshot::final_state, mono_ns(), false);
+      break;
+    }
+    ++tick;
+    now = mono_ns();
+    if (now > tick_origin_ns_ + tick * period_ns) {  // this tick ended after the next one was due
+      bump(counters_.overruns);
+      tick = (now - tick_origin_ns_) / period_ns + 1;  // the next tick on the grid
+    }
+    sleep_until(tick_origin_ns_ + tick * period_ns);
+  }
+  if (probe_) probe_->exiting();
+}
+
+void EstimationLoop::drain(std::int64_t now) noexcept {
+  const std::size_t limit = input_.capacity();
+  std::size_t n = 0;
+  while (n < limit) {
+    const StampedSample* s = input_.front();
+    if (!s) break;
+    if (fit_in_flight_ || backlog_size_ > 0) enqueue_held(*s);  // behind the backlog, in order
+    else process(*s);
+    input_.pop();
+    ++n;
+  }
+  if (n > 0) last_sample_ns_ = now;
+}
+
+// A sample that arrives while the warm-up fit runs or the backlog is worked off.
+void EstimationLoop::enqueue_held(const StampedSample& s) noexcept {
+  if (backlog_size_ == backlog_.size()) {  // daemon.warmup_backlog too small for this fit
+    bump(counters_.held_dropped);
+    return;
+  }
+  backlog_[(backlog_head_ + backlog_size_) % backlog_.size()] = s;
+  ++backlog_size_;
+  bump(counters_.samples_held);
+}
+
+// The held samples, oldest first, until `deadline_ns` (checked per sample: a
+// step is a few microseconds), so that a catch-up does not cost the loop its tick.
+void EstimationLoop::work_off_backlog(std::int64_t deadline_ns) noexcept {
+  while (!fit_in_flight_ && backlog_size_ > 0) {
+    process(backlog_[backlog_head_]);
+    backlog_head_ = (backlog_head_ + 1) % backlog_.size();
+    --backlog_size_;
+    if (mono_ns() >= deadline_ns) break;
+  }
+}
+
+void EstimationLoop::process(const StampedSample& s) noexcept {
+  if (have_seq_ && s.seq <= last_seq_ && !(have_ref_time_ && s.utime > last_utime_ + gap_us_)) {
+    bump(s.seq == last_seq_ ? counters_.samples_duplicate : counters_.samples_out_of_order);
+    return;
+  }
+  have_seq_ = true;
+  last_seq_ = s.seq;
+  if (!have_time_) {
+    have_time_ = true;
+    utime0_ = s.utime;
+    next_publish_utime_ = s.utime + publish_period_us_;
+  } else if (s.utime <= last_utime_) {
+    // A later seq with an earlier (or equal) time: the estimator would reject it too.
+    bump(counters_.samples_out_of_order);
+    return;
+  }
+  last_utime_ = s.utime;
+  have_ref_time_ = true;
+  const double t = static_cast<double>(s.utime - utime0_) * 1e-6;
+  // A non-finite sample goes to the estimator too, which keeps its time slot
+  // (holds u and r, lets the model stand in for y, does not update): dropping it
+  // here would leave a hole of 2 T that resets the prefilters as a gap.
+  const unsigned flags = estimator_.step(Sample{t, s.u, s.y, s.r});
+  bump(finite(s) ? counters_.samples_processed : counters_.samples_nonfinite);
+  if (flags & kWarmupFitPending) {
+    // The window is complete: the fitter takes the job and, until it has applied
+    // it, the estimator (take_warmup_fit moves the window: no allocation here).
+    status_before_fit_ = estimator_.status();
+    fit_in_flight_ = true;
+    fitter_.request(estimator_.take_warmup_fit());
+  }
+  if (flags & kGap) {
+    bump(counters_.gaps);
+    gap_since_snapshot_ = true;
+  }
+  if (flags & kReset) {
+    bump(counters_.resets);
+    reset_since_snapshot_ = true;
+  }
+  if (s.utime >= next_publish_utime_) {
+    push_snapshot(Snapshot::estimate, mono_ns(), true);
+    next_publish_utime_ += publish_period_us_;
+    if (next_publish_utime_ <= s.utime) next_publish_utime_ = s.utime + publish_period_us_;
+  }
+}
+
+void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool update_detector) noexcept {
+  Snapshot& snap = next_snapshot_;
+  const int K = static_cast<int>(mode_values_.size());
+  // During the warm-up fit the estimator is the fitter's: the cached status and
+  // the last values stand in (flags are suppressed while warming up anyway).
+  const EstimatorStatus& st = fit_in_flight_ ? status_before_fit_ : estimator_.status();
+  snap.kind = kind;
+  snap.n_modes = K;
+  snap.utime = have_ref_time_ ? last_utime_ : 0;
+  snap.utime0 = utime0_;
+  snap.last_seq = last_seq_;
+  snap.have_seq = have_seq_;
+  snap.warming_up = st.warming_up;
+  snap.low_excitation = st.low_excitation;
+  snap.reset_reason = st.last_reset_reason;
+  snap.warmup_fit_seconds = fitter_.last_fit_seconds();
+  warming_up_.store(st.warming_up, std::memory_order_relaxed);
+  for (int i = 0; i < K && !fit_in_flight_; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    const ModeEstimate m = estimator_.mode(i);
+    mode_values_[k] = snap.value[k] = m.value;
+    mode_stds_[k] = snap.std_dev[k] = m.std;
+  }
+  if (!fit_in_flight_) snap.residual_rms = estimator_.residual_rms();
+  snap.n_changes = 0;
+  if (update_detector) {
+    flag_changes_.clear();
+    const double t = static_cast<double>(last_utime_ - utime0_) * 1e-6;
+    const bool valid = !st.warming_up && !st.low_excitation;
+    detector_->update(t, mode_values_, mode_stds_, valid, flag_changes_);  // capacity reserved: no allocation
+    for (const FlagChange& c : flag_changes_) {
+      if (snap.n_changes == kMaxEntries) break;
+      snap.changes[static_cast<std::size_t>(snap.n_changes++)] = c;
+    }
+    if (snap.n_changes) bump(counters_.flag_changes, static_cast<std::uint64_t>(snap.n_changes));
+  }
+  std::copy(detector_->status().begin(), detector_->status().end(), snap.modes.begin());
+  const std::int64_t since_input = now - (last_sample_ns_ ? last_sample_ns_ : start_ns_);
+  snap.stale = since_input > static_cast<std::int64_t>(config_.daemon.stale_time * 1e9);
+  snap.gap = gap_since_snapshot_;
+  snap.reset = reset_since_snapshot_;
+  gap_since_snapshot_ = reset_since_snapshot_ = false;
+  const std::uint64_t dropped = read(all_counters_.subscriber.ring_full) + read(counters_.held_dropped);
+  const std::uint64_t decode_errors = read(all_counters_.subscriber.decode_errors);
+  snap.input_dropped = dropped != dropped_at_snapshot_;
+  snap.decode_errors = decode_errors != decode_errors_at_snapshot_;
+  dropped_at_snapshot_ = dropped;
+  decode_errors_at_snapshot_ = decode_errors;
+  bump(counters_.snapshots);
+  snap.counters = all_counters_.load();
+  if (output_.try_push(snap)) output_bell_.ring();
+  else bump(counters_.snapshots_dropped);
+  last_snapshot_ns_ = now;
+}
+
+// The estimator's state() allocates: only while the thread is stopped. While a
+// warm-up fit is out (only the stopped loop could have started one) the
+// estimator is the fitter's, and there is nothing worth keeping yet.
+std::optional<Checkpoint> EstimationLoop::capture(std::uint64_t fingerprint) const {
+  if (!fitter_.idle()) return std::nullopt;
+  if (!have_seq_ || estimator_.status().warming_up) return std::nullopt;
+  Checkpoint ck;
+  ck.config_fingerprint = fingerprint;
+  ck.last_utime = last_utime_;
+  ck.last_seq = last_seq_;
+  ck.estimator = estimator_.state();
+  for (int i = 0; i < estimator_.submodels(); ++i) {
+    const ModeStatus& m = detector_->status()[static_cast<std::size_t>(i)];
+    ck.baselines.push_back(m.baseline_ready ? std::optional<ModalParameters>(m.baseline.value) : std::nullopt);
+  }
+  return ck;
+}
+
+// Learned baselines survive; configured ones come from the rewritten config.
+void EstimationLoop::reconfigure_detector() {
+  std::vector<std::optional<ModalParameters>> learned(detector_->status().size());
+  for (std::size_t i = 0; i < learned.size(); ++i) {
+    const ModeStatus& s = detector_->status()[i];
+    if (s.baseline_ready && s.baseline.learned) learned[i] = s.baseline.value;
+  }
+  detector_.emplace(detector_settings(config_, learned));
+}
+
+}  // namespace modalwatch::daemon_detail

@@ -1,0 +1,149 @@
+#pragma once
+// The estimation loop: a thread on a fixed tick grid (daemon.loop_rate_hz,
+// absolute-time sleep) that drains the input ring through the input policy into
+// RecursiveEstimator::step, runs the fault detector once per publish period of
+// sample time and pushes a Snapshot for the publisher. After start-up it
+// neither allocates, locks nor makes a system call, apart from its sleep and,
+// under systemd with WatchdogSec, sd_notify(WATCHDOG=1).
+//
+// Input policy:
+// - Time. The estimator, the fault detector and the publish period run on
+//   sample time, t = (utime - utime0) * 1e-6 with utime0 the first sample's,
+//   so the daemon gives the estimates `modalwatch track` gives on the same
+//   record and replay faster than real time is just faster. Stale input and
+//   the idle fault status run on the wall clock (CLOCK_MONOTONIC).
+// - Sequence numbers. A seq at or below the last accepted one is a duplicate
+//   (equal) or out of order (below) and is dropped, unless its utime is more
+//   than one gap past the last sample: then the sender has restarted (a new
+//   replay, a controller reboot) and the sample is taken, and the time gap
+//   resets the prefilter states as any gap does.
+// - NaN/Inf in u, y or r: counted, and passed to the estimator, which keeps the
+//   sample's time slot without updating.
+// - Gaps. The estimator detects them itself (estimator.gap_factor, which
+//   daemon.gap_time sets), so track and the daemon apply one rule.
+// - The warm-up fit runs on the WarmupFitter. Meanwhile the loop keeps ticking
+//   (watchdog, fault status from the status cached before the fit) and moves
+//   the input into a backlog preallocated for daemon.warmup_backlog seconds
+//   (overflow: counted as dropped). Once the fit is applied the loop works the
+//   backlog off within half of each tick, then continues live. The estimates
+//   equal those of `modalwatch track`, which runs the same fit inline.
+//
+// The thread is started and stopped by the control side; a stop is either a
+// pause (checkpoint, reload: the state stays for the next start) or final.
+#include <atomic>
+#include <cstdint>
+#include <optional>
+#include <thread>
+#include <vector>
+
+#include "counters.hpp"
+#include "doorbell.hpp"
+#include "modalwatch/estimator.hpp"
+#include "modalwatch/fault_detector.hpp"
+#include "modalwatch/io/checkpoint.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/io/messages.hpp"
+#include "snapshot.hpp"
+#include "spsc_ring.hpp"
+#include "warmup_fitter.hpp"
+
+namespace modalwatch {
+class LoopProbe;
+}
+
+namespace modalwatch::daemon_detail {
+
+class EstimationLoop {
+ public:
+  // `config` is the daemon's; the control side rewrites it only while the loop
+  // is stopped. Resumes from `checkpoint` when the estimator accepts it.
+  EstimationLoop(const Config& config, const std::optional<Checkpoint>& checkpoint,
+                 SpscRing<StampedSample>& input, SpscRing<Snapshot>& output, Doorbell& output_bell,
+                 Counters& counters, std::int64_t start_ns);
+  ~EstimationLoop();
+  EstimationLoop(const EstimationLoop&) = delete;
+  EstimationLoop& operator=(const EstimationLoop&) = delete;
+
+  void set_probe(LoopProbe* probe);
+  void set_watchdog_usec(std::uint64_t usec) { watchdog_usec_ = usec; }
+
+  // The fitter lives from start-up to the final stop; only while warming up.
+  void start_fitter();
+  void stop_fitter() { fitter_.stop(); }
+
+  void start();
+  // A pause drains the input ring and pushes a final snapshot. A final stop
+  // also waits for a running warm-up fit (ticking as usual) and works the
+  // backlog off in full.
+  void stop(bool final_stop);
+
+  // While stopped: the state to resume from (none during the warm-up), and a
+  // new fault detector for the rewritten config that keeps learned baselines.
+  std::optional<Checkpoint> capture(std::uint64_t fingerprint) const;
+  void reconfigure_detector();
+
+  bool restored() const { return restored_; }
+  bool warming_up() const { return warming_up_.load(std::memory_order_relaxed); }
+  const std::atomic<bool>& warming_up_flag() const { return warming_up_; }
+  std::size_t backlog_capacity() const { return backlog_.size(); }
+
+ private:
+  enum StopRequest : int { keep_running = 0, pause_requested = 1, stop_requested = 2 };
+  void run() noexcept;
+  void drain(std::int64_t now) noexcept;
+  void process(const StampedSample& s) noexcept;
+  void enqueue_held(const StampedSample& s) noexcept;
+  void work_off_backlog(std::int64_t deadline_ns) noexcept;
+  void push_snapshot(Snapshot::Kind kind, std::int64_t now, bool update_detector) noexcept;
+
+  // Wiring.
+  const Config& config_;
+  SpscRing<StampedSample>& input_;
+  SpscRing<Snapshot>& output_;
+  Doorbell& output_bell_;
+  LoopCounters& counters_;
+  const Counters& all_counters_;  // copied into each snapshot
+  const std::int64_t start_ns_;
+  LoopProbe* probe_ = nullptr;
+  std::uint64_t watchdog_usec_ = 0;
+  std::thread thread_;
+  std::atomic<int> stop_{keep_running};
+
+  // Set by start() from the config.
+  std::int64_t tick_origin_ns_ = 0, tick_period_ns_ = 0;
+  std::int64_t publish_period_us_ = 0, gap_us_ = 0;
+
+  // The estimator and the fault detector, and the detector's inputs (sized at
+  // construction, so that update() does not allocate).
+  RecursiveEstimator estimator_;
+  bool restored_ = false;
+  std::optional<FaultDetector> detector_;
+  std::vector<ModalParameters> mode_values_, mode_stds_;
+  std::vector<FlagChange> flag_changes_;
+
+  // Input policy and timing.
+  bool have_seq_ = false;
+  std::int64_t last_seq_ = -1;
+  bool have_time_ = false;      // utime0_ set (a sample since start)
+  bool have_ref_time_ = false;  // last_utime_ is meaningful (a sample, or a restored checkpoint)
+  std::int64_t utime0_ = 0, last_utime_ = 0;
+  std::int64_t next_publish_utime_ = 0;
+  std::int64_t last_sample_ns_ = 0, last_snapshot_ns_ = 0, last_watchdog_ns_ = 0;
+
+  // Events for the next snapshot.
+  bool gap_since_snapshot_ = false, reset_since_snapshot_ = false;
+  std::uint64_t dropped_at_snapshot_ = 0, decode_errors_at_snapshot_ = 0;
+  Snapshot next_snapshot_;  // built in place, copied into the ring
+  std::atomic<bool> warming_up_{true};
+  bool probe_fired_ = false;
+
+  // The warm-up fit. While it runs, the loop reports status_before_fit_ and
+  // holds the input in backlog_, a FIFO preallocated at construction.
+  WarmupFitter fitter_;
+  bool fit_in_flight_ = false;
+  EstimatorStatus status_before_fit_;
+  std::vector<StampedSample> backlog_;
+  std::size_t backlog_head_ = 0, backlog_size_ = 0;
+};
+
+}  // namespace modalwatch::daemon_detail
