@@ -157,12 +157,13 @@ MetricsSnapshot example_snapshot() {
   ModeMetrics& flex = s.modes[1];
   flex.value = {2.0 * std::numbers::pi * 50.0, 0.02, 1.5};
   flex.std_dev = {2.0 * std::numbers::pi * 0.25, 0.001, 0.05};
-  flex.baseline = {2.0 * std::numbers::pi * 56.0, 0.025, 1.25};
-  flex.baseline_ready = true;
-  flex.baseline_learned = true;
-  flex.quantity[static_cast<int>(Quantity::wn)] = {-24.0, -0.125, FlagState::raised};
-  flex.quantity[static_cast<int>(Quantity::zeta)] = {-5.0, -0.2, FlagState::pending};
-  flex.quantity[static_cast<int>(Quantity::gain)] = {5.0, 0.2, FlagState::none};
+  flex.status.baseline = {{2.0 * std::numbers::pi * 56.0, 0.025, 1.25}, true};  // learned
+  flex.status.baseline_ready = true;
+  QuantityStatus& wn = flex.status.quantity[static_cast<int>(Quantity::wn)];
+  wn = {.flagged = true, .deviation_sigma = -24.0, .deviation_relative = -0.125, .since = 12.0};
+  QuantityStatus& zeta = flex.status.quantity[static_cast<int>(Quantity::zeta)];
+  zeta = {.deviation_sigma = -5.0, .deviation_relative = -0.2, .since = 13.0, .pending = true};
+  flex.status.quantity[static_cast<int>(Quantity::gain)] = {.deviation_sigma = 5.0, .deviation_relative = 0.2};
   s.counters.samples_received = 1000;
   s.counters.samples_processed = 990;
   s.counters.samples_dropped = 3;
@@ -268,7 +269,7 @@ TEST(Metrics, CountersAdvanceByTheDifferenceAndIgnoreARestart) {
   endpoint.update(snap);
   snap.counters.samples_received = 1500;
   snap.counters.flag_changes = 2;
-  snap.modes[1].quantity[0].flag = FlagState::none;
+  snap.modes[1].status.quantity[0].flagged = false;  // cleared
   snap.tick.record(20'000);  // le 25 us
   endpoint.update(snap);
 

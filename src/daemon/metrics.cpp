@@ -24,7 +24,7 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kHertzPerRadPerSecond = 1.0 / (2.0 * std::numbers::pi);
 constexpr const char* kListenKey = "daemon.metrics.listen";
 
-double baseline_or_nan(const ModeMetrics& m, double v) { return m.baseline_ready ? v : kNaN; }
+double baseline_or_nan(const ModeMetrics& m, double v) { return m.status.baseline_ready ? v : kNaN; }
 
 struct ModeSeries {
   const char* name;
@@ -51,34 +51,34 @@ constexpr ModeSeries kModeSeries[] = {
     {"modalwatch_mode_gain_stddev", "Standard deviation of the modal gain, output units per input unit.",
      [](const ModeMetrics& m) { return m.std_dev.gain; }},
     {"modalwatch_mode_baseline_angular_frequency_radians_per_second", "Baseline wn, rad/s (NaN until known).",
-     [](const ModeMetrics& m) { return baseline_or_nan(m, m.baseline.wn); }},
+     [](const ModeMetrics& m) { return baseline_or_nan(m, m.status.baseline.value.wn); }},
     {"modalwatch_mode_baseline_frequency_hertz", "Baseline natural frequency, Hz (NaN until known).",
-     [](const ModeMetrics& m) { return baseline_or_nan(m, m.baseline.wn * kHertzPerRadPerSecond); }},
+     [](const ModeMetrics& m) { return baseline_or_nan(m, m.status.baseline.value.wn * kHertzPerRadPerSecond); }},
     {"modalwatch_mode_baseline_damping_ratio", "Baseline damping ratio (NaN until known).",
-     [](const ModeMetrics& m) { return baseline_or_nan(m, m.baseline.zeta); }},
+     [](const ModeMetrics& m) { return baseline_or_nan(m, m.status.baseline.value.zeta); }},
     {"modalwatch_mode_baseline_gain", "Baseline modal gain (NaN until known).",
-     [](const ModeMetrics& m) { return baseline_or_nan(m, m.baseline.gain); }},
+     [](const ModeMetrics& m) { return baseline_or_nan(m, m.status.baseline.value.gain); }},
     {"modalwatch_mode_baseline_ready", "1 when the mode's baseline is known (configured, restored or learned).",
-     [](const ModeMetrics& m) { return m.baseline_ready ? 1.0 : 0.0; }},
+     [](const ModeMetrics& m) { return m.status.baseline_ready ? 1.0 : 0.0; }},
     {"modalwatch_mode_baseline_learned",
      "1 when the baseline was learned over faults.learn_window, 0 when configured or restored (or not yet known).",
-     [](const ModeMetrics& m) { return m.baseline_ready && m.baseline_learned ? 1.0 : 0.0; }},
+     [](const ModeMetrics& m) { return m.status.baseline_ready && m.status.baseline.learned ? 1.0 : 0.0; }},
 };
 
 struct QuantitySeries {
   const char* name;
   const char* help;
-  double (*get)(const QuantityMetrics&);
+  double (*get)(const QuantityStatus&);
 };
 
 // One gauge per mode and quantity each.
 constexpr QuantitySeries kQuantitySeries[] = {
     {"modalwatch_mode_deviation_sigma", "Signed deviation from the baseline in standard deviations, (x - x0) / std.",
-     [](const QuantityMetrics& q) { return q.deviation_sigma; }},
+     [](const QuantityStatus& q) { return q.deviation_sigma; }},
     {"modalwatch_mode_deviation_ratio", "Signed relative deviation from the baseline, (x - x0) / |x0|.",
-     [](const QuantityMetrics& q) { return q.deviation_ratio; }},
+     [](const QuantityStatus& q) { return q.deviation_relative; }},
     {"modalwatch_mode_flag", "Fault flag: 0 none, 1 pending (past the thresholds, hold time running), 2 raised.",
-     [](const QuantityMetrics& q) { return static_cast<double>(q.flag); }},
+     [](const QuantityStatus& q) { return q.flagged ? 2.0 : q.pending ? 1.0 : 0.0; }},
 };
 
 struct CounterSeries {
@@ -121,7 +121,7 @@ constexpr const char* kStateNames[n_states] = {"warming_up", "learning", "runnin
 State state_of(const MetricsSnapshot& s) {
   if (s.warming_up) return warming_up;
   for (int i = 0; i < s.n_modes; ++i)
-    if (!s.modes[static_cast<std::size_t>(i)].baseline_ready) return learning;
+    if (!s.modes[static_cast<std::size_t>(i)].status.baseline_ready) return learning;
   return running;
 }
 
@@ -235,7 +235,7 @@ void MetricsEndpoint::update(const MetricsSnapshot& s) {
   for (std::size_t k = 0; k < std::size(kQuantitySeries); ++k)
     for (std::size_t i = 0; i < n_modes; ++i)
       for (std::size_t q = 0; q < kQuantities; ++q)
-        m.quantity_gauges[k][i * kQuantities + q]->Set(kQuantitySeries[k].get(s.modes[i].quantity[q]));
+        m.quantity_gauges[k][i * kQuantities + q]->Set(kQuantitySeries[k].get(s.modes[i].status.quantity[q]));
 
   const State now = state_of(s);
   for (int st = 0; st < n_states; ++st) m.state[static_cast<std::size_t>(st)]->Set(st == now ? 1.0 : 0.0);

@@ -56,21 +56,11 @@ struct TickHistogram {
   }
 };
 
-// modalwatch_mode_flag's values.
-enum class FlagState : std::uint8_t { none = 0, pending = 1, raised = 2 };
-
-struct QuantityMetrics {
-  double deviation_sigma = 0.0;  // signed (x - x0) / std(x)
-  double deviation_ratio = 0.0;  // signed (x - x0) / |x0|
-  FlagState flag = FlagState::none;
-};
-
 struct ModeMetrics {
-  ModalParameters value, std_dev;  // wn in rad/s; the endpoint derives the Hz series
-  ModalParameters baseline;        // meaningful when baseline_ready
-  bool baseline_ready = false;
-  bool baseline_learned = false;   // learned over faults.learn_window, else configured or restored
-  std::array<QuantityMetrics, kQuantities> quantity{};  // indexed by Quantity
+  ModalParameters value, std_dev;  // the estimate, wn in rad/s (the endpoint derives the Hz series)
+  // The fault detector's view: baseline (learned or configured), and per
+  // quantity the deviations and the flag, exported as 0 none, 1 pending, 2 raised.
+  ModeStatus status;
 };
 
 // What one update() exports: a plain, trivially copyable value, modes in config
