@@ -12,6 +12,8 @@ packages=(
   libeigen3-dev libyaml-cpp-dev libspdlog-dev libcli11-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   liblcm-dev liblcm-bin libglib2.0-dev libsystemd-dev
+  prometheus-cpp-dev  # the daemon's metrics endpoint
+  prometheus          # the server and promtool, for scripts/check/prometheus.sh
   python3 python3-numpy python3-matplotlib
   help2man pandoc  # the man pages (built only when both are found)
 )
