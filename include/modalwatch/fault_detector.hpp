@@ -3,7 +3,8 @@
 // C0 (configured, or learned once the estimate has settled) and per update the
 // deviation d = x - x0 of (wn, zeta, gain), x with covariance C:
 //   T2 = d' S^-1 d, S = C + C0                      (chi-square, 3 dof)
-//   G+-_q = min(1.2 b, max(0, G+-_q +- (z_q -+ k) dt / sqrt(2 tau)))  (CUSUM per quantity)
+//   G+-_q = max(0, G+-_q +- e_q - k), e_q = (z_q - rho z_q,prev) / sqrt(1 - rho^2),
+//   z_q = d_q / sqrt(C_qq), rho = exp(-dt / tau)     (CUSUMs on the AR(1) innovations)
 // T2 > h and |d_q| > sigma_threshold sqrt(S_qq), or G_q > b on d_q's side, say the
 // change is real; h and b follow from the mean time between false alarms for a
 // stationary estimate (errors AR(1) over the estimator's memory tau). Quantity q
@@ -118,8 +119,8 @@ struct FlagChange {
 // The thresholds the settings give (see FaultDetectorSettings).
 struct DetectionThresholds {
   double chi_square = 0.0;  // h
-  double cusum = 0.0;       // b, in the CUSUM's units (normalised deviation x sqrt(s))
-  double cusum_reference = 0.0;  // k
+  double cusum = 0.0;            // b, in std of the innovations
+  double cusum_reference = 0.0;  // k at update_period
 };
 DetectionThresholds detection_thresholds(const FaultDetectorSettings& settings);
 
@@ -163,6 +164,7 @@ class FaultDetector {
   std::vector<ModeStatus> modes_;
   std::vector<Learning> learning_;
   std::vector<std::array<double, 2 * kQuantities>> cusum_;  // G+ and G- per quantity
+  std::vector<std::array<double, kQuantities>> previous_;    // z_q of the last valid update
   std::vector<std::array<double, kQuantities>> below_since_;  // hold / clear timers
   std::vector<Eigen::Matrix3d> diagonal_;  // the std overload's covariances
   // Invalid updates pause every timer: each mode runs on its own clock, which

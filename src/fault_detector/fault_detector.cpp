@@ -22,11 +22,12 @@
 //   chi-square path cannot fire. A quantity whose S_qq is not positive and finite
 //   reports deviation_sigma 0 and cannot rise; one whose baseline is 0 reports
 //   deviation_relative 0 and cannot rise either.
-// - The CUSUMs run on d_q shrunk toward 0 by 3 std of the baseline (a baseline's
-//   own error is a constant offset that no averaging removes; shifts inside it
-//   cannot be told from it), over sqrt(C_qq). They are capped at kCusumCap b so
-//   that a past excursion is forgotten within (cap - 1) b sqrt(2 tau) / k s, and
-//   a quantity's two are reset when its flag falls.
+// - The CUSUMs run on the innovations of z_q = d_q / sqrt(C_qq), d_q first shrunk
+//   toward 0 by 3 std of the baseline (a baseline's own error is a constant
+//   offset that no averaging removes; shifts inside it cannot be told from it).
+//   The first valid update after an invalid one only primes the innovation. They
+//   are capped at kCusumCap b so that a past excursion is forgotten within
+//   (cap - 1) b / k updates, and a quantity's two are reset when its flag falls.
 // - A flag falls once the quantity has been out of the reduced box for
 //   clear_time: NOT (|z_q| > f sigma_threshold AND |rel_q| > f relative_threshold),
 //   f = clear_fraction; a failed test counts as back.
@@ -157,17 +158,19 @@ DetectionThresholds detection_thresholds(const FaultDetectorSettings& s) {
   const double per_update = kChiShare * s.update_period / seconds;
   out.chi_square = solve_decreasing([&](double h) { return upcrossings_per_update(h, rho); }, per_update, 1.0, 2000.0);
 
-  // CUSUM: the sum of z dt / sqrt(2 tau) is, on scales past tau, a Brownian
-  // motion with unit variance per second; with reference k its drift under no
-  // change is -mu, mu = k / sqrt(2 tau). Siegmund's Brownian approximation of the
-  // in-control average run length of a CUSUM with threshold b (D. Siegmund,
-  // Sequential Analysis, Springer 1985, ch. II):
-  //   ARL0 = (exp(2 mu b) - 1 - 2 mu b) / (2 mu^2).
-  out.cusum_reference = 0.5 * s.cusum_shift;
-  const double mu = out.cusum_reference / std::sqrt(2.0 * s.memory_time);
-  const double arl = seconds / kCusumShare;
-  const double x = solve_decreasing([](double v) { return -(std::expm1(v) - v); }, -2.0 * mu * mu * arl, 0.0, 800.0);
-  out.cusum = x / (2.0 * mu);
+  // CUSUM on the innovations of z: e = (z - rho z_prev) / sqrt(1 - rho^2) is
+  // N(0, 1) and independent from update to update for AR(1) errors, and a
+  // sustained shift delta of z shifts it by delta sqrt((1 - rho) / (1 + rho)),
+  // so the reference is k = cusum_shift / 2 times that. Siegmund's approximation
+  // of the in-control average run length (in updates) of a one-sided CUSUM of
+  // N(0, 1) increments with reference k and threshold b (D. Siegmund, Sequential
+  // Analysis, Springer 1985; the 1.166 corrects for the overshoot):
+  //   ARL0 = (exp(2 k b') - 1 - 2 k b') / (2 k^2),  b' = b + 1.166.
+  out.cusum_reference = 0.5 * s.cusum_shift * std::sqrt((1.0 - rho) / (1.0 + rho));
+  const double k = out.cusum_reference;
+  const double arl = seconds / kCusumShare / s.update_period;
+  const double x = solve_decreasing([](double v) { return -(std::expm1(v) - v); }, -2.0 * k * k * arl, 0.0, 800.0);
+  out.cusum = std::max(0.0, x / (2.0 * k) - 1.166);
   return out;
 }
 
@@ -191,6 +194,7 @@ FaultDetector::FaultDetector(FaultDetectorSettings settings) : settings_(std::mo
   modes_.assign(n, ModeStatus{});
   learning_.assign(n, Learning{});
   cusum_.assign(n, {});
+  previous_.assign(n, {kNaN, kNaN, kNaN});
   below_since_.assign(n, {kNaN, kNaN, kNaN});
   diagonal_.assign(n, Eigen::Matrix3d::Zero());
   clock_.assign(n, 0.0);
@@ -288,13 +292,13 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
   if (value.size() != n || covariance.size() != n)
     throw std::invalid_argument("FaultDetector::update: estimates for a different number of modes");
   const bool t_ok = std::isfinite(t);
-  const double h = thresholds_.chi_square, b = thresholds_.cusum, k = thresholds_.cusum_reference;
-  const double per_second = 1.0 / std::sqrt(2.0 * settings_.memory_time);
+  const double h = thresholds_.chi_square, b = thresholds_.cusum;
 
   for (std::size_t i = 0; i < n; ++i) {
     const bool mode_valid = valid && t_ok && finite(value[i]);
     if (!mode_valid) {
       last_valid_[i] = 0;  // the interval up to the next valid update does not count
+      previous_[i] = {kNaN, kNaN, kNaN};  // nor does the innovation across it
       continue;
     }
     const double dt = last_valid_[i] && t > last_t_ ? t - last_t_ : 0.0;
@@ -314,6 +318,9 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
     const Eigen::Vector3d d = x - x0;
     const Eigen::Matrix3d& c0 = m.baseline.covariance;
     const Eigen::Matrix3d S = c + c0;
+    // The AR(1) coefficient and CUSUM reference over this update's interval.
+    const double rho = std::exp(-dt / settings_.memory_time);
+    const double k = 0.5 * settings_.cusum_shift * std::sqrt((1.0 - rho) / (1.0 + rho));
     const Eigen::LLT<Eigen::Matrix3d> llt(S);
     m.chi_square = S.allFinite() && llt.info() == Eigen::Success ? d.dot(llt.solve(d)) : 0.0;
     const bool chi_real = m.chi_square > h;
@@ -327,13 +334,19 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
       const bool rel_ok = x0(q) != 0.0;
       s.deviation_sigma = sigma_ok ? d(q) / std::sqrt(S(q, q)) : 0.0;
       s.deviation_relative = rel_ok ? d(q) / std::abs(x0(q)) : 0.0;
+      double& z_prev = previous_[i][q];
       if (std::isfinite(c(q, q)) && c(q, q) > 0.0) {
         const double band = kBaselineBand * std::sqrt(std::max(0.0, c0(q, q)));
         const double shrunk = std::copysign(std::max(0.0, std::abs(d(q)) - band), d(q));
         const double z = shrunk / std::sqrt(c(q, q));
-        const double step = dt * per_second;
-        g[2 * q] = std::clamp(g[2 * q] + (z - k) * step, 0.0, kCusumCap * b);
-        g[2 * q + 1] = std::clamp(g[2 * q + 1] + (-z - k) * step, 0.0, kCusumCap * b);
+        if (dt > 0.0 && std::isfinite(z_prev)) {
+          const double e = (z - rho * z_prev) / std::sqrt(1.0 - rho * rho);
+          g[2 * q] = std::clamp(g[2 * q] + e - k, 0.0, kCusumCap * b);
+          g[2 * q + 1] = std::clamp(g[2 * q + 1] - e - k, 0.0, kCusumCap * b);
+        }
+        z_prev = z;
+      } else {
+        z_prev = kNaN;
       }
       s.cusum = std::max(g[2 * q], g[2 * q + 1]) / b;
       const bool cusum_real = (g[2 * q] > b && d(q) > 0.0) || (g[2 * q + 1] > b && d(q) < 0.0);
