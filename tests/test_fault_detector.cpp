@@ -396,9 +396,9 @@ TEST(FaultDetector, LearnsTheMeanOverTheWindowAndRaisesNothingWhileLearning) {
   EXPECT_NEAR(m.baseline.value.wn, kBaseline[0].wn, 0.01 * kBaseline[0].wn);
   // Its covariance: the mean reported one over window / (2 memory_time) samples.
   const double n_eff = window / (2.0 * memory);
-  EXPECT_NEAR(m.baseline.covariance(0, 0), std::pow(0.02 * kBaseline[0].wn, 2) / n_eff, 1e-12);
-  EXPECT_NEAR(m.baseline.covariance(2, 2), std::pow(0.02 * kBaseline[0].gain, 2) / n_eff, 1e-15);
-  EXPECT_EQ(m.baseline.covariance(0, 1), 0.0);
+  EXPECT_NEAR(m.baseline.covariance_matrix()(0, 0), std::pow(0.02 * kBaseline[0].wn, 2) / n_eff, 1e-12);
+  EXPECT_NEAR(m.baseline.covariance_matrix()(2, 2), std::pow(0.02 * kBaseline[0].gain, 2) / n_eff, 1e-15);
+  EXPECT_EQ(m.baseline.covariance_matrix()(0, 1), 0.0);
   for (int i = 0; i < 3; ++i) EXPECT_TRUE(s.detector.status()[i].baseline_ready);
   EXPECT_TRUE(s.log.empty()) << "no flag while learning";
 
@@ -418,7 +418,7 @@ TEST(FaultDetector, ConfiguredBaselineIsUsedFromTheFirstUpdate) {
     EXPECT_TRUE(m.baseline_ready);
     EXPECT_EQ(m.state, BaselineState::configured);
     EXPECT_FALSE(m.baseline.learned);
-    EXPECT_EQ(m.baseline.covariance.norm(), 0.0) << "no std configured: taken as exact";
+    EXPECT_EQ(m.baseline.covariance_matrix().norm(), 0.0) << "no std configured: taken as exact";
     EXPECT_EQ(m.baseline.value.wn, kBaseline[i].wn);
     EXPECT_EQ(m.baseline.value.zeta, kBaseline[i].zeta);
     EXPECT_EQ(m.baseline.value.gain, kBaseline[i].gain);

@@ -306,7 +306,7 @@ TEST(FaultStatistics, TheBaselinesUncertaintyWidensTheTest) {
   EXPECT_TRUE(a.q(0, Quantity::wn).flagged);
   EXPECT_FALSE(b.detector.any_flag());
   EXPECT_TRUE(b.log.empty());
-  EXPECT_NEAR(b.detector.status()[0].baseline.covariance(0, 0), std::pow(0.05 * kTruth[0].wn, 2), 1e-12);
+  EXPECT_NEAR(b.detector.status()[0].baseline.covariance_matrix()(0, 0), std::pow(0.05 * kTruth[0].wn, 2), 1e-12);
   EXPECT_NEAR(b.q(0, Quantity::wn).deviation_sigma, 0.08 / std::hypot(0.05, 0.001), 0.05);
   EXPECT_LT(b.detector.status()[0].chi_square, 4.0);
   EXPECT_EQ(b.q(0, Quantity::wn).cusum, 0.0) << "a deviation inside 3 std of the baseline is no drift";

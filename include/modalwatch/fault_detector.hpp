@@ -3,8 +3,8 @@
 // C0 (configured, or learned once the estimate has settled) and per update the
 // deviation d = x - x0 of (wn, zeta, gain), x with covariance C:
 //   T2 = d' S^-1 d, S = C + C0                      (chi-square, 3 dof)
-//   G+-_q = max(0, G+-_q +- e_q - k), e_q = (z_q - rho z_q,prev) / sqrt(1 - rho^2),
-//   z_q = d_q / sqrt(C_qq), rho = exp(-dt / tau)     (CUSUMs on the AR(1) innovations)
+//   G+_q = max(0, G+_q + e_q - k), G-_q = max(0, G-_q - e_q - k)   (CUSUMs)
+//   e_q = (z_q - rho z_q,prev) / sqrt(1 - rho^2), z_q = d_q / sqrt(C_qq), rho = exp(-dt / tau)
 // T2 > h and |d_q| > sigma_threshold sqrt(S_qq), or G_q > b on d_q's side, say the
 // change is real; h and b follow from the mean time between false alarms for a
 // stationary estimate (errors AR(1) over the estimator's memory tau). Quantity q
@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include <Eigen/Core>
@@ -54,8 +55,13 @@ enum class LearnHold : int {
 
 struct ModeBaseline {
   ModalParameters value;  // wn, zeta, gain
-  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // of value: (wn, zeta, gain)
+  // Covariance of value, row-major over (wn, zeta, gain): plain numbers, so that
+  // ModeStatus stays trivially copyable (the daemon passes it through a lock-free ring).
+  std::array<double, 9> covariance{};
   bool learned = false;   // from the learning window rather than the config
+  Eigen::Matrix3d covariance_matrix() const {
+    return Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(covariance.data());
+  }
 };
 
 struct FaultDetectorSettings {
@@ -106,6 +112,8 @@ struct ModeStatus {
   double chi_square = 0.0;          // T2 of the last valid update
 };
 
+static_assert(std::is_trivially_copyable_v<ModeStatus>);
+
 // One event per flag change, for logging (the daemon logs every one).
 struct FlagChange {
   int mode = 0;
@@ -115,6 +123,8 @@ struct FlagChange {
   double value = 0.0, baseline = 0.0, deviation_sigma = 0.0, deviation_relative = 0.0;
   double chi_square = 0.0, cusum = 0.0;  // the statistics at the change (cusum in units of b)
 };
+
+static_assert(std::is_trivially_copyable_v<FlagChange>);
 
 // The thresholds the settings give (see FaultDetectorSettings).
 struct DetectionThresholds {

@@ -74,6 +74,10 @@ const char* quantity_name(int q) {
 Eigen::Vector3d vec(const ModalParameters& p) { return {p.wn, p.zeta, p.gain}; }
 ModalParameters params(const Eigen::Vector3d& v) { return {v(0), v(1), v(2)}; }
 
+void set_covariance(ModeBaseline& b, const Eigen::Matrix3d& c) {
+  Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(b.covariance.data()) = c;
+}
+
 bool finite(const ModalParameters& p) {
   return std::isfinite(p.wn) && std::isfinite(p.zeta) && std::isfinite(p.gain);
 }
@@ -208,7 +212,7 @@ FaultDetector::FaultDetector(FaultDetectorSettings settings) : settings_(std::mo
                                   "' (or its std) is not finite");
     ModeStatus& m = modes_[i];
     m.baseline.value = *b;
-    m.baseline.covariance = vec(sd).cwiseAbs2().asDiagonal();
+    set_covariance(m.baseline, vec(sd).cwiseAbs2().asDiagonal());
     m.baseline.learned = false;
     m.baseline_ready = true;
     m.state = BaselineState::configured;
@@ -265,7 +269,7 @@ void FaultDetector::learn(std::size_t i, double now, const Eigen::Vector3d& x, c
   }
   const double samples = std::max(1.0, window / (2.0 * settings_.memory_time));
   m.baseline.value = params(mean);
-  m.baseline.covariance = mean_covariance / samples;
+  set_covariance(m.baseline, mean_covariance / samples);
   m.baseline.learned = true;
   m.baseline_ready = true;
   m.state = BaselineState::ready;
@@ -316,7 +320,7 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
 
     const Eigen::Vector3d x0 = vec(m.baseline.value);
     const Eigen::Vector3d d = x - x0;
-    const Eigen::Matrix3d& c0 = m.baseline.covariance;
+    const Eigen::Matrix3d c0 = m.baseline.covariance_matrix();
     const Eigen::Matrix3d S = c + c0;
     // The AR(1) coefficient and CUSUM reference over this update's interval.
     const double rho = std::exp(-dt / settings_.memory_time);
