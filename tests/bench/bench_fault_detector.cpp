@@ -22,7 +22,7 @@ void BM_FaultDetectorUpdate(benchmark::State& state) {
   std::vector<ModalParameters> truth;
   for (std::size_t i = 0; i < K; ++i) {
     truth.push_back({50.0 * static_cast<double>(i + 1), 0.02, 1.0});
-    s.mode_names.push_back("m" + std::to_string(i));
+    s.mode_names.push_back(std::to_string(i));  // ("m" + ... trips GCC 12 -Wrestrict in Release)
     s.baselines.emplace_back(truth.back());
   }
   FaultDetector detector(s);
