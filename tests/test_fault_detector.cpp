@@ -348,7 +348,7 @@ TEST(FaultDetector, ABlipShorterThanTheHoldTimeNeverFlags) {
 TEST(FaultDetector, LearnsTheMeanOverTheWindowAndRaisesNothingWhileLearning) {
   constexpr double window = 10.0;
   FaultDetectorSettings st = learned(3, window);
-  const double memory = st.memory_time;
+  const double memory = kDefaultMemoryTime;
   Stream s(st);
   // Warm-up first: invalid updates do not start the window.
   s.run(5.0, false);
@@ -552,7 +552,8 @@ TEST(FaultDetector, BadSettingsThrow) {
   throws([](auto& s) { s.baseline_std.assign(2, ModalParameters{}); });
   throws([](auto& s) { s.baseline_std.assign(3, ModalParameters{1.0, -0.1, 1.0}); });
   throws([](auto& s) { s.baseline_std.assign(3, ModalParameters{1.0, 0.1, kNaN}); });
-  throws([](auto& s) { s.memory_time = 0.0; });
+  throws([](auto& s) { s.memory_time = {2.0, 0.0, 2.0}; });
+  throws([](auto& s) { s.memory_time = {2.0, 2.0}; });
   throws([](auto& s) { s.update_period = -0.1; });
   throws([](auto& s) { s.false_alarm_interval = 0.0; });
   throws([](auto& s) { s.false_alarm_interval = std::numeric_limits<double>::infinity(); });

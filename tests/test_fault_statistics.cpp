@@ -19,7 +19,7 @@ namespace modalwatch {
 namespace {
 
 constexpr double kPeriod = 0.1;  // s between updates (the publish period)
-constexpr double kMemory = 2.0;  // s, FaultDetectorSettings{}.memory_time
+constexpr double kMemory = kDefaultMemoryTime;  // s
 const std::vector<ModalParameters> kTruth = {{60.0, 0.05, 2.0}, {150.0, 0.03, 0.5}, {400.0, 0.02, 0.1}};
 
 Eigen::Vector3d vec(const ModalParameters& p) { return {p.wn, p.zeta, p.gain}; }
@@ -110,12 +110,15 @@ TEST(FaultStatistics, ChiSquareTailOfThreeDegreesOfFreedom) {
 // ------------------------------------------------------------------ false alarms
 
 TEST(FaultStatistics, StationaryEstimatesRaiseFalseAlarmsAtTheStatedRateAndNoneAtTheDefaults) {
-  // Three modes, 20 simulated hours each, errors AR(1) over the memory with 1 %
-  // relative std and correlated quantities, baselines exact. `stated`: a false
-  // alarm every half hour per mode, the relative threshold and the hold time off,
-  // attribution at 1 std. `defaults`: the default settings (1000 h, 5 %, 2 s).
+  // Three modes, 20 simulated hours each, errors AR(1) over memories of 1, 2 and
+  // 4 s with 1 % relative std and correlated quantities, baselines exact.
+  // `stated`: a false alarm every half hour per mode, the relative threshold and
+  // the hold time off, attribution at 1 std. `defaults`: the default settings
+  // (1000 h, 5 %, 2 s hold) but for the memories.
   constexpr double hours = 20.0, interval = 0.5;
-  FaultDetectorSettings stated = configured(kTruth);
+  const std::vector<double> memory = {1.0, 2.0, 4.0};
+  FaultDetectorSettings stated = configured(kTruth), defaults = configured(kTruth);
+  stated.memory_time = defaults.memory_time = memory;
   stated.false_alarm_interval = interval;
   for (auto& th : stated.thresholds) {
     th.relative_threshold = 1e-12;
@@ -124,11 +127,13 @@ TEST(FaultStatistics, StationaryEstimatesRaiseFalseAlarmsAtTheStatedRateAndNoneA
   }
   std::vector<Estimates> est, est_default;
   for (std::size_t i = 0; i < kTruth.size(); ++i) {
-    est.emplace_back(kTruth[i], covariance(kTruth[i], 0.01), 100 + i);
-    est_default.emplace_back(kTruth[i], covariance(kTruth[i], 0.01), 100 + i);  // the same stream
+    est.emplace_back(kTruth[i], covariance(kTruth[i], 0.01), 100 + i, memory[i]);
+    est_default.emplace_back(kTruth[i], covariance(kTruth[i], 0.01), 100 + i, memory[i]);  // the same stream
   }
-  Feed a(stated, est), d(configured(kTruth), est_default);
-  const double h = a.detector.thresholds().chi_square;
+  Feed a(stated, est), d(defaults, est_default);
+  // A longer memory: fewer independent tests per hour, a lower chi-square threshold.
+  EXPECT_GT(a.detector.thresholds(0).chi_square, a.detector.thresholds(2).chi_square);
+  std::vector<int> per_mode(kTruth.size(), 0);
   int alarms = 0, by_chi = 0, by_cusum = 0;
   std::vector<bool> up(kTruth.size(), false);
   const long n = std::lround(hours * 3600.0 / kPeriod);
@@ -139,7 +144,8 @@ TEST(FaultStatistics, StationaryEstimatesRaiseFalseAlarmsAtTheStatedRateAndNoneA
       if (!c.raised || up[static_cast<std::size_t>(c.mode)]) continue;
       // A mode's alarm: its first flag rising while none is up.
       ++alarms;
-      (c.chi_square > h ? by_chi : by_cusum) += 1;
+      ++per_mode[static_cast<std::size_t>(c.mode)];
+      (c.chi_square > a.detector.thresholds(c.mode).chi_square ? by_chi : by_cusum) += 1;
       up[static_cast<std::size_t>(c.mode)] = true;
     }
     for (std::size_t i = 0; i < kTruth.size(); ++i) {
@@ -151,9 +157,15 @@ TEST(FaultStatistics, StationaryEstimatesRaiseFalseAlarmsAtTheStatedRateAndNoneA
   }
   const double expected = kTruth.size() * hours / interval;
   std::printf("  %g mode-hours at %g h between false alarms: %d alarms (%d chi-square, %d CUSUM), %g expected"
-              " (%g each); h = %.2f, b = %.2f\n",
-              kTruth.size() * hours, interval, alarms, by_chi, by_cusum, expected, expected / 2, h,
-              a.detector.thresholds().cusum);
+              " (%g each)\n",
+              kTruth.size() * hours, interval, alarms, by_chi, by_cusum, expected, expected / 2);
+  for (std::size_t i = 0; i < kTruth.size(); ++i) {
+    const DetectionThresholds& th = a.detector.thresholds(static_cast<int>(i));
+    std::printf("  memory %g s: h = %.2f, b = %.2f, k = %.4f; %d alarms, %g expected\n", memory[i], th.chi_square,
+                th.cusum, th.cusum_reference, per_mode[i], hours / interval);
+    EXPECT_GT(per_mode[i], hours / interval / 2.0) << "memory " << memory[i];
+    EXPECT_LT(per_mode[i], hours / interval * 2.0) << "memory " << memory[i];
+  }
   EXPECT_GT(alarms, expected / 2.0);
   EXPECT_LT(alarms, expected * 2.0);
   // Each path within a factor 3 of its half.
@@ -228,7 +240,7 @@ TEST(FaultStatistics, ASlowDriftTheChiSquareMissesIsCaughtByTheCusum) {
   Feed r(st, {Estimates(kTruth[0], covariance(kTruth[0], 0.02), 23)});
   for (int j = 0; j < 600; ++j) r.step(kTruth);
   ASSERT_TRUE(r.log.empty());
-  const double t0 = r.t(), h = r.detector.thresholds().chi_square;
+  const double t0 = r.t(), h = r.detector.thresholds(0).chi_square;
   int chi_square_past = 0;
   double t_flag = NAN;
   for (int j = 0; j < 3000 && std::isnan(t_flag); ++j) {

@@ -64,6 +64,8 @@ struct ModeBaseline {
   }
 };
 
+inline constexpr double kDefaultMemoryTime = 2.0;  // s
+
 struct FaultDetectorSettings {
   std::vector<std::string> mode_names;
   // Per mode: a configured baseline, or none (learned).
@@ -72,9 +74,10 @@ struct FaultDetectorSettings {
   // commissioning fit's); zero where it is taken as exact.
   std::vector<ModalParameters> baseline_std;
   double learn_window = 30.0;  // s of valid updates a learned baseline averages
-  // The estimator's memory (s): its errors are taken as correlated like
-  // exp(-|t| / memory_time), e.g. sample time / (1 - forgetting factor).
-  double memory_time = 2.0;
+  // Per mode, the estimator's memory (s): its errors are taken as correlated like
+  // exp(-|t| / memory_time), e.g. sample time / (1 - the submodel's forgetting
+  // factor). Empty: kDefaultMemoryTime for every mode.
+  std::vector<double> memory_time;
   double update_period = 0.1;  // s between updates (the thresholds assume it)
   // Mean time between false alarms per mode (h) of a stationary estimate: half
   // from the chi-square test, a twelfth from each of the six one-sided CUSUMs.
@@ -126,13 +129,13 @@ struct FlagChange {
 
 static_assert(std::is_trivially_copyable_v<FlagChange>);
 
-// The thresholds the settings give (see FaultDetectorSettings).
+// The thresholds the settings give for a mode of the given memory (s).
 struct DetectionThresholds {
-  double chi_square = 0.0;  // h
+  double chi_square = 0.0;       // h
   double cusum = 0.0;            // b, in std of the innovations
   double cusum_reference = 0.0;  // k at update_period
 };
-DetectionThresholds detection_thresholds(const FaultDetectorSettings& settings);
+DetectionThresholds detection_thresholds(const FaultDetectorSettings& settings, double memory_time);
 
 // P(X > x) for X chi-square with 3 degrees of freedom: erfc(sqrt(x/2)) + sqrt(2x/pi) exp(-x/2).
 double chi_square3_tail(double x);
@@ -154,7 +157,7 @@ class FaultDetector {
               bool valid, std::vector<FlagChange>& changes);
 
   const std::vector<ModeStatus>& status() const { return modes_; }
-  const DetectionThresholds& thresholds() const { return thresholds_; }
+  const DetectionThresholds& thresholds(int mode) const { return thresholds_[static_cast<std::size_t>(mode)]; }
   bool any_flag() const;
   // Bit i*3 + q set when mode i quantity q is flagged (up to 21 modes).
   std::uint64_t flag_bits() const;
@@ -170,7 +173,8 @@ class FaultDetector {
   void restart_learning(std::size_t i, LearnHold why);
 
   FaultDetectorSettings settings_;
-  DetectionThresholds thresholds_;
+  std::vector<double> memory_;  // per mode
+  std::vector<DetectionThresholds> thresholds_;
   std::vector<ModeStatus> modes_;
   std::vector<Learning> learning_;
   std::vector<std::array<double, 2 * kQuantities>> cusum_;  // G+ and G- per quantity

@@ -147,8 +147,8 @@ double chi_square3_tail(double x) {
   return std::erfc(std::sqrt(0.5 * x)) + std::sqrt(2.0 * x / std::numbers::pi) * std::exp(-0.5 * x);
 }
 
-DetectionThresholds detection_thresholds(const FaultDetectorSettings& s) {
-  check_positive(s.memory_time, "memory_time");
+DetectionThresholds detection_thresholds(const FaultDetectorSettings& s, double memory_time) {
+  check_positive(memory_time, "memory_time");
   check_positive(s.update_period, "update_period");
   check_positive(s.false_alarm_interval, "false_alarm_interval");
   check_positive(s.cusum_shift, "cusum_shift");
@@ -158,7 +158,7 @@ DetectionThresholds detection_thresholds(const FaultDetectorSettings& s) {
   // Chi-square: h such that T2, with its three components AR(1) with time
   // constant memory_time sampled every update_period, crosses h upward once per
   // seconds / kChiShare on average.
-  const double rho = std::exp(-s.update_period / s.memory_time);
+  const double rho = std::exp(-s.update_period / memory_time);
   const double per_update = kChiShare * s.update_period / seconds;
   out.chi_square = solve_decreasing([&](double h) { return upcrossings_per_update(h, rho); }, per_update, 1.0, 2000.0);
 
@@ -193,7 +193,12 @@ FaultDetector::FaultDetector(FaultDetectorSettings settings) : settings_(std::mo
   check_positive(settings_.settle_std_fraction, "settle_std_fraction");
   check_positive(settings_.settle_change_fraction, "settle_change_fraction");
   for (int q = 0; q < kQuantities; ++q) check_thresholds(settings_.thresholds[q], q);
-  thresholds_ = detection_thresholds(settings_);
+  if (!settings_.memory_time.empty() && settings_.memory_time.size() != n)
+    throw std::invalid_argument("FaultDetector: " + std::to_string(settings_.memory_time.size()) +
+                                " memory times for " + std::to_string(n) + " modes");
+  memory_ = settings_.memory_time.empty() ? std::vector<double>(n, kDefaultMemoryTime) : settings_.memory_time;
+  if (n == 0) detection_thresholds(settings_, kDefaultMemoryTime);  // checks the other settings all the same
+  for (const double memory : memory_) thresholds_.push_back(detection_thresholds(settings_, memory));
 
   modes_.assign(n, ModeStatus{});
   learning_.assign(n, Learning{});
@@ -256,7 +261,7 @@ void FaultDetector::learn(std::size_t i, double now, const Eigen::Vector3d& x, c
   if (l.count_first > 0 && l.count > l.count_first) {
     const Eigen::Vector3d first = l.sum_first / static_cast<double>(l.count_first);
     const Eigen::Vector3d second = (l.sum - l.sum_first) / static_cast<double>(l.count - l.count_first);
-    const double half_samples = std::max(1.0, 0.5 * window / (2.0 * settings_.memory_time));
+    const double half_samples = std::max(1.0, 0.5 * window / (2.0 * memory_[i]));
     for (int q = 0; q < kQuantities; ++q) {
       const double change = std::abs(second(q) - first(q));
       const double noise = kChangeSigmas * std::sqrt(2.0 * mean_covariance(q, q) / half_samples);
@@ -267,7 +272,7 @@ void FaultDetector::learn(std::size_t i, double now, const Eigen::Vector3d& x, c
       }
     }
   }
-  const double samples = std::max(1.0, window / (2.0 * settings_.memory_time));
+  const double samples = std::max(1.0, window / (2.0 * memory_[i]));
   m.baseline.value = params(mean);
   set_covariance(m.baseline, mean_covariance / samples);
   m.baseline.learned = true;
@@ -296,7 +301,6 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
   if (value.size() != n || covariance.size() != n)
     throw std::invalid_argument("FaultDetector::update: estimates for a different number of modes");
   const bool t_ok = std::isfinite(t);
-  const double h = thresholds_.chi_square, b = thresholds_.cusum;
 
   for (std::size_t i = 0; i < n; ++i) {
     const bool mode_valid = valid && t_ok && finite(value[i]);
@@ -323,7 +327,8 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
     const Eigen::Matrix3d c0 = m.baseline.covariance_matrix();
     const Eigen::Matrix3d S = c + c0;
     // The AR(1) coefficient and CUSUM reference over this update's interval.
-    const double rho = std::exp(-dt / settings_.memory_time);
+    const double rho = std::exp(-dt / memory_[i]);
+    const double h = thresholds_[i].chi_square, b = thresholds_[i].cusum;
     const double k = 0.5 * settings_.cusum_shift * std::sqrt((1.0 - rho) / (1.0 + rho));
     const Eigen::LLT<Eigen::Matrix3d> llt(S);
     m.chi_square = S.allFinite() && llt.info() == Eigen::Success ? d.dot(llt.solve(d)) : 0.0;

@@ -29,7 +29,7 @@ void BM_FaultDetectorUpdate(benchmark::State& state) {
 
   // 4096 updates of estimates, errors AR(1) over the memory with 1 % relative std.
   constexpr int kUpdates = 4096;
-  const double rho = std::exp(-s.update_period / s.memory_time), sd = std::sqrt(1.0 - rho * rho);
+  const double rho = std::exp(-s.update_period / kDefaultMemoryTime), sd = std::sqrt(1.0 - rho * rho);
   std::mt19937_64 rng(1);
   std::normal_distribution<double> z;
   std::vector<std::vector<ModalParameters>> value(kUpdates, truth);
