@@ -83,7 +83,9 @@ struct FaultDetectorSettings {
   // from the chi-square test, a twelfth from each of the six one-sided CUSUMs.
   // A hold_time only makes them rarer.
   double false_alarm_interval = 1000.0;
-  double cusum_shift = 1.0;  // sustained shift (std of d) the CUSUMs are tuned for: k = shift / 2
+  // Sustained shift (std of d) the CUSUMs are tuned for: their reference k is half
+  // of what it makes of an innovation, shift sqrt((1 - rho) / (1 + rho)) / 2.
+  double cusum_shift = 1.0;
   // Learning: a window gives the baseline when every estimate's relative std is
   // below settle_std_fraction, and its mean moved less than settle_change_fraction
   // (and less than 3 std of that move) between the halves, of the relative threshold.
