@@ -1,18 +1,22 @@
 // Proof that RecursiveEstimator::step() (and the read-outs a daemon calls per
-// sample: mode(), residual_rms(), status()) does not touch the heap once the
-// warm-up is over.
+// sample: mode(), mode_covariance(), residual_rms(), status()) does not touch the
+// heap once the warm-up is over, nor FaultDetector::update() after construction.
 //
 // The counting (every operator new/delete and, outside sanitizer builds, malloc
 // & co., per thread) is tests/allocation_counter.cpp, linked into this binary.
 #include <array>
+#include <cmath>
 #include <cstdio>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include <gtest/gtest.h>
 
 #include "allocation_counter.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/estimator.hpp"
+#include "modalwatch/fault_detector.hpp"
 #include "modalwatch/simulator.hpp"
 
 namespace modalwatch {
@@ -88,6 +92,7 @@ TEST_P(NoAllocation, InStepAndReadOutsAfterWarmup) {
     for (int i = 0; i < est.submodels(); ++i) {
       const ModeEstimate m = est.mode(i);
       sink += m.value.wn + m.value.zeta + m.value.gain + m.std.wn + m.std.zeta + m.std.gain;
+      sink += est.mode_covariance(i).trace();
     }
     sink += est.residual_rms();
     resets += est.status().resets;
@@ -101,6 +106,17 @@ TEST_P(NoAllocation, InStepAndReadOutsAfterWarmup) {
   EXPECT_FALSE(flags & kWarmingUp);
   EXPECT_TRUE(sink == sink) << "NaN in the read-outs";
   (void)resets;
+  // mode_covariance() is modal_covariance() of the submodel's theta covariance,
+  // and its diagonal gives mode()'s standard deviations.
+  for (int i = 0; i < est.submodels(); ++i) {
+    const Eigen::Matrix3d mc = est.mode_covariance(i);
+    const Eigen::Matrix3d expected = modal_covariance(est.submodel(i), est.covariance(i));
+    EXPECT_LE((mc - expected).norm(), 1e-12 * expected.norm()) << "submodel " << i;
+    const ModeEstimate m = est.mode(i);
+    EXPECT_NEAR(std::sqrt(mc(0, 0)), m.std.wn, 1e-12 * m.std.wn + 1e-300);
+    EXPECT_NEAR(std::sqrt(mc(1, 1)), m.std.zeta, 1e-12 * m.std.zeta + 1e-300);
+    EXPECT_NEAR(std::sqrt(mc(2, 2)), m.std.gain, 1e-12 * m.std.gain + 1e-300);
+  }
 }
 
 std::vector<Case> all_cases() {
@@ -114,6 +130,51 @@ std::vector<Case> all_cases() {
 }
 
 INSTANTIATE_TEST_SUITE_P(Estimator, NoAllocation, ::testing::ValuesIn(all_cases()), case_name);
+
+// FaultDetector::update(), both overloads, through learning (a restart and a
+// settled window), configured baselines, flags rising and falling on every
+// quantity of every mode: no allocation once constructed (`changes` reserved).
+TEST(FaultDetectorAllocation, UpdateAllocatesNothing) {
+  const std::vector<ModalParameters> truth = {{60.0, 0.05, 2.0}, {150.0, 0.03, 0.5}, {400.0, 0.02, 0.1}};
+  FaultDetectorSettings s;
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    s.mode_names.push_back("m" + std::to_string(i));
+    s.baselines.emplace_back(i == 0 ? std::nullopt : std::optional<ModalParameters>(truth[i]));
+  }
+  s.baseline_std.assign(truth.size(), ModalParameters{});
+  s.learn_window = 5.0;
+  for (auto& th : s.thresholds) th.hold_time = th.clear_time = 0.5;
+  FaultDetector detector(s);
+  std::vector<ModalParameters> value = truth, std_dev(truth.size());
+  std::vector<Eigen::Matrix3d> cov(truth.size());
+  std::vector<FlagChange> changes;
+  changes.reserve(kQuantities * truth.size());
+  int raised = 0, fallen = 0;
+
+  AllocationCounter::start();
+  for (int k = 0; k < 2000; ++k) {
+    const double t = 0.1 * k;
+    // 0-2 s: the first mode still settling (a restart); then steady; every 20 s
+    // a 10 s spell 30 % off on every quantity of every mode.
+    const double f = t < 2.0 ? 1.0 + 0.1 * (2.0 - t) : ((k / 100) % 2 == 1 && t > 20.0 ? 0.7 : 1.0);
+    for (std::size_t i = 0; i < truth.size(); ++i) {
+      value[i] = {truth[i].wn * f, truth[i].zeta * f, truth[i].gain * f};
+      std_dev[i] = {1e-3 * truth[i].wn, 1e-3 * truth[i].zeta, 1e-3 * truth[i].gain};
+      cov[i] = Eigen::Vector3d(std_dev[i].wn, std_dev[i].zeta, std_dev[i].gain).cwiseAbs2().asDiagonal();
+    }
+    changes.clear();
+    if (k % 2 == 0) detector.update(t, value, cov, k % 97 != 0, changes);
+    else detector.update(t, value, std_dev, true, changes);
+    for (const FlagChange& c : changes) (c.raised ? raised : fallen) += 1;
+  }
+  const test_support::AllocationCounts counts = AllocationCounter::stop();
+  EXPECT_EQ(counts.allocations, 0u) << first_allocation_trace();
+  EXPECT_EQ(counts.deallocations, 0u);
+  EXPECT_EQ(detector.status()[0].state, BaselineState::ready);
+  EXPECT_GE(detector.status()[0].learn_restarts, 1);
+  EXPECT_GE(raised, 9 * 5) << "every quantity of every mode rose in each spell";
+  EXPECT_GE(fallen, 9 * 4);
+}
 
 // The counter itself works: an allocation inside the counted region is seen
 // (through operator new and, outside sanitizer builds, through malloc).

@@ -3,6 +3,8 @@
 // reported standard deviations never is, both thresholds are needed, flags fall
 // with hysteresis, baselines are learned or configured, invalid updates freeze
 // everything, bad settings throw, and update() never grows the caller's vector.
+// The statistics (false-alarm rate, delays, CUSUM, settling) are in
+// test_fault_statistics.cpp.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -345,12 +347,29 @@ TEST(FaultDetector, ABlipShorterThanTheHoldTimeNeverFlags) {
 
 TEST(FaultDetector, LearnsTheMeanOverTheWindowAndRaisesNothingWhileLearning) {
   constexpr double window = 10.0;
-  Stream s(learned(3, window));
+  FaultDetectorSettings st = learned(3, window);
+  const double memory = kDefaultMemoryTime;
+  Stream s(st);
   // Warm-up first: invalid updates do not start the window.
   s.run(5.0, false);
   EXPECT_FALSE(s.detector.status()[0].baseline_ready);
-  // During learning the estimates swing +-20 % about kBaseline with a tiny std:
-  // far past the thresholds of the baseline they end up defining.
+  EXPECT_EQ(s.detector.status()[0].state, BaselineState::learning);
+  // Then estimates 50 % off with a 30 % std: too uncertain to learn from (the
+  // limit is half the 5 % relative threshold), so no window begins.
+  for (int i = 0; i < 3; ++i) {
+    s.value[i] = scaled(kBaseline[i], 1.5);
+    s.std_dev[i] = scaled(kBaseline[i], 0.3);
+  }
+  s.run(5.0);
+  EXPECT_EQ(s.detector.status()[0].state, BaselineState::learning);
+  EXPECT_EQ(s.detector.status()[0].learn_hold, LearnHold::uncertain);
+  EXPECT_EQ(s.detector.status()[0].learn_progress, 0.0);
+  // Then estimates swinging +-2 % about kBaseline with a 2 % std: consistent
+  // with their std, and steady between the window's halves.
+  for (int i = 0; i < 3; ++i) {
+    s.value[i] = scaled(kBaseline[i], 1.02);
+    s.std_dev[i] = scaled(kBaseline[i], 0.02);
+  }
   const double t_start = s.t();
   double sum_wn = 0.0;
   int count = 0;
@@ -358,7 +377,10 @@ TEST(FaultDetector, LearnsTheMeanOverTheWindowAndRaisesNothingWhileLearning) {
     sum_wn += s.value[0].wn;
     ++count;
     const bool ready = s.detector.status()[0].baseline_ready;
-    const double f = (count % 2 == 0) ? 1.2 : 0.8;
+    if (!ready) {
+      EXPECT_NEAR(s.detector.status()[0].learn_progress, (count - 1) * kPeriod / window, 1e-9);
+    }
+    const double f = (count % 2 == 0) ? 1.02 : 0.98;
     for (int i = 0; i < 3; ++i) s.value[i] = scaled(kBaseline[i], f);
     return ready;
   });
@@ -367,8 +389,16 @@ TEST(FaultDetector, LearnsTheMeanOverTheWindowAndRaisesNothingWhileLearning) {
   EXPECT_EQ(count, static_cast<int>(std::lround(window / kPeriod)) + 1) << "both ends included";
   const ModeStatus& m = s.detector.status()[0];
   EXPECT_TRUE(m.baseline.learned);
+  EXPECT_EQ(m.state, BaselineState::ready);
+  EXPECT_EQ(m.learn_hold, LearnHold::none);
+  EXPECT_EQ(m.learn_progress, 1.0);
   EXPECT_NEAR(m.baseline.value.wn, sum_wn / count, 1e-9);
   EXPECT_NEAR(m.baseline.value.wn, kBaseline[0].wn, 0.01 * kBaseline[0].wn);
+  // Its covariance: the mean reported one over window / (2 memory_time) samples.
+  const double n_eff = window / (2.0 * memory);
+  EXPECT_NEAR(m.baseline.covariance_matrix()(0, 0), std::pow(0.02 * kBaseline[0].wn, 2) / n_eff, 1e-12);
+  EXPECT_NEAR(m.baseline.covariance_matrix()(2, 2), std::pow(0.02 * kBaseline[0].gain, 2) / n_eff, 1e-15);
+  EXPECT_EQ(m.baseline.covariance_matrix()(0, 1), 0.0);
   for (int i = 0; i < 3; ++i) EXPECT_TRUE(s.detector.status()[i].baseline_ready);
   EXPECT_TRUE(s.log.empty()) << "no flag while learning";
 
@@ -376,7 +406,7 @@ TEST(FaultDetector, LearnsTheMeanOverTheWindowAndRaisesNothingWhileLearning) {
   for (int i = 0; i < 3; ++i) s.value[i] = s.detector.status()[i].baseline.value;
   s.run(10.0);
   EXPECT_FALSE(s.detector.any_flag());
-  s.value[2].wn *= 0.85;
+  s.value[2].wn *= 0.8;
   s.run(5.0);
   EXPECT_EQ(s.detector.flag_bits(), std::uint64_t{1} << 6);
 }
@@ -386,7 +416,9 @@ TEST(FaultDetector, ConfiguredBaselineIsUsedFromTheFirstUpdate) {
   for (int i = 0; i < 3; ++i) {
     const ModeStatus& m = s.detector.status()[i];
     EXPECT_TRUE(m.baseline_ready);
+    EXPECT_EQ(m.state, BaselineState::configured);
     EXPECT_FALSE(m.baseline.learned);
+    EXPECT_EQ(m.baseline.covariance_matrix().norm(), 0.0) << "no std configured: taken as exact";
     EXPECT_EQ(m.baseline.value.wn, kBaseline[i].wn);
     EXPECT_EQ(m.baseline.value.zeta, kBaseline[i].zeta);
     EXPECT_EQ(m.baseline.value.gain, kBaseline[i].gain);
@@ -517,6 +549,17 @@ TEST(FaultDetector, BadSettingsThrow) {
   throws([](auto& s) { s.thresholds[1].clear_time = -0.1; });
   throws([](auto& s) { s.thresholds[2].hold_time = std::numeric_limits<double>::infinity(); });
   throws([](auto& s) { s.baselines[0]->wn = kNaN; });
+  throws([](auto& s) { s.baseline_std.assign(2, ModalParameters{}); });
+  throws([](auto& s) { s.baseline_std.assign(3, ModalParameters{1.0, -0.1, 1.0}); });
+  throws([](auto& s) { s.baseline_std.assign(3, ModalParameters{1.0, 0.1, kNaN}); });
+  throws([](auto& s) { s.memory_time = {2.0, 0.0, 2.0}; });
+  throws([](auto& s) { s.memory_time = {2.0, 2.0}; });
+  throws([](auto& s) { s.update_period = -0.1; });
+  throws([](auto& s) { s.false_alarm_interval = 0.0; });
+  throws([](auto& s) { s.false_alarm_interval = std::numeric_limits<double>::infinity(); });
+  throws([](auto& s) { s.cusum_shift = kNaN; });
+  throws([](auto& s) { s.settle_std_fraction = 0.0; });
+  throws([](auto& s) { s.settle_change_fraction = -1.0; });
   throws([](auto& s) {
     s.mode_names.assign(22, "m");
     s.baselines.assign(22, ModalParameters{1.0, 0.1, 1.0});

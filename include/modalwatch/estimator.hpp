@@ -280,6 +280,8 @@ class RecursiveEstimator {
   AdditiveModel model() const;
   // Modal view of submodel i and its standard deviations (sigma^2 P_i). No allocation.
   ModeEstimate mode(int i) const noexcept;
+  // Covariance of submodel i's (wn, zeta, gain): modal_covariance() of sigma^2 P_i. No allocation.
+  Eigen::Matrix3d mode_covariance(int i) const noexcept;
   // Covariance of theta_i (physical units), sigma^2 P_i.
   Eigen::MatrixXd covariance(int i) const;
   double residual_rms() const noexcept;  // output error over the residual window

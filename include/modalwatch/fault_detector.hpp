@@ -1,17 +1,25 @@
 #pragma once
-// Fault detection on modal estimates (DESIGN.md, "Fault detection"): per mode a
-// baseline (configured, or learned over a window), and per publish period the
-// deviation of wn, zeta and gain in units of the estimate's standard deviation
-// and as a relative change. A flag rises when a deviation stays past its
-// threshold for a hold time and falls with hysteresis; no flag while the
-// estimator warms up or the excitation is too low.
+// Fault detection on modal estimates. Per mode a baseline x0 with covariance
+// C0 (configured, or learned once the estimate has settled) and per update the
+// deviation d = x - x0 of (wn, zeta, gain), x with covariance C:
+//   T2 = d' S^-1 d, S = C + C0                      (chi-square, 3 dof)
+//   G+_q = max(0, G+_q + e_q - k), G-_q = max(0, G-_q - e_q - k)   (CUSUMs)
+//   e_q = (z_q - rho z_q,prev) / sqrt(1 - rho^2), z_q = d_q / sqrt(C_qq), rho = exp(-dt / tau)
+// T2 > h and |d_q| > sigma_threshold sqrt(S_qq), or G_q > b on d_q's side, say the
+// change is real; h and b follow from the mean time between false alarms for a
+// stationary estimate (errors AR(1) over the estimator's memory tau). Quantity q
+// is past when that holds AND |d_q| / |x0_q| > relative_threshold (the size of
+// change that matters); a flag rises after hold_time past and falls with hysteresis.
 //
 // A plain class: no I/O, no threads, no allocation in update().
 #include <array>
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <vector>
+
+#include <Eigen/Core>
 
 #include "modalwatch/model.hpp"
 
@@ -21,28 +29,68 @@ enum class Quantity : int { wn = 0, zeta = 1, gain = 2 };
 inline constexpr int kQuantities = 3;
 
 struct FaultThresholds {
-  // A quantity deviates when BOTH hold: |x - x0| > sigma_threshold * std(x) and
-  // |x - x0| / |x0| > relative_threshold. (Statistics alone flag noise-free drifts of
-  // 0.01 %; percentages alone flag noisy estimates.)
+  // Attribution: a mode-level chi-square detection flags only the quantities whose
+  // own deviation is past sigma_threshold standard deviations of d.
   double sigma_threshold = 4.0;
+  // The size of change that matters: |x - x0| / |x0| past this, or no flag.
   double relative_threshold = 0.05;
   double hold_time = 2.0;      // s past the thresholds before the flag rises
-  double clear_fraction = 0.5; // hysteresis: falls below this fraction of both thresholds
+  double clear_fraction = 0.5; // hysteresis: falls below this fraction of either threshold
   double clear_time = 2.0;     // s below before it falls
   bool operator==(const FaultThresholds&) const = default;
 };
 
+enum class BaselineState : int {
+  learning = 0,    // no baseline yet: the detector tests nothing for this mode
+  ready = 1,       // learned from a settled window
+  configured = 2,  // from the settings
+};
+
+// Why a learning window has not (yet) produced a baseline.
+enum class LearnHold : int {
+  none = 0,       // the window is filling
+  uncertain = 1,  // an estimate's relative std was past settle_std_fraction of the relative threshold
+  drifting = 2,   // its mean moved between the window's halves: still settling
+};
+
 struct ModeBaseline {
   ModalParameters value;  // wn, zeta, gain
+  // Covariance of value, row-major over (wn, zeta, gain): plain numbers, so that
+  // ModeStatus stays trivially copyable (the daemon passes it through a lock-free ring).
+  std::array<double, 9> covariance{};
   bool learned = false;   // from the learning window rather than the config
+  Eigen::Matrix3d covariance_matrix() const {
+    return Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(covariance.data());
+  }
 };
+
+inline constexpr double kDefaultMemoryTime = 2.0;  // s
 
 struct FaultDetectorSettings {
   std::vector<std::string> mode_names;
-  // Per mode: a configured baseline, or none (learned as the mean estimate over
-  // learn_window seconds once estimates are valid).
+  // Per mode: a configured baseline, or none (learned).
   std::vector<std::optional<ModalParameters>> baselines;
-  double learn_window = 30.0;  // s
+  // Empty, or per mode: the standard deviations of a configured baseline (a
+  // commissioning fit's); zero where it is taken as exact.
+  std::vector<ModalParameters> baseline_std;
+  double learn_window = 30.0;  // s of valid updates a learned baseline averages
+  // Per mode, the estimator's memory (s): its errors are taken as correlated like
+  // exp(-|t| / memory_time), e.g. sample time / (1 - the submodel's forgetting
+  // factor). Empty: kDefaultMemoryTime for every mode.
+  std::vector<double> memory_time;
+  double update_period = 0.1;  // s between updates (the thresholds assume it)
+  // Mean time between false alarms per mode (h) of a stationary estimate: half
+  // from the chi-square test, a twelfth from each of the six one-sided CUSUMs.
+  // A hold_time only makes them rarer.
+  double false_alarm_interval = 1000.0;
+  // Sustained shift (std of d) the CUSUMs are tuned for: their reference k is half
+  // of what it makes of an innovation, shift sqrt((1 - rho) / (1 + rho)) / 2.
+  double cusum_shift = 1.0;
+  // Learning: a window gives the baseline when every estimate's relative std is
+  // below settle_std_fraction, and its mean moved less than settle_change_fraction
+  // (and less than 3 std of that move) between the halves, of the relative threshold.
+  double settle_std_fraction = 0.5;
+  double settle_change_fraction = 0.1;
   // Per quantity (wn, zeta, gain); zeta is noisier, so it usually gets looser limits.
   std::array<FaultThresholds, kQuantities> thresholds{};
   bool operator==(const FaultDetectorSettings&) const = default;
@@ -51,8 +99,9 @@ struct FaultDetectorSettings {
 // The detector's view of one quantity of one mode.
 struct QuantityStatus {
   bool flagged = false;
-  double deviation_sigma = 0.0;    // (x - x0) / std
+  double deviation_sigma = 0.0;    // (x - x0) / sqrt(S_qq)
   double deviation_relative = 0.0; // (x - x0) / |x0|
+  double cusum = 0.0;              // the larger one-sided CUSUM, in units of its threshold b
   double since = 0.0;              // time the flag rose (or the condition began, when pending)
   bool pending = false;            // past the thresholds, hold time not yet elapsed
 };
@@ -60,8 +109,15 @@ struct QuantityStatus {
 struct ModeStatus {
   std::array<QuantityStatus, kQuantities> quantity{};
   ModeBaseline baseline;
-  bool baseline_ready = false;
+  bool baseline_ready = false;  // state != learning
+  BaselineState state = BaselineState::learning;
+  double learn_progress = 0.0;      // learning: fraction of the window filled
+  LearnHold learn_hold = LearnHold::none;  // learning: why the last window restarted
+  int learn_restarts = 0;           // windows begun and restarted so far
+  double chi_square = 0.0;          // T2 of the last valid update
 };
+
+static_assert(std::is_trivially_copyable_v<ModeStatus>);
 
 // One event per flag change, for logging (the daemon logs every one).
 struct FlagChange {
@@ -70,34 +126,63 @@ struct FlagChange {
   bool raised = false;
   double time = 0.0;
   double value = 0.0, baseline = 0.0, deviation_sigma = 0.0, deviation_relative = 0.0;
+  double chi_square = 0.0, cusum = 0.0;  // the statistics at the change (cusum in units of b)
 };
+
+static_assert(std::is_trivially_copyable_v<FlagChange>);
+
+// The thresholds the settings give for a mode of the given memory (s).
+struct DetectionThresholds {
+  double chi_square = 0.0;       // h
+  double cusum = 0.0;            // b, in std of the innovations
+  double cusum_reference = 0.0;  // k at update_period
+};
+DetectionThresholds detection_thresholds(const FaultDetectorSettings& settings, double memory_time);
+
+// P(X > x) for X chi-square with 3 degrees of freedom: erfc(sqrt(x/2)) + sqrt(2x/pi) exp(-x/2).
+double chi_square3_tail(double x);
 
 class FaultDetector {
  public:
   // Throws std::invalid_argument on inconsistent settings (sizes, thresholds).
   explicit FaultDetector(FaultDetectorSettings settings);
 
-  // One publish period: the current estimate of every mode (value and std) at time t.
-  // `valid` is false while the estimator warms up or excitation is low: no flag
-  // changes then, and learning pauses. Flag changes since the last call are
-  // appended to `changes` (capacity reserved at construction: no allocation for
-  // up to 3 changes per mode per call).
+  // One update: the current estimate of every mode (value and covariance of
+  // (wn, zeta, gain), e.g. modal_covariance()) at time t. `valid` is false while
+  // the estimator warms up or excitation is low: no flag changes then, and
+  // learning pauses. Flag changes since the last call are appended to `changes`
+  // (reserve 3 per mode: no allocation).
+  void update(double t, const std::vector<ModalParameters>& value, const std::vector<Eigen::Matrix3d>& covariance,
+              bool valid, std::vector<FlagChange>& changes);
+  // The same with standard deviations only (a diagonal covariance).
   void update(double t, const std::vector<ModalParameters>& value, const std::vector<ModalParameters>& std_dev,
               bool valid, std::vector<FlagChange>& changes);
 
   const std::vector<ModeStatus>& status() const { return modes_; }
+  const DetectionThresholds& thresholds(int mode) const { return thresholds_[static_cast<std::size_t>(mode)]; }
   bool any_flag() const;
   // Bit i*3 + q set when mode i quantity q is flagged (up to 21 modes).
   std::uint64_t flag_bits() const;
 
  private:
+  struct Learning {
+    double start = 0.0;  // mode clock
+    int count = 0, count_first = 0;
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero(), sum_first = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d sum_covariance = Eigen::Matrix3d::Zero();
+  };
+  void learn(std::size_t i, double now, const Eigen::Vector3d& x, const Eigen::Matrix3d& c);
+  void restart_learning(std::size_t i, LearnHold why);
+
   FaultDetectorSettings settings_;
+  std::vector<double> memory_;  // per mode
+  std::vector<DetectionThresholds> thresholds_;
   std::vector<ModeStatus> modes_;
-  // Learning: running sums per mode over the learn window.
-  std::vector<std::array<double, kQuantities>> sum_;
-  std::vector<double> learn_start_;
-  std::vector<int> learn_count_;
-  std::vector<std::array<double, kQuantities>> below_since_;  // hysteresis timers
+  std::vector<Learning> learning_;
+  std::vector<std::array<double, 2 * kQuantities>> cusum_;  // G+ and G- per quantity
+  std::vector<std::array<double, kQuantities>> previous_;    // z_q of the last valid update
+  std::vector<std::array<double, kQuantities>> below_since_;  // hold / clear timers
+  std::vector<Eigen::Matrix3d> diagonal_;  // the std overload's covariances
   // Invalid updates pause every timer: each mode runs on its own clock, which
   // advances only between consecutive updates that are valid for that mode.
   std::vector<double> clock_;

@@ -64,9 +64,15 @@ Submodel make_rigid_body(const std::string& name, double gain, int rigid_poles =
 // still the DC gain. For a rigid body, wn and zeta are those of A (0 if n < 2).
 ModalParameters modal_parameters(const Submodel& s);
 
-// Standard deviations of (wn, zeta, gain) from the covariance of theta_i,
-// by first-order propagation through the maps wn = a2^{-1/2},
-// zeta = a1 / (2 sqrt(a2)), gain = b0.
+// Covariance of (wn, zeta, gain) from the covariance of theta_i, by first-order
+// propagation J C J' through the maps of eq. (11): wn = a2^{-1/2},
+// zeta = a1 / (2 sqrt(a2)), gain = b0. Only gain's row and column are filled for
+// a submodel that is not a plain mode with a2 > 0; zero when the sizes disagree.
+Eigen::Matrix3d modal_covariance(const Submodel& s, const Eigen::MatrixXd& theta_covariance);
+// The same from A's coefficients a1, a2 and the covariance of (a1, a2, b0).
+// Fixed size, no allocation (for per-sample callers).
+Eigen::Matrix3d modal_covariance(double a1, double a2, const Eigen::Matrix3d& a1_a2_b0_covariance);
+// Standard deviations of (wn, zeta, gain): the square roots of modal_covariance's diagonal.
 ModalParameters modal_std(const Submodel& s, const Eigen::MatrixXd& theta_covariance);
 
 // Every resonance of a submodel of any order: the (wn, zeta) of each

@@ -3,6 +3,7 @@
 #include "modalwatch/estimator.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -267,6 +268,21 @@ ModeEstimate RecursiveEstimator::mode(int i) const noexcept {
     }
   }
   return est;
+}
+
+Eigen::Matrix3d RecursiveEstimator::mode_covariance(int i) const noexcept {
+  const Impl& m = *impl_;
+  Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
+  if (m.blocks.empty()) return c;
+  const Block& b = m.blocks[i];
+  if (b.n != 2) {
+    c(2, 2) = m.e_var * b.P(b.n, b.n) / (b.scale(b.n) * b.scale(b.n));
+    return c;
+  }
+  const std::array<int, 3> at = {0, 1, b.n};  // a1, a2, b0 inside theta
+  for (int r = 0; r < 3; ++r)
+    for (int k = 0; k < 3; ++k) c(r, k) = m.e_var * b.P(at[r], at[k]) / (b.scale(at[r]) * b.scale(at[k]));
+  return modal_covariance(b.theta(0) / b.scale(0), b.theta(1) / b.scale(1), c);
 }
 
 Eigen::MatrixXd RecursiveEstimator::covariance(int i) const {

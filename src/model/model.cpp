@@ -1,6 +1,7 @@
 #include "modalwatch/model.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
@@ -94,20 +95,40 @@ ModalParameters modal_parameters(const Submodel& s) {
   return p;
 }
 
-ModalParameters modal_std(const Submodel& s, const Eigen::MatrixXd& cov) {
-  ModalParameters sd;
-  if (cov.rows() != s.n_theta()) return sd;
-  sd.gain = std::sqrt(std::max(0.0, cov(s.n, s.n)));
-  if (s.n == 2 && s.a(1) > 0.0) {
-    const double a1 = s.a(0), a2 = s.a(1);
-    // Jacobians of wn = a2^{-1/2} and zeta = a1 / (2 sqrt(a2)) w.r.t. (a1, a2).
-    Eigen::Vector2d jw(0.0, -0.5 * std::pow(a2, -1.5));
-    Eigen::Vector2d jz(0.5 / std::sqrt(a2), -0.25 * a1 * std::pow(a2, -1.5));
-    const Eigen::Matrix2d c = cov.topLeftCorner(2, 2);
-    sd.wn = std::sqrt(std::max(0.0, jw.dot(c * jw)));
-    sd.zeta = std::sqrt(std::max(0.0, jz.dot(c * jz)));
+Eigen::Matrix3d modal_covariance(double a1, double a2, const Eigen::Matrix3d& c) {
+  if (!(a2 > 0.0)) {
+    Eigen::Matrix3d out = Eigen::Matrix3d::Zero();
+    out(2, 2) = c(2, 2);
+    return out;
   }
-  return sd;
+  // Jacobian of (wn, zeta, gain) w.r.t. (a1, a2, b0).
+  const double a2_32 = a2 * std::sqrt(a2);
+  Eigen::Matrix3d j = Eigen::Matrix3d::Zero();
+  j(0, 1) = -0.5 / a2_32;
+  j(1, 0) = 0.5 / std::sqrt(a2);
+  j(1, 1) = -0.25 * a1 / a2_32;
+  j(2, 2) = 1.0;
+  const Eigen::Matrix3d out = j * c * j.transpose();
+  return 0.5 * (out + out.transpose());  // exactly symmetric, as a covariance
+}
+
+Eigen::Matrix3d modal_covariance(const Submodel& s, const Eigen::MatrixXd& cov) {
+  if (cov.rows() != s.n_theta() || cov.cols() != s.n_theta()) return Eigen::Matrix3d::Zero();
+  if (!(s.n == 2 && s.a(1) > 0.0)) {
+    Eigen::Matrix3d out = Eigen::Matrix3d::Zero();
+    out(2, 2) = cov(s.n, s.n);
+    return out;
+  }
+  const std::array<Eigen::Index, 3> at = {0, 1, s.n};  // a1, a2, b0 inside theta
+  Eigen::Matrix3d c;
+  for (int r = 0; r < 3; ++r)
+    for (int k = 0; k < 3; ++k) c(r, k) = cov(at[r], at[k]);
+  return modal_covariance(s.a(0), s.a(1), c);
+}
+
+ModalParameters modal_std(const Submodel& s, const Eigen::MatrixXd& cov) {
+  const Eigen::Matrix3d c = modal_covariance(s, cov);
+  return {std::sqrt(std::max(0.0, c(0, 0))), std::sqrt(std::max(0.0, c(1, 1))), std::sqrt(std::max(0.0, c(2, 2)))};
 }
 
 std::vector<ModalParameters> resonances(const Submodel& s) {
