@@ -70,23 +70,29 @@ TEST(DaemonAllocation, NoneOnTheEstimationThreadAfterStartUp) {
     const Eigen::Index mid = 20 * 4096, end = rec.size();
     publish_range(lcm, c.lcm.batches_channel, rec, 0, mid, 64, 0, 0, pace);
     ASSERT_TRUE(wait_for([&] { return probe.started.load(); }, 20.0)) << "the warm-up never ended";
-    // Bad input after the warm-up: NaN, a duplicate, reordering.
+    // Bad input after the warm-up: NaN, a duplicate, a late (reordered) sample.
     for (int i = 0; i < 3; ++i) {
       StampedSample s{kUtime0 + std::llround(rec.t(mid + i) * 1e6), mid + i, rec.u(mid + i), std::nan(""), rec.r(mid + i)};
       const auto bytes = encode_sample(s);
       lcm_publish(lcm, c.lcm.samples_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
       if (i == 1) lcm_publish(lcm, c.lcm.samples_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
     }
+    {  // an old sample arriving late: out of order
+      const Eigen::Index k = mid - 5;
+      const auto bytes = encode_sample(StampedSample{kUtime0 + std::llround(rec.t(k) * 1e6), k, rec.u(k), rec.y(k), rec.r(k)});
+      lcm_publish(lcm, c.lcm.samples_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
+    }
     // Then silence (stale input), and the rest 2 s later in sample time (a gap), with the drift.
     std::this_thread::sleep_for(std::chrono::milliseconds(400));
     done = mid + 3;
     publish_range(lcm, c.lcm.batches_channel, rec, mid + 3, end, 64, 2'000'000, 0, pace);
-    published += 4;  // the single samples
+    published += 5;  // the single samples
     ASSERT_TRUE(wait_for([&] { return d.counters().samples_received == published && handled() == published; }, 30.0));
     d.stop();
     const DaemonCounters k = d.counters();
     EXPECT_EQ(k.samples_nonfinite, 3u);
     EXPECT_EQ(k.samples_duplicate, 1u);
+    EXPECT_EQ(k.samples_out_of_order, 1u);
     EXPECT_EQ(k.gaps, 1u);
     EXPECT_GT(k.flag_changes, 0u) << "the fault detector's flag path was not exercised";
     EXPECT_GT(k.samples_processed, std::uint64_t(end) - 10);

@@ -233,7 +233,7 @@ TEST(RecursiveEstimator, TracksTheSeedExample) {
 }
 
 TEST(RecursiveEstimator, AdditiveModelIsAtLeastAsAccurateAsTheUnfactoredSixthOrderOne) {
-  // Acceptance 2: the recursive SRIVC with K = 1 and an unfactored 6th-order model
+  // The recursive SRIVC with K = 1 and an unfactored 6th-order model
   // (CONTSID's approach, which the paper argues against) on the same record, same
   // forgetting: the additive estimate is at least as accurate on every mode.
   const Config c = paper_config();

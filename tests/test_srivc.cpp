@@ -264,7 +264,7 @@ TEST(AdditiveSrivc, MonteCarloAtSeedNoiseLevelOpenLoopIsUnbiasedWithHonestStd) {
 TEST(AdditiveSrivc, ModesAt150And700HzAt10kHzAreAsAccurateAsTheSameSystemScaledDownInTime) {
   // Time scaled by 2 pi 100: the slow twin has modes at 1.5 and 7 rad/s at 15.9 Hz.
   // Same input and noise sequences, so both problems are the same up to scaling
-  // (DESIGN.md point 3): the relative errors must agree.
+  // (each submodel is estimated in its own normalised time): the relative errors must agree.
   const double scale = 2 * kPi * 100;
   auto plant_at = [](double wscale) {
     PlantSpec p;

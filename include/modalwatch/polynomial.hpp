@@ -19,7 +19,7 @@ std::optional<Eigen::VectorXcd> eigenvalues(const Eigen::MatrixXd& A);
 // scaled so that its constant coefficient is `constant` (anti-monic for 1).
 Eigen::VectorXd polynomial_from_roots(const Eigen::VectorXcd& roots, double constant = 1.0);
 
-// Stability projection (section 4.7, DESIGN.md point 4): reflects every root
+// Stability projection (section 4.7): reflects every root
 // with a non-negative real part into the open left half plane (s -> -conj(s)),
 // which keeps |A(jw)|. `a` holds a_1..a_n of an anti-monic A(p) and is changed in
 // place. Roots on the imaginary axis are moved to real part -margin*|s|.

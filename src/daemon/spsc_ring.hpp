@@ -23,33 +23,17 @@
 //   resource (in particular no heap memory that a std::string or std::vector
 //   would free on the wrong thread).
 //
-// Design
-// - Capacity is any n >= 1, not rounded to a power of two. Like Rigtorp's queue
-//   the indices live in [0, n] over n + 1 slots and wrap by compare-and-reset;
-//   one slot stays empty so that "full" (next write == read) differs from
-//   "empty" (write == read) without a shared counter. The compare costs what a
-//   mask costs (the branch is almost never taken and well predicted), there is
-//   no division, and a ring configured for "one second at 4096 Hz" or "5000
-//   samples" holds exactly that many, which keeps the drop counters in terms
-//   of the configured size. The price is one unused slot.
-// - The producer's index (write_) and the consumer's index (read_) sit in
-//   separate 128-byte blocks, each next to a private cached copy of the other
-//   side's index. The producer reloads the shared read_ only when its cached copy
-//   says the ring is full, the consumer reloads write_ only when its copy says it
-//   is empty, so in steady state each side touches only its own cache lines and
-//   the lines of the slots it uses. 128 rather than 64 bytes because x86 L2
-//   prefetchers pull cache lines in adjacent pairs (folly and crossbeam pad to
-//   128 on x86_64 for this reason); std::hardware_destructive_interference_size
-//   is not used because GCC warns that its value is not ABI-stable and clang 14's
-//   libstdc++ setup does not provide it.
-// - The read-only members (capacity, slot pointer) get their own block too, so
-//   reading them never pulls a line that the other thread is writing. The ring
-//   object is 128-byte aligned and 384 bytes (for any T), so nothing else in its
-//   enclosing struct or heap block shares these blocks; over-aligned operator new
-//   (C++17) keeps that true for a heap-allocated ring.
-// - The slot array is allocated once, aligned to 128 bytes and rounded up to a
-//   multiple of 128 bytes, so neither its first nor its last slot shares a line
-//   with an unrelated heap object.
+// Design (why it is fast)
+// - Capacity is any n >= 1: indices live in [0, n] over n + 1 slots and wrap by
+//   compare-and-reset, so a ring sized "one second at 4096 Hz" holds exactly
+//   that and the drop counters stay in the configured unit. One slot stays empty
+//   to tell full from empty without a shared counter.
+// - Each side's index sits in its own 128-byte block next to a cached copy of
+//   the other side's index, reloaded only when the copy says full (producer) or
+//   empty (consumer): in steady state each thread touches only its own lines.
+//   128 bytes because x86 prefetchers pull line pairs.
+// - The slot array is allocated once, 128-byte aligned and padded, so it shares
+//   no line with unrelated heap objects.
 #include <atomic>
 #include <cassert>
 #include <cstddef>

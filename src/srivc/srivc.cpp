@@ -13,7 +13,7 @@
 namespace modalwatch {
 namespace {
 
-// Per-submodel time normalisation (DESIGN.md point 3): with t' = ws t a mode's
+// Per-submodel time normalisation: with t' = ws t a mode's
 // coefficients become a'_j = a_j ws^j and b'_k = b_k ws^(k-l), so a'_n is of
 // order one whether the mode sits at 1 rad/s or at 700 Hz.
 double time_scale(const Submodel& s) {
