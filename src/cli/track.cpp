@@ -579,9 +579,13 @@ int track(const TrackArgs& args) {
         static constexpr const char* kStates[] = {"learning", "ready", "configured"};
         std::fprintf(stderr, "    %s: baseline %s", config.model.submodels[i].name.c_str(),
                      kStates[static_cast<int>(m.state)]);
+        static constexpr const char* kHolds[] = {"none", "an estimate too uncertain", "the estimate drifting"};
         if (m.baseline_ready)
           std::fprintf(stderr, " (wn %.6g, zeta %.4g, gain %.6g)", m.baseline.value.wn, m.baseline.value.zeta,
                        m.baseline.value.gain);
+        else if (m.learn_restarts > 0)
+          std::fprintf(stderr, " (%d windows restarted, the last for %s)", m.learn_restarts,
+                       kHolds[static_cast<int>(m.learn_hold)]);
         std::fprintf(stderr, "\n");
       }
     }
