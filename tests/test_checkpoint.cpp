@@ -11,6 +11,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <bit>
 #include <iterator>
 #include <limits>
 #include <system_error>
@@ -47,7 +48,10 @@ Checkpoint real_checkpoint() {
   cp.last_utime = 1'700'000'000'000'000 + 99'950'000;
   cp.last_seq = r.size() - 1;
   cp.estimator = est.state();
-  cp.baselines = {ModalParameters{20.0, 0.1, 1.0}, std::nullopt, ModalParameters{4.0, 0.05, 0.5}};
+  ModeBaseline learned{{20.0, 0.1, 1.0}, {0.04, 1e-4, 2e-4, 1e-4, 1e-6, 3e-6, 2e-4, 3e-6, 1e-5}, true};
+  ModeBaseline configured{{4.0, 0.05, 0.5}, {}, false};
+  configured.covariance[4] = 2.5e-5;
+  cp.baselines = {learned, std::nullopt, configured};
   return cp;
 }
 
@@ -92,7 +96,11 @@ TEST(Checkpoint, RoundTripIsExact) {
   EXPECT_EQ(back.estimator.status().updates, cp.estimator.status().updates);
   ASSERT_EQ(back.baselines.size(), 3u);
   EXPECT_FALSE(back.baselines[1].has_value());
-  EXPECT_EQ(back.baselines[2]->zeta, 0.05);
+  EXPECT_EQ(back.baselines[2]->value.zeta, 0.05);
+  EXPECT_FALSE(back.baselines[2]->learned);
+  EXPECT_EQ(back.baselines[2]->covariance[4], 2.5e-5);
+  EXPECT_TRUE(back.baselines[0]->learned);
+  EXPECT_EQ(back.baselines[0]->covariance, cp.baselines[0]->covariance);  // bitwise
   // And an estimator restored from the decoded state continues exactly like one
   // restored from the original.
   const Config c = paper_config();
@@ -132,8 +140,10 @@ TEST(Checkpoint, WrongMagicVersionAndAbsurdLengthsAreNamed) {
   b[0] = 'X';
   EXPECT_NE(error_of([&] { decode_checkpoint(b, "m"); }).find("wrong magic"), std::string::npos);
   b = good;
-  put_le(b, 8, 2, 4);
-  EXPECT_NE(error_of([&] { decode_checkpoint(b, "v"); }).find("format version 2"), std::string::npos);
+  put_le(b, 8, 3, 4);
+  EXPECT_NE(error_of([&] { decode_checkpoint(b, "v"); }).find("format version 3"), std::string::npos);
+  put_le(b, 8, 0, 4);
+  EXPECT_NE(error_of([&] { decode_checkpoint(b, "v"); }).find("format version 0"), std::string::npos);
   b = good;
   put_le(b, 12, std::uint64_t{1} << 60, 8);
   EXPECT_NE(error_of([&] { decode_checkpoint(b, "l"); }).find("exceeds the limit"), std::string::npos);
@@ -195,6 +205,41 @@ TEST(Checkpoint, FingerprintCoversStructureLoopAndForgettingButNotTheRest) {
   EXPECT_NE(checkpoint_fingerprint(d), f);
 }
 
+// A version-1 file (baselines as wn, zeta, gain only) still reads: its baselines
+// come back learned, with zero covariance.
+TEST(Checkpoint, ReadsVersionOneBaselinesAsLearnedWithoutCovariance) {
+  Checkpoint cp = real_checkpoint();
+  cp.baselines = {std::nullopt, std::nullopt, std::nullopt};
+  std::vector<std::uint8_t> b = encode_checkpoint(cp);
+  b.resize(b.size() - 4 - 3);  // CRC and the three absent baselines
+  const auto f64 = [&](double v) {
+    b.resize(b.size() + 8);
+    put_le(b, b.size() - 8, std::bit_cast<std::uint64_t>(v), 8);
+  };
+  b.push_back(1);
+  f64(20.0);
+  f64(0.1);
+  f64(1.0);
+  b.push_back(0);
+  b.push_back(1);
+  f64(4.0);
+  f64(0.05);
+  f64(0.5);
+  put_le(b, 8, 1, 4);
+  put_le(b, 12, b.size() - 20, 8);
+  b.resize(b.size() + 4);
+  reseal(b);
+  const Checkpoint back = decode_checkpoint(b, "v1");
+  ASSERT_EQ(back.baselines.size(), 3u);
+  ASSERT_TRUE(back.baselines[0] && back.baselines[2]);
+  EXPECT_FALSE(back.baselines[1]);
+  EXPECT_EQ(back.baselines[0]->value.wn, 20.0);
+  EXPECT_EQ(back.baselines[2]->value.gain, 0.5);
+  EXPECT_TRUE(back.baselines[2]->learned);
+  EXPECT_EQ(back.baselines[2]->covariance, (std::array<double, 9>{}));
+  EXPECT_EQ(back.estimator, cp.estimator);
+}
+
 TEST(Checkpoint, EncodeRefusesWhatDecodeWouldReject) {
   // The state of a new estimator (still warming up) on a model with one mode of that name.
   const auto state_named = [](std::size_t length) {
@@ -236,7 +281,7 @@ TEST_F(CheckpointFile, AFailedWriteThrowsWithErrnoAndKeepsThePreviousCheckpoint)
   write_checkpoint(p, a);
   const auto before = read_bytes(p);
   Checkpoint big = a;
-  big.baselines.resize(60, ModalParameters{1.0, 0.1, 1.0});
+  big.baselines.resize(60, ModeBaseline{{1.0, 0.1, 1.0}, {}, true});
   // A file-size limit below the checkpoint's size: write() fails with EFBIG, as
   // it would with ENOSPC on a full disk. (As root, permissions stop nothing.)
   rlimit old{};

@@ -21,6 +21,8 @@
 
 namespace fs = std::filesystem;
 using modalwatch::Config;
+using modalwatch::FaultDetector;
+using modalwatch::FaultDetectorSettings;
 using modalwatch::InputError;
 using modalwatch::parse_config;
 
@@ -1258,7 +1260,7 @@ TEST(ConfigErrors, DaemonAndFaults) {
   EXPECT_EQ(parse_error(kBase + "daemon:\n  loop_rate: 5\n"),
             "test.yaml:16: key 'daemon.loop_rate': unknown key for daemon (allowed: loop_rate_hz, publish_period, "
             "heartbeat_period, gap_time, stale_time, sample_ring, snapshot_ring, warmup_backlog, realtime_priority, "
-            "checkpoint, log_level)");
+            "checkpoint, log_level, metrics)");
   EXPECT_EQ(parse_error(kBase + "daemon:\n  loop_rate_hz: 0\n"),
             "test.yaml:16: key 'daemon.loop_rate_hz': must be > 0 (got 0)");
   EXPECT_EQ(parse_error(kBase + "daemon:\n  publish_period: 0.01\n"),
@@ -1292,4 +1294,102 @@ TEST(ConfigErrors, DaemonAndFaults) {
             "(allowed: m1, m2)");
   EXPECT_EQ(parse_error(kBase + "faults:\n  baselines:\n    m1: {wn: 1, gain: 1}\n"),
             "test.yaml:17: key 'faults.baselines.m1.zeta': missing required key (kind mode)");
+  EXPECT_EQ(parse_error(kBase + "faults:\n  false_alarm_interval: 0\n"),
+            "test.yaml:16: key 'faults.false_alarm_interval': must be > 0 (got 0)");
+  EXPECT_EQ(parse_error(kBase + "faults:\n  cusum_shift: -1\n"),
+            "test.yaml:16: key 'faults.cusum_shift': must be > 0 (got -1)");
+  EXPECT_EQ(parse_error(kBase + "faults:\n  settle_std_fraction: x\n"),
+            "test.yaml:16: key 'faults.settle_std_fraction': expected a number (got x)");
+  EXPECT_EQ(parse_error(kBase + "faults:\n  settle_change_fraction: 0\n"),
+            "test.yaml:16: key 'faults.settle_change_fraction': must be > 0 (got 0)");
+  EXPECT_EQ(parse_error(kBase + "faults:\n  memory_time: 2\n"),
+            "test.yaml:16: key 'faults.memory_time': unknown key for faults (allowed: learn_window, "
+            "false_alarm_interval, cusum_shift, settle_std_fraction, settle_change_fraction, wn, zeta, gain, "
+            "baselines)");
+  EXPECT_EQ(parse_error(kBase + "faults:\n  baselines:\n    m1: {wn: 1, zeta: 0.1, gain: 1, std: {zeta: -0.1}}\n"),
+            "test.yaml:17: key 'faults.baselines.m1.std.zeta': must be >= 0 (got -0.1)");
+  EXPECT_EQ(parse_error(kBase + "faults:\n  baselines:\n    m1: {wn: 1, zeta: 0.1, gain: 1, std: {frequency_hz: -1}}\n"),
+            "test.yaml:17: key 'faults.baselines.m1.std.frequency_hz': must be >= 0 (got -1)");
+  EXPECT_EQ(parse_error(kBase + "faults:\n  baselines:\n    m1: {wn: 1, zeta: 0.1, gain: 1, std: {q: 1}}\n"),
+            "test.yaml:17: key 'faults.baselines.m1.std.q': unknown key for a baseline's std (allowed: wn, "
+            "frequency_hz, zeta, gain)");
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  metrics: {listen: 9464}\n"),
+            "test.yaml:16: key 'daemon.metrics.listen': expected host:port, e.g. 127.0.0.1:9464 (port 1..65535) "
+            "(got 9464)");
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  metrics: {listen: \"localhost:70000\"}\n"),
+            "test.yaml:16: key 'daemon.metrics.listen': expected host:port, e.g. 127.0.0.1:9464 (port 1..65535) "
+            "(got \"localhost:70000\")");
+  EXPECT_EQ(parse_error(kBase + "daemon:\n  metrics: {port: 1}\n"),
+            "test.yaml:16: key 'daemon.metrics.port': unknown key for daemon.metrics (allowed: listen)");
+  EXPECT_EQ(parse_error("axis: [x]\n" + kBase),
+            "test.yaml:1: key 'axis': expected a non-empty string (got [x])");
+}
+
+// The new detector keys, a baseline's std, axis and daemon.metrics: parsed,
+// defaulted and written back.
+TEST(Config, DetectorKeysAxisAndMetricsRoundTrip) {
+  const Config d = parse_config(kBase, "/etc/modalwatch/axis-x.yaml");
+  EXPECT_EQ(d.axis, "axis-x");
+  EXPECT_TRUE(d.daemon.metrics_listen.empty());
+  EXPECT_DOUBLE_EQ(d.faults.false_alarm_interval, 1000.0);
+  EXPECT_DOUBLE_EQ(d.faults.cusum_shift, 1.0);
+  EXPECT_DOUBLE_EQ(d.faults.settle_std_fraction, 0.5);
+  EXPECT_DOUBLE_EQ(d.faults.settle_change_fraction, 0.1);
+  ASSERT_EQ(d.faults.baseline_std.size(), 2u);
+  EXPECT_FALSE(d.faults.baseline_std[1]);
+  EXPECT_EQ(parse_config(kBase + "daemon:\n  metrics: {listen: \"\"}\n", "t.yaml").daemon.metrics_listen, "");
+
+  const std::string extra =
+      "daemon:\n"
+      "  publish_period: 0.25\n"
+      "  metrics: {listen: \"127.0.0.1:9464\"}\n"
+      "faults:\n"
+      "  learn_window: 12\n"
+      "  false_alarm_interval: 5000\n"
+      "  cusum_shift: 1.5\n"
+      "  settle_std_fraction: 0.25\n"
+      "  settle_change_fraction: 0.2\n"
+      "  baselines:\n"
+      "    m1: {wn: 2, zeta: 0.25, gain: 3}\n"
+      "    m2: {frequency_hz: 1.5, zeta: 0.2, gain: 2, std: {frequency_hz: 0.01, gain: 0.1}}\n";
+  const Config c = parse_config("axis: \"stage y\"\n" + kBase + extra, "/cfg/test.yaml");
+  EXPECT_EQ(c.axis, "stage y");
+  EXPECT_EQ(c.daemon.metrics_listen, "127.0.0.1:9464");
+  EXPECT_DOUBLE_EQ(c.faults.false_alarm_interval, 5000.0);
+  EXPECT_DOUBLE_EQ(c.faults.cusum_shift, 1.5);
+  EXPECT_DOUBLE_EQ(c.faults.settle_std_fraction, 0.25);
+  EXPECT_DOUBLE_EQ(c.faults.settle_change_fraction, 0.2);
+  EXPECT_FALSE(c.faults.baseline_std[0]);
+  ASSERT_TRUE(c.faults.baseline_std[1]);
+  EXPECT_DOUBLE_EQ(c.faults.baseline_std[1]->wn, 0.01 * kTwoPi);
+  EXPECT_EQ(c.faults.baseline_std[1]->zeta, 0.0);
+  EXPECT_DOUBLE_EQ(c.faults.baseline_std[1]->gain, 0.1);
+  Config back = parse_config(config_to_yaml(c, c.model), "/cfg/test.yaml");
+  back.source = c.source;
+  EXPECT_EQ(back.axis, c.axis);
+  EXPECT_EQ(back.daemon, c.daemon);
+  EXPECT_EQ(back.faults, c.faults);
+
+  // The detector's settings: the section, memory Ts / (1 - lambda) (m1: 0.05 /
+  // 0.01 = 5 s; m2 does not forget: the learning window), update period =
+  // publish period, the std as the configured baselines' (0 where not given).
+  const FaultDetectorSettings s = modalwatch::fault_detector_settings(c);
+  EXPECT_EQ(s.mode_names, (std::vector<std::string>{"m1", "m2"}));
+  ASSERT_EQ(s.memory_time.size(), 2u);
+  EXPECT_NEAR(s.memory_time[0], 5.0, 1e-12);
+  EXPECT_EQ(s.memory_time[1], 12.0);
+  EXPECT_EQ(s.update_period, 0.25);
+  EXPECT_EQ(s.false_alarm_interval, 5000.0);
+  EXPECT_EQ(s.cusum_shift, 1.5);
+  EXPECT_EQ(s.settle_std_fraction, 0.25);
+  EXPECT_EQ(s.settle_change_fraction, 0.2);
+  EXPECT_EQ(s.learn_window, 12.0);
+  ASSERT_EQ(s.baselines.size(), 2u);
+  EXPECT_EQ(s.baselines[0]->wn, 2.0);
+  ASSERT_EQ(s.baseline_std.size(), 2u);
+  EXPECT_EQ(s.baseline_std[0].wn, 0.0);
+  EXPECT_EQ(s.baseline_std[1].gain, 0.1);
+  EXPECT_NO_THROW(FaultDetector{s});
+  // Without any std the detector takes every configured baseline as exact.
+  EXPECT_TRUE(modalwatch::fault_detector_settings(d).baseline_std.empty());
 }

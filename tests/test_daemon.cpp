@@ -159,8 +159,47 @@ TEST_F(DaemonInProcess, FlagsTheDriftingModeOnlyAndMatchesTrack) {
     }
     std::fclose(f);
   }
-  const Outcome tr_us = run_cli("track --no-progress --config " + kDriftConfig + " --data " + us_csv + " --out " + us_est);
+  const std::string us_flags = path("flags_us.csv");
+  const Outcome tr_us = run_cli("track --no-progress --config " + kDriftConfig + " --data " + us_csv + " --out " +
+                                us_est + " --faults " + us_flags);
   ASSERT_EQ(tr_us.code, 0) << tr_us.output;
+
+  // Flags: `track --faults` on the same samples changes exactly the daemon's
+  // flags (time to the microsecond, mode, quantity, event). The daemon's
+  // changes are read off its fault status: a flag's RAISED bit turning on (at
+  // `since`) or off (at the message's utime).
+  {
+    const std::int64_t first = std::llround(data.record.t(0) * 1e6);
+    const char* kQuantity[3] = {"wn", "zeta", "gain"};
+    std::vector<std::string> daemon_changes, track_changes;
+    std::array<bool, 6> up{};
+    for (const auto& s : rx.status) {
+      for (int e = 0; e < 6; ++e) {
+        const bool now = s.flags[e] & Fault::FLAG_RAISED;
+        if (now == up[e]) continue;
+        up[e] = now;
+        const std::int64_t at = (now ? s.since[e] : s.utime) - kUtime0 - first;
+        daemon_changes.push_back(std::to_string(at) + "," + s.mode_names[e / 3] + "," + kQuantity[e % 3] + "," +
+                                 (now ? "raised" : "cleared"));
+      }
+    }
+    std::ifstream in(us_flags);
+    std::string line;
+    std::getline(in, line);
+    ASSERT_EQ(line, "t,mode,quantity,event,value,baseline,relative,sigma");
+    while (std::getline(in, line)) {
+      std::stringstream row(line);
+      std::string t, mode, quantity, event;
+      std::getline(row, t, ',');
+      std::getline(row, mode, ',');
+      std::getline(row, quantity, ',');
+      std::getline(row, event, ',');
+      track_changes.push_back(std::to_string(std::llround(std::stod(t) * 1e6)) + "," + mode + "," + quantity + "," +
+                              event);
+    }
+    EXPECT_FALSE(daemon_changes.empty());
+    EXPECT_EQ(track_changes, daemon_changes) << "track --faults and the daemon flag differently";
+  }
   const Table tr = read_table(us_est);
   const int c_wn[2] = {tr.column("suspension_wn"), tr.column("flex_wn")};
   const int c_zeta[2] = {tr.column("suspension_zeta"), tr.column("flex_zeta")};

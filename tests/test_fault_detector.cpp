@@ -411,6 +411,50 @@ TEST(FaultDetector, LearnsTheMeanOverTheWindowAndRaisesNothingWhileLearning) {
   EXPECT_EQ(s.detector.flag_bits(), std::uint64_t{1} << 6);
 }
 
+// A learned baseline restored into a new detector (a checkpoint, a reload) keeps
+// its value, covariance and state: the new detector's statistics and flags are
+// the original's from the first update on.
+TEST(FaultDetector, RestoredLearnedBaselineKeepsItsCovarianceAndFlagsAsBefore) {
+  Stream a(learned(1, 10.0));
+  a.std_dev[0] = scaled(kBaseline[0], 0.01);
+  a.run(10.5);
+  const ModeStatus learned_status = a.detector.status()[0];
+  ASSERT_EQ(learned_status.state, BaselineState::ready);
+  ASSERT_GT(learned_status.baseline.covariance[0], 0.0);
+
+  Stream b(learned(1, 10.0));
+  b.k = a.k;
+  b.std_dev = a.std_dev;
+  b.detector.restore_baseline(0, learned_status.baseline);
+  const ModeStatus& r = b.detector.status()[0];
+  EXPECT_EQ(r.state, BaselineState::ready);
+  EXPECT_TRUE(r.baseline_ready);
+  EXPECT_TRUE(r.baseline.learned);
+  EXPECT_EQ(r.baseline.covariance, learned_status.baseline.covariance);
+  EXPECT_EQ(r.baseline.value.wn, learned_status.baseline.value.wn);
+  // 2 s steady, then wn 8 % low: the same chi-square at every update, the same flags.
+  for (int j = 0; j < 100; ++j) {
+    if (j == 20) a.value[0].wn = b.value[0].wn = 0.92 * kBaseline[0].wn;
+    a.step();
+    b.step();
+    EXPECT_EQ(b.detector.status()[0].chi_square, a.detector.status()[0].chi_square) << j;
+  }
+  ASSERT_EQ(a.log.size(), 1u);
+  ASSERT_EQ(b.log.size(), a.log.size());
+  EXPECT_EQ(b.log[0].time, a.log[0].time);
+  EXPECT_EQ(b.log[0].quantity, Quantity::wn);
+  EXPECT_TRUE(b.log[0].raised);
+
+  // A configured one is configured; out of range or not finite throws.
+  Stream c(learned(1, 10.0));
+  c.detector.restore_baseline(0, ModeBaseline{kBaseline[0], {}, false});
+  EXPECT_EQ(c.detector.status()[0].state, BaselineState::configured);
+  EXPECT_THROW(c.detector.restore_baseline(1, learned_status.baseline), std::invalid_argument);
+  ModeBaseline bad = learned_status.baseline;
+  bad.covariance[4] = kNaN;
+  EXPECT_THROW(c.detector.restore_baseline(0, bad), std::invalid_argument);
+}
+
 TEST(FaultDetector, ConfiguredBaselineIsUsedFromTheFirstUpdate) {
   Stream s(configured());
   for (int i = 0; i < 3; ++i) {

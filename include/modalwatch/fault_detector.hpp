@@ -158,6 +158,12 @@ class FaultDetector {
   void update(double t, const std::vector<ModalParameters>& value, const std::vector<ModalParameters>& std_dev,
               bool valid, std::vector<FlagChange>& changes);
 
+  // A baseline kept from an earlier run (a checkpoint, a reloaded config): the
+  // mode tests against it at once, with its covariance; its state is ready when
+  // it was learned, configured otherwise. Throws std::invalid_argument for a mode
+  // out of range or a value or covariance that is not finite.
+  void restore_baseline(std::size_t mode, const ModeBaseline& baseline);
+
   const std::vector<ModeStatus>& status() const { return modes_; }
   const DetectionThresholds& thresholds(int mode) const { return thresholds_[static_cast<std::size_t>(mode)]; }
   bool any_flag() const;

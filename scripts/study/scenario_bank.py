@@ -10,7 +10,8 @@ writes, under DIR/<id>/:
 
     config.yaml   plant: (the truth, with the fault's trajectory), simulation:,
                   model: (the nominal model: wn +-3 %, zeta +-20 %, gain +-10 %),
-                  controller: (closed loop), estimator:, faults:
+                  controller: (closed loop), estimator:, daemon: (publish
+                  period), faults:
     meta.json     the truth, the fault (kind, mode, size, timing), the memory,
                   lambda, the detector's thresholds, and the identifiability
                   figures (Cramer-Rao bounds over one memory, Fisher matrix rank)
@@ -43,7 +44,10 @@ zeta 50 % and 6 sigma, gain 10 % and 4 sigma); the baseline is learned over
 with the time constant of the memory, so a 2x-threshold step crosses the
 threshold about 0.7 M after the change: a hold of 1 M then flags it within
 about 2 M, and asks a noise excursion to outlast the estimate's correlation
-time (about one memory) before it counts.
+time (about one memory) before it counts. The detector's memory is the
+estimator's (Ts / (1 - lambda) = 1 M, derived by modalwatch); it updates every
+M / 20 (daemon.publish_period, at least one sample) and is designed for a mean
+of 1000 h between false alarms per mode (faults.false_alarm_interval).
 
 Records: healthy 100 M (small: 20 M); a fault record has one change on one
 mode, starting at 10-15 M (small: 6-8 M) and lasting at least 8 M (small: 5 M)
@@ -92,6 +96,8 @@ MEMORY_PERIODS = 50
 WARMUP_MEMORIES = 1.0
 LEARN_MEMORIES = 3.0
 HOLD_MEMORIES = 1.0
+PUBLISH_MEMORIES = 0.05  # detector updates every 1/20 memory (at least every sample)
+FALSE_ALARM_INTERVAL_H = 1000.0  # the detector's default, written out
 THRESHOLDS = {"wn": {"sigma": 4.0, "relative": 0.03},
               "zeta": {"sigma": 6.0, "relative": 0.5},
               "gain": {"sigma": 4.0, "relative": 0.1}}
@@ -467,7 +473,9 @@ def scenario_files(s, index, seed, scale, loop_name, richness):
                          ("reference" if s["controller"] else "input"): sig}
     cfg["estimator"] = {"warmup": WARMUP_MEMORIES * M, "fit_on_warmup": True}
     hold = HOLD_MEMORIES * M
-    cfg["faults"] = {"learn_window": LEARN_MEMORIES * M}
+    publish = max(1, round(PUBLISH_MEMORIES * s["N"])) * s["T"]
+    cfg["daemon"] = {"publish_period": publish}
+    cfg["faults"] = {"learn_window": LEARN_MEMORIES * M, "false_alarm_interval": FALSE_ALARM_INTERVAL_H}
     for q, th in THRESHOLDS.items():
         cfg["faults"][q] = {"_flow": True, **th, "hold": hold, "clear_time": hold}
     meta = {
@@ -478,6 +486,7 @@ def scenario_files(s, index, seed, scale, loop_name, richness):
         "wnT": [m["wn"] * s["T"] for m in s["modes"]],
         "memory_samples": s["N"], "memory_s": M, "lambda": lam,
         "warmup_s": WARMUP_MEMORIES * M, "learn_window_s": LEARN_MEMORIES * M, "hold_s": hold,
+        "publish_period_s": publish, "false_alarm_interval_h": FALSE_ALARM_INTERVAL_H,
         "thresholds": THRESHOLDS, "snr_db": s["snr_db"], "noise_variance": s["noise_variance"],
         "output_power": s["output_power"], "controller": s["controller"], "fault": fault,
         "nominal_model": [{k: v for k, v in m.items() if k in ("name", "wn", "zeta", "gain")} for m in model],

@@ -4,11 +4,12 @@
 What it does
 ------------
 For every scenario DIR/<id>/ written by scenario_bank.py it runs
-`modalwatch track --config config.yaml --data record.csv --out est.csv` (unless
-est.csv is already there; --retrack forces it), then compares the estimates
-with truth.csv and, when DIR/<id>/flags.csv exists (the fault detector run
-offline on the record: columns t,mode,quantity,event,value,baseline,relative,
-sigma with event raised|cleared), the flags with the fault in meta.json.
+`modalwatch track --config config.yaml --data record.csv --out est.csv --faults
+flags.csv` (unless est.csv and flags.csv are already there; --retrack forces
+it), then compares the estimates with truth.csv and, when DIR/<id>/flags.csv
+exists (the daemon's fault detector run on the record: columns t,mode,quantity,
+event,value,baseline,relative,sigma with event raised|cleared), the flags with
+the fault in meta.json.
 
 It prints tables per class (healthy or fault kind; open or closed loop; rich
 or poor excitation):
@@ -55,12 +56,12 @@ def default_binary():
 
 
 def run_track(binary, d, retrack):
-    est = os.path.join(d, "est.csv")
-    if os.path.exists(est) and not retrack:
+    est, flags = os.path.join(d, "est.csv"), os.path.join(d, "flags.csv")
+    if os.path.exists(est) and os.path.exists(flags) and not retrack:
         return None
     t0 = time.time()
     out = subprocess.run([binary, "track", "--config", "config.yaml", "--data", "record.csv", "--out", "est.csv",
-                          "--no-progress"], cwd=d, capture_output=True, text=True)
+                          "--faults", "flags.csv", "--no-progress"], cwd=d, capture_output=True, text=True)
     with open(os.path.join(d, "track.log"), "w") as f:
         f.write(out.stdout + out.stderr)
     if out.returncode != 0:

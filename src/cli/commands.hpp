@@ -29,6 +29,7 @@ struct TrackArgs {
   std::string data;     // CSV or LCM log
   std::string channel;  // LCM log: the channel to read
   std::string out;       // est.csv
+  std::string faults;    // flags CSV (the daemon's fault detector over the record); empty: none
   bool progress = true;  // progress bar on stderr
 };
 

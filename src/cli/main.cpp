@@ -41,6 +41,9 @@ int main(int argc, char** argv) {
   track_cmd->add_option("--data,-d", track_args.data, "record: CSV with columns t,u,y[,r], or an LCM log")->required();
   track_cmd->add_option("--channel", track_args.channel, "LCM log: channel with the samples (default: the only one)");
   track_cmd->add_option("--out,-o", track_args.out, "estimates CSV to write (one row per sample)")->required();
+  track_cmd->add_option("--faults", track_args.faults,
+                        "flags CSV to write: the daemon's fault detector (faults:) over the record, one row per flag "
+                        "change (t,mode,quantity,event,value,baseline,relative,sigma)");
   track_cmd->add_flag("--no-progress", no_progress, "no progress bar on stderr");
 
   ReplayArgs replay_args;

@@ -43,6 +43,7 @@
 #include "modalwatch/error.hpp"
 #include "modalwatch/io/atomic_file.hpp"
 #include "modalwatch/estimator.hpp"
+#include "modalwatch/fault_detector.hpp"
 
 namespace modalwatch::cli {
 namespace {
@@ -398,6 +399,80 @@ std::vector<EstColumn> est_columns(const AdditiveModel& model) {
 }
 
 
+// The daemon's fault detector over the record, run as the daemon runs it: an
+// update at the first sample at or past each publish time, on the sample times
+// as the daemon's whole microseconds (utime), the estimates' covariances, valid
+// outside warm-up and low excitation. The daemon runs the warm-up fit on
+// another thread: at the sample that completes the window it still reports the
+// warm-up (the fit's update is not valid there) and steps the samples held
+// meanwhile afterwards, as track does. Each flag change becomes a row of the
+// flags CSV: t,mode,quantity,event,value,baseline,relative,sigma.
+class FlagRecorder {
+ public:
+  FlagRecorder(const Config& config, const RecursiveEstimator& estimator)
+      : detector_(fault_detector_settings(config)),
+        warming_up_(estimator.status().warming_up),
+        names_(detector_.status().size()),
+        period_us_(std::max<std::int64_t>(1, std::llround(config.daemon.publish_period * 1e6))) {
+    for (std::size_t i = 0; i < names_.size(); ++i) names_[i] = config.model.submodels[i].name;
+    values_.resize(names_.size());
+    covariances_.assign(names_.size(), Eigen::Matrix3d::Zero());
+    changes_.reserve(kQuantities * names_.size());
+  }
+
+  // After the estimator's step on the sample at t (s).
+  void after_step(double t, const RecursiveEstimator& estimator) {
+    const EstimatorStatus& st = estimator.status();
+    const bool fit_sample = warming_up_ && !st.warming_up;
+    warming_up_ = st.warming_up;
+    const std::int64_t utime = std::llround(t * 1e6);
+    if (!have_time_) {
+      have_time_ = true;
+      utime0_ = utime;
+      next_publish_ = utime + period_us_;
+    } else if (utime <= last_utime_) {
+      return;  // the daemon drops a sample that is not later than the last
+    }
+    last_utime_ = utime;
+    if (utime < next_publish_) return;
+    next_publish_ += period_us_;
+    if (next_publish_ <= utime) next_publish_ = utime + period_us_;
+    for (std::size_t i = 0; i < values_.size(); ++i) {
+      values_[i] = estimator.mode(static_cast<int>(i)).value;
+      covariances_[i] = estimator.mode_covariance(static_cast<int>(i));
+    }
+    changes_.clear();
+    detector_.update(static_cast<double>(utime - utime0_) * 1e-6, values_, covariances_,
+                     !fit_sample && !st.warming_up && !st.low_excitation, changes_);
+    for (const FlagChange& c : changes_) {
+      static constexpr const char* kQuantityNames[kQuantities] = {"wn", "zeta", "gain"};
+      char line[256];
+      std::snprintf(line, sizeof line, "%.17g,%s,%s,%s,%.17g,%.17g,%.17g,%.17g\n", t,
+                    names_[static_cast<std::size_t>(c.mode)].c_str(), kQuantityNames[static_cast<int>(c.quantity)],
+                    c.raised ? "raised" : "cleared", c.value, c.baseline, c.deviation_relative, c.deviation_sigma);
+      rows_ += line;
+      ++(c.raised ? raised_ : cleared_);
+    }
+  }
+
+  const std::string& rows() const { return rows_; }
+  int raised() const { return raised_; }
+  int cleared() const { return cleared_; }
+  const FaultDetector& detector() const { return detector_; }
+
+ private:
+  FaultDetector detector_;
+  bool warming_up_;  // the estimator's status after the previous sample
+  std::vector<std::string> names_;
+  std::vector<ModalParameters> values_;
+  std::vector<Eigen::Matrix3d> covariances_;
+  std::vector<FlagChange> changes_;
+  std::int64_t period_us_, utime0_ = 0, last_utime_ = 0, next_publish_ = 0;
+  bool have_time_ = false;
+  std::string rows_;
+  int raised_ = 0, cleared_ = 0;
+};
+
 double seconds_between(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
 }  // namespace
@@ -424,6 +499,12 @@ int track(const TrackArgs& args) {
     const std::vector<EstColumn> columns = est_columns(config.model);
 
     AtomicFile file(args.out);
+    std::optional<AtomicFile> flags_file;
+    std::optional<FlagRecorder> recorder;
+    if (!args.faults.empty()) {
+      flags_file.emplace(args.faults);
+      recorder.emplace(config, estimator);
+    }
     {
       std::string header;
       for (const auto& c : columns) (header += header.empty() ? "" : ",") += c.name;
@@ -462,6 +543,7 @@ int track(const TrackArgs& args) {
           row[0] = estimator.residual_rms();
           row[1] = static_cast<double>(flags);
           row[2] = static_cast<double>(estimator.status().resets);
+          if (recorder) recorder->after_step(t[k], estimator);
         }
         n += count;
         if (count > 0) last_t = t[count - 1];
@@ -470,7 +552,12 @@ int track(const TrackArgs& args) {
     }
     check.finish(source, read_options);  // nothing written on failure: the temporary file goes
     rows.finish();
+    if (recorder) {
+      flags_file->write("t,mode,quantity,event,value,baseline,relative,sigma\n");
+      flags_file->write(recorder->rows());
+    }
     file.commit();
+    if (flags_file) flags_file->commit();
     progress.finish(n);
     const auto t_end = Clock::now();
 
@@ -484,6 +571,24 @@ int track(const TrackArgs& args) {
                  seconds_between(t_start, t_read), loop);
     std::fprintf(stderr, "  samples/s: %.4g end to end, %.4g after start-up\n",
                  total > 0.0 ? static_cast<double>(n) / total : 0.0, loop > 0.0 ? static_cast<double>(n) / loop : 0.0);
+    if (recorder) {
+      std::fprintf(stderr, "  flags: %d raised, %d cleared -> %s\n", recorder->raised(), recorder->cleared(),
+                   args.faults.c_str());
+      for (std::size_t i = 0; i < recorder->detector().status().size(); ++i) {
+        const ModeStatus& m = recorder->detector().status()[i];
+        static constexpr const char* kStates[] = {"learning", "ready", "configured"};
+        std::fprintf(stderr, "    %s: baseline %s", config.model.submodels[i].name.c_str(),
+                     kStates[static_cast<int>(m.state)]);
+        static constexpr const char* kHolds[] = {"none", "an estimate too uncertain", "the estimate drifting"};
+        if (m.baseline_ready)
+          std::fprintf(stderr, " (wn %.6g, zeta %.4g, gain %.6g)", m.baseline.value.wn, m.baseline.value.zeta,
+                       m.baseline.value.gain);
+        else if (m.learn_restarts > 0)
+          std::fprintf(stderr, " (%d windows restarted, the last for %s)", m.learn_restarts,
+                       kHolds[static_cast<int>(m.learn_hold)]);
+        std::fprintf(stderr, "\n");
+      }
+    }
     std::fprintf(stderr, "  samples processed: %llu\n", static_cast<unsigned long long>(st.samples));
     std::fprintf(stderr, "  updates: %llu\n", static_cast<unsigned long long>(st.updates));
     if (st.resets > 0)

@@ -208,8 +208,10 @@ std::string Daemon::reload(const Config& next) {
   if (same_fingerprint) {
     applied.faults = next.faults;
   } else {  // configured baselines may not match the running model's submodels
-    applied.faults.thresholds = next.faults.thresholds;
-    applied.faults.learn_window = next.faults.learn_window;
+    FaultSettings faults = next.faults;
+    faults.baselines = applied.faults.baselines;
+    faults.baseline_std = applied.faults.baseline_std;
+    applied.faults = faults;
   }
   m.config = applied;
   m.loop.reconfigure_detector();
@@ -222,7 +224,7 @@ std::string Daemon::reload(const Config& next) {
   std::string summary = "reloaded " + next.source + ": applied rates (loop " +
                         std::to_string(m.config.daemon.loop_rate_hz) + " Hz, publish " +
                         std::to_string(m.config.daemon.publish_period) +
-                        " s), fault thresholds, learn window, "
+                        " s), fault detector settings, "
                         "baselines, checkpoint, log level " +
                         m.config.daemon.log_level + " (flags restart their hold timers)";
   if (!kept.empty()) {

@@ -22,16 +22,14 @@ EstimatorSettings with_deferred_fit(EstimatorSettings s) {
   return s;
 }
 
-FaultDetectorSettings detector_settings(const Config& c, const std::vector<std::optional<ModalParameters>>& kept) {
-  FaultDetectorSettings s;
-  for (const auto& sub : c.model.submodels) s.mode_names.push_back(sub.name);
-  s.baselines = c.faults.baselines;
-  s.baselines.resize(c.model.submodels.size());
-  for (std::size_t i = 0; i < s.baselines.size() && i < kept.size(); ++i)
-    if (!s.baselines[i] && kept[i]) s.baselines[i] = kept[i];
-  s.learn_window = c.faults.learn_window;
-  s.thresholds = c.faults.thresholds;
-  return s;
+// The config's detector with the learned baselines kept from before (a
+// checkpoint, the detector of the config a reload replaces), covariance and
+// all, for the modes the config gives no baseline.
+FaultDetector make_detector(const Config& c, const std::vector<std::optional<ModeBaseline>>& kept) {
+  FaultDetector detector(fault_detector_settings(c));
+  for (std::size_t i = 0; i < c.faults.baselines.size() && i < kept.size(); ++i)
+    if (!c.faults.baselines[i] && kept[i] && kept[i]->learned) detector.restore_baseline(i, *kept[i]);
+  return detector;
 }
 
 }  // namespace
@@ -49,7 +47,7 @@ EstimationLoop::EstimationLoop(const Config& config, const std::optional<Checkpo
       estimator_(config.model, with_deferred_fit(config.estimator)),
       fitter_(estimator_) {
   const auto K = config.model.submodels.size();
-  std::vector<std::optional<ModalParameters>> restored_baselines;
+  std::vector<std::optional<ModeBaseline>> restored_baselines;
   if (checkpoint) {
     try {
       estimator_.restore(checkpoint->estimator);  // no warm-up; the prefilters restart as after a gap
@@ -73,9 +71,9 @@ EstimationLoop::EstimationLoop(const Config& config, const std::optional<Checkpo
     const double held = std::ceil(config.daemon.warmup_backlog / config.sample_time);
     backlog_.resize(static_cast<std::size_t>(std::max(1.0, held)));
   }
-  detector_.emplace(detector_settings(config, restored_baselines));
+  detector_.emplace(make_detector(config, restored_baselines));
   mode_values_.resize(K);
-  mode_stds_.resize(K);
+  mode_covariances_.assign(K, Eigen::Matrix3d::Zero());
   flag_changes_.reserve(kQuantities * K);
 }
 
@@ -258,7 +256,8 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
     const auto k = static_cast<std::size_t>(i);
     const ModeEstimate m = estimator_.mode(i);
     mode_values_[k] = snap.value[k] = m.value;
-    mode_stds_[k] = snap.std_dev[k] = m.std;
+    snap.std_dev[k] = m.std;
+    mode_covariances_[k] = estimator_.mode_covariance(i);
   }
   if (!fit_in_flight_) snap.residual_rms = estimator_.residual_rms();
   snap.n_changes = 0;
@@ -266,7 +265,7 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
     flag_changes_.clear();
     const double t = static_cast<double>(last_utime_ - utime0_) * 1e-6;
     const bool valid = !st.warming_up && !st.low_excitation;
-    detector_->update(t, mode_values_, mode_stds_, valid, flag_changes_);  // capacity reserved: no allocation
+    detector_->update(t, mode_values_, mode_covariances_, valid, flag_changes_);  // capacity reserved: no allocation
     for (const FlagChange& c : flag_changes_) {
       if (snap.n_changes == kMaxEntries) break;
       snap.changes[static_cast<std::size_t>(snap.n_changes++)] = c;
@@ -305,19 +304,19 @@ std::optional<Checkpoint> EstimationLoop::capture(std::uint64_t fingerprint) con
   ck.estimator = estimator_.state();
   for (int i = 0; i < estimator_.submodels(); ++i) {
     const ModeStatus& m = detector_->status()[static_cast<std::size_t>(i)];
-    ck.baselines.push_back(m.baseline_ready ? std::optional<ModalParameters>(m.baseline.value) : std::nullopt);
+    ck.baselines.push_back(m.baseline_ready ? std::optional<ModeBaseline>(m.baseline) : std::nullopt);
   }
   return ck;
 }
 
 // Learned baselines survive; configured ones come from the rewritten config.
 void EstimationLoop::reconfigure_detector() {
-  std::vector<std::optional<ModalParameters>> learned(detector_->status().size());
+  std::vector<std::optional<ModeBaseline>> learned(detector_->status().size());
   for (std::size_t i = 0; i < learned.size(); ++i) {
     const ModeStatus& s = detector_->status()[i];
-    if (s.baseline_ready && s.baseline.learned) learned[i] = s.baseline.value;
+    if (s.baseline_ready && s.baseline.learned) learned[i] = s.baseline;
   }
-  detector_.emplace(detector_settings(config_, learned));
+  detector_.emplace(make_detector(config_, learned));
 }
 
 }  // namespace modalwatch::daemon_detail

@@ -118,7 +118,8 @@ class EstimationLoop {
   RecursiveEstimator estimator_;
   bool restored_ = false;
   std::optional<FaultDetector> detector_;
-  std::vector<ModalParameters> mode_values_, mode_stds_;
+  std::vector<ModalParameters> mode_values_;
+  std::vector<Eigen::Matrix3d> mode_covariances_;  // the detector's input, sized at construction
   std::vector<FlagChange> flag_changes_;
 
   // Input policy and timing.

@@ -224,6 +224,24 @@ FaultDetector::FaultDetector(FaultDetectorSettings settings) : settings_(std::mo
   }
 }
 
+void FaultDetector::restore_baseline(std::size_t mode, const ModeBaseline& baseline) {
+  if (mode >= modes_.size())
+    throw std::invalid_argument("FaultDetector: baseline for mode " + std::to_string(mode) + " of " +
+                                std::to_string(modes_.size()));
+  const bool covariance_finite =
+      std::all_of(baseline.covariance.begin(), baseline.covariance.end(), [](double v) { return std::isfinite(v); });
+  if (!finite(baseline.value) || !covariance_finite)
+    throw std::invalid_argument("FaultDetector: restored baseline of mode '" + settings_.mode_names[mode] +
+                                "' (or its covariance) is not finite");
+  learning_[mode] = Learning{};
+  ModeStatus& m = modes_[mode];
+  m.baseline = baseline;
+  m.baseline_ready = true;
+  m.state = baseline.learned ? BaselineState::ready : BaselineState::configured;
+  m.learn_progress = baseline.learned ? 1.0 : 0.0;
+  m.learn_hold = LearnHold::none;
+}
+
 void FaultDetector::restart_learning(std::size_t i, LearnHold why) {
   ModeStatus& m = modes_[i];
   if (learning_[i].count > 0) ++m.learn_restarts;

@@ -3,14 +3,19 @@
 // and the newest sample they include, so that a restart resumes without a new
 // warm-up.
 //
-// File format (version 1), little-endian throughout:
+// File format (version 2), little-endian throughout:
 //   offset 0   8 bytes  magic "MWCHKPT\0"
-//          8   u32      format version (1)
+//          8   u32      format version (2)
 //         12   u64      payload length L (at most kMaxCheckpointPayload)
 //         20   L bytes  payload: fingerprint, last utime and sequence number,
-//                       the estimator state (EstimatorState::write), baselines
+//                       the estimator state (EstimatorState::write), baselines:
+//                       u32 count, then per mode u8 present and, when present,
+//                       f64 wn, zeta, gain, u8 learned, f64[9] covariance
+//                       (row-major over wn, zeta, gain)
 //       20+L   u32      CRC-32 (IEEE 802.3, as zlib) of bytes [0, 20+L)
 // Doubles are IEEE-754 binary64 bit patterns, so a round trip is exact.
+// Version 1 (baselines as wn, zeta, gain only) is still read: its baselines come
+// back as learned, with zero covariance (unknown), as that version restored them.
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -19,11 +24,13 @@
 
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/estimator.hpp"
+#include "modalwatch/fault_detector.hpp"
 #include "modalwatch/model.hpp"
 
 namespace modalwatch {
 
-inline constexpr std::uint32_t kCheckpointVersion = 1;
+inline constexpr std::uint32_t kCheckpointVersion = 2;
+inline constexpr std::uint32_t kOldestCheckpointVersion = 1;  // still read
 inline constexpr std::uint64_t kMaxCheckpointPayload = 16u << 20;  // 16 MiB: far above any real model
 
 struct Checkpoint {
@@ -31,8 +38,9 @@ struct Checkpoint {
   std::int64_t last_utime = 0;           // us, newest sample included
   std::int64_t last_seq = -1;            // its sequence number
   EstimatorState estimator;
-  // Fault-detector baselines per mode (configured or learned); nullopt = not yet known.
-  std::vector<std::optional<ModalParameters>> baselines;
+  // Fault-detector baselines per mode (value, covariance, learned or configured);
+  // nullopt = not yet known.
+  std::vector<std::optional<ModeBaseline>> baselines;
 };
 
 // What a checkpoint must match: sample time, loop, controller, model structure

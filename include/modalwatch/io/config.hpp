@@ -48,20 +48,29 @@ struct DaemonSettings {
   std::string checkpoint_path;     // empty: no checkpoint (relative paths: to the config file)
   double checkpoint_period = 60.0; // s (wall clock) between periodic checkpoints
   std::string log_level = "info";  // spdlog level name
+  std::string metrics_listen;      // daemon.metrics.listen, "host:port"; empty: no metrics endpoint
   bool operator==(const DaemonSettings&) const = default;
 };
 
-// The `faults:` section: the fault detector (baselines, thresholds per quantity).
+// The `faults:` section: the fault detector (baselines, thresholds per quantity,
+// the false-alarm rate and learning). The defaults are FaultDetectorSettings'.
 struct FaultSettings {
-  double learn_window = 30.0;  // s of sample time
+  double learn_window = FaultDetectorSettings{}.learn_window;  // s of sample time
+  double false_alarm_interval = FaultDetectorSettings{}.false_alarm_interval;  // h per mode
+  double cusum_shift = FaultDetectorSettings{}.cusum_shift;
+  double settle_std_fraction = FaultDetectorSettings{}.settle_std_fraction;
+  double settle_change_fraction = FaultDetectorSettings{}.settle_change_fraction;
   std::array<FaultThresholds, kQuantities> thresholds{};
   // Per submodel (config order): a configured baseline, or none (learned).
   std::vector<std::optional<ModalParameters>> baselines;
+  // Per submodel: the standard deviations of its configured baseline (`std:`), or none (exact).
+  std::vector<std::optional<ModalParameters>> baseline_std;
   bool operator==(const FaultSettings&) const = default;
 };
 
 struct Config {
   std::string source;          // file name, for messages
+  std::string axis;            // `axis:`, the axis this file describes (default: the file's stem)
   double sample_time = 0.0;    // s (from sample_rate_hz)
   AdditiveModel model;         // initial guesses / nominal model
   std::vector<SubmodelSettings> submodel_settings;  // one per submodel
@@ -90,6 +99,12 @@ struct Config {
 // a CSV table with a time column 't', or an LCM log's samples (key `channel`).
 Config load_config(const std::string& path);
 Config parse_config(const std::string& yaml_text, const std::string& source_name);
+
+// The fault detector's settings for this configuration, for the daemon and
+// `track --faults` alike: the `faults:` section, each submodel's memory_time
+// = sample_time / (1 - forgetting) (learn_window when it does not forget) and
+// update_period = daemon.publish_period.
+FaultDetectorSettings fault_detector_settings(const Config& config);
 
 // The configuration as YAML, with `model` in place of the configured one (for
 // `fit --out`: a fitted model that seeds the other commands).

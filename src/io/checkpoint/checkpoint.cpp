@@ -271,9 +271,11 @@ std::vector<std::uint8_t> encode_checkpoint(const Checkpoint& c) {
   for (const auto& b : c.baselines) {
     w.u8(b.has_value());
     if (b) {
-      w.f64(b->wn);
-      w.f64(b->zeta);
-      w.f64(b->gain);
+      w.f64(b->value.wn);
+      w.f64(b->value.zeta);
+      w.f64(b->value.gain);
+      w.u8(b->learned);
+      for (const double v : b->covariance) w.f64(v);
     }
   }
   const std::uint64_t payload = w.bytes.size() - kHeaderSize;
@@ -290,9 +292,10 @@ Checkpoint decode_checkpoint(std::span<const std::uint8_t> bytes, const std::str
     h.fail("not a modalwatch checkpoint (wrong magic)");
   h.raw(8, "magic");
   const std::uint32_t version = h.u32("version");
-  if (version != kCheckpointVersion)
+  if (version < kOldestCheckpointVersion || version > kCheckpointVersion)
     throw InputError(source, "checkpoint: byte offset 8: format version " + std::to_string(version) +
-                                 ", this build reads version " + std::to_string(kCheckpointVersion));
+                                 ", this build reads versions " + std::to_string(kOldestCheckpointVersion) + " to " +
+                                 std::to_string(kCheckpointVersion));
   const std::uint64_t length = h.u64("payload length");
   if (length > kMaxCheckpointPayload)
     throw InputError(source, "checkpoint: byte offset 12: payload length " + std::to_string(length) +
@@ -326,11 +329,16 @@ Checkpoint decode_checkpoint(std::span<const std::uint8_t> bytes, const std::str
   const std::uint32_t nb = r.count("baseline count", kMaxBaselines);
   for (std::uint32_t i = 0; i < nb; ++i) {
     if (r.flag("baseline present")) {
-      ModalParameters p;
-      p.wn = r.f64("baseline wn");
-      p.zeta = r.f64("baseline zeta");
-      p.gain = r.f64("baseline gain");
-      c.baselines.emplace_back(p);
+      ModeBaseline b;
+      b.value.wn = r.f64("baseline wn");
+      b.value.zeta = r.f64("baseline zeta");
+      b.value.gain = r.f64("baseline gain");
+      b.learned = true;  // version 1 kept no more
+      if (version >= 2) {
+        b.learned = r.flag("baseline learned");
+        for (double& v : b.covariance) v = r.f64("baseline covariance");
+      }
+      c.baselines.emplace_back(b);
     } else {
       c.baselines.emplace_back(std::nullopt);
     }

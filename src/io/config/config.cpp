@@ -22,9 +22,10 @@ using namespace config_detail;
 // ---------------------------------------------------------------- document
 
 void parse_document(const Map& top, Config& config, const std::filesystem::path& dir) {
-  top.allow({"sample_rate_hz", "model", "controller", "plant", "simulation", "estimator", "lcm", "daemon",
+  top.allow({"axis", "sample_rate_hz", "model", "controller", "plant", "simulation", "estimator", "lcm", "daemon",
              "faults"},
             "");
+  if (const auto a = top.get("axis")) config.axis = a->text();
   config.sample_time = 1.0 / top.require("sample_rate_hz").positive();
   parse_model(Map(top.require("model")), config);
   if (const auto c = top.get("controller")) config.controller = parse_controller(Map(*c));
@@ -37,6 +38,7 @@ void parse_document(const Map& top, Config& config, const std::filesystem::path&
   const bool gap_factor_given = top.get("estimator") && Map(*top.get("estimator")).has("gap_factor");
   if (const auto d = top.get("daemon")) parse_daemon(Map(*d), config, dir, gap_factor_given);
   config.faults.baselines.assign(config.model.submodels.size(), std::nullopt);
+  config.faults.baseline_std.assign(config.model.submodels.size(), std::nullopt);
   if (const auto f = top.get("faults")) parse_faults(Map(*f), config);
 }
 
@@ -71,6 +73,7 @@ Config parse_config(const std::string& yaml_text, const std::string& source_name
   const int line = root.Mark().line >= 0 ? root.Mark().line + 1 : 1;
   Config config;
   config.source = source_name;
+  config.axis = std::filesystem::path(source_name).stem().string();
   const Map top(Value(source_name, root, "", line));
   parse_document(top, config, std::filesystem::path(source_name).parent_path());
   complete_estimator(config);

@@ -266,11 +266,19 @@ void write_daemon(YamlWriter& w, const DaemonSettings& d) {
     w.number(2, "period", d.checkpoint_period);
   }
   w.key(1, "log_level", d.log_level);
+  if (!d.metrics_listen.empty()) {
+    w.line(1, "metrics:");
+    w.key(2, "listen", quoted(d.metrics_listen));
+  }
 }
 
 void write_faults(YamlWriter& w, const FaultSettings& f, const AdditiveModel& model) {
   w.line(0, "faults:");
   w.number(1, "learn_window", f.learn_window);
+  w.number(1, "false_alarm_interval", f.false_alarm_interval);
+  w.number(1, "cusum_shift", f.cusum_shift);
+  w.number(1, "settle_std_fraction", f.settle_std_fraction);
+  w.number(1, "settle_change_fraction", f.settle_change_fraction);
   const char* names[kQuantities] = {"wn", "zeta", "gain"};
   for (int q = 0; q < kQuantities; ++q) {
     const FaultThresholds& th = f.thresholds[static_cast<std::size_t>(q)];
@@ -290,6 +298,12 @@ void write_faults(YamlWriter& w, const FaultSettings& f, const AdditiveModel& mo
     w.number(3, "wn", f.baselines[i]->wn);
     w.number(3, "zeta", f.baselines[i]->zeta);
     w.number(3, "gain", f.baselines[i]->gain);
+    if (i < f.baseline_std.size() && f.baseline_std[i]) {
+      w.line(3, "std:");
+      w.number(4, "wn", f.baseline_std[i]->wn);
+      w.number(4, "zeta", f.baseline_std[i]->zeta);
+      w.number(4, "gain", f.baseline_std[i]->gain);
+    }
   }
 }
 
@@ -308,6 +322,7 @@ std::string config_to_yaml(const Config& config, const AdditiveModel& model) {
   w.line(0, "# modalwatch configuration" +
                 (config.source.empty() ? std::string() : ", written from " + config.source) +
                 " (keys: config/README.md)");
+  if (!config.axis.empty()) w.key(0, "axis", quoted(config.axis));
   w.number(0, "sample_rate_hz", 1.0 / config.sample_time);
   write_model(w, config, model);
   if (!config.controller.empty()) write_controller(w, config.controller);

@@ -91,7 +91,7 @@ namespace {
 
 void parse_daemon(const Map& d, Config& config, const std::filesystem::path& dir, bool gap_factor_given) {
   d.allow({"loop_rate_hz", "publish_period", "heartbeat_period", "gap_time", "stale_time", "sample_ring",
-           "snapshot_ring", "warmup_backlog", "realtime_priority", "checkpoint", "log_level"},
+           "snapshot_ring", "warmup_backlog", "realtime_priority", "checkpoint", "log_level", "metrics"},
           "daemon");
   DaemonSettings& s = config.daemon;
   if (const auto v = d.get("loop_rate_hz")) {
@@ -130,6 +130,25 @@ void parse_daemon(const Map& d, Config& config, const std::filesystem::path& dir
   }
   if (const auto v = d.get("log_level"))
     s.log_level = v->choice({"trace", "debug", "info", "warn", "error", "critical", "off"});
+  if (const auto c = d.get("metrics")) {
+    const Map m(*c);
+    m.allow({"listen"}, "daemon.metrics");
+    if (const auto v = m.get("listen")) {
+      // An empty string (listen: "") turns the endpoint off, as an absent key does.
+      const std::string listen = v->node().IsNull() ? std::string() : v->node().IsScalar() ? v->node().Scalar() : v->text();
+      if (!listen.empty()) {
+        const auto colon = listen.rfind(':');
+        const std::string port = colon == std::string::npos ? std::string() : listen.substr(colon + 1);
+        long long number = 0;
+        const bool digits = !port.empty() && port.size() <= 5 &&
+                            std::all_of(port.begin(), port.end(), [](char ch) { return ch >= '0' && ch <= '9'; });
+        if (digits) number = std::stoll(port);
+        if (colon == 0 || colon == std::string::npos || !digits || number < 1 || number > 65535)
+          v->fail("expected host:port, e.g. 127.0.0.1:9464 (port 1..65535)");
+      }
+      s.metrics_listen = listen;
+    }
+  }
 }
 
 namespace {
@@ -148,12 +167,30 @@ void parse_thresholds(const Map& m, FaultThresholds& th) {
   if (const auto v = m.get("clear_time")) th.clear_time = v->at_least(0.0);
 }
 
+// A configured baseline's `std:`: each of wn (or frequency_hz), zeta, gain
+// optional, 0 (exact) when not given.
+ModalParameters parse_baseline_std(const Map& m) {
+  m.allow({"wn", "frequency_hz", "zeta", "gain"}, "a baseline's std");
+  ModalParameters sd{0.0, 0.0, 0.0};
+  sd.wn = one_of(m, "wn", "frequency_hz", kTwoPi, false).value_or(0.0);
+  if (const auto v = m.get(m.has("wn") ? "wn" : "frequency_hz"); v && sd.wn < 0.0) v->fail("must be >= 0");
+  if (const auto v = m.get("zeta")) sd.zeta = v->at_least(0.0);
+  if (const auto v = m.get("gain")) sd.gain = v->at_least(0.0);
+  return sd;
+}
+
 }  // namespace
 
 void parse_faults(const Map& f, Config& config) {
-  f.allow({"learn_window", "wn", "zeta", "gain", "baselines"}, "faults");
+  f.allow({"learn_window", "false_alarm_interval", "cusum_shift", "settle_std_fraction", "settle_change_fraction",
+           "wn", "zeta", "gain", "baselines"},
+          "faults");
   FaultSettings& s = config.faults;
   if (const auto v = f.get("learn_window")) s.learn_window = v->positive();
+  if (const auto v = f.get("false_alarm_interval")) s.false_alarm_interval = v->positive();
+  if (const auto v = f.get("cusum_shift")) s.cusum_shift = v->positive();
+  if (const auto v = f.get("settle_std_fraction")) s.settle_std_fraction = v->positive();
+  if (const auto v = f.get("settle_change_fraction")) s.settle_change_fraction = v->positive();
   const char* names[kQuantities] = {"wn", "zeta", "gain"};
   for (int q = 0; q < kQuantities; ++q)
     if (const auto v = f.get(names[q])) parse_thresholds(Map(*v), s.thresholds[static_cast<std::size_t>(q)]);
@@ -166,8 +203,9 @@ void parse_faults(const Map& f, Config& config) {
     for (std::size_t i = 0; i < config.model.submodels.size(); ++i)
       if (const auto v = m.get(config.model.submodels[i].name)) {
         const Map mode(*v);
-        mode.allow({"wn", "frequency_hz", "zeta", "gain"}, "a baseline");
+        mode.allow({"wn", "frequency_hz", "zeta", "gain", "std"}, "a baseline");
         s.baselines[i] = parse_modal(mode);
+        if (const auto sd = mode.get("std")) s.baseline_std[i] = parse_baseline_std(Map(*sd));
       }
   }
 }
