@@ -370,6 +370,7 @@ std::optional<Checkpoint> EstimationLoop::capture(std::uint64_t fingerprint) con
 // for that mode; configured ones follow the config. What the new detector
 // does not carry over is logged at warning level.
 void EstimationLoop::reconfigure_detector() {
+  if (config_.faults == detector_faults_) return;  // nothing to apply: flags and learning go on
   const std::vector<ModeStatus>& status = detector_->status();
   std::vector<std::optional<ModalParameters>> kept(status.size());
   const auto& configured = config_.faults.baselines;
@@ -404,6 +405,7 @@ void EstimationLoop::reconfigure_detector() {
 
 void EstimationLoop::set_detector(const std::vector<std::optional<ModalParameters>>& kept) {
   const auto& configured = config_.faults.baselines;
+  detector_faults_ = config_.faults;
   baseline_configured_.assign(config_.model.submodels.size(), false);
   for (std::size_t i = 0; i < baseline_configured_.size() && i < configured.size(); ++i)
     baseline_configured_[i] = configured[i].has_value();

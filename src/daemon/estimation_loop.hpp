@@ -87,7 +87,8 @@ class EstimationLoop {
   // While stopped: the state to resume from (none during the warm-up), and a
   // new fault detector for the rewritten config that keeps learned and
   // restored baselines (unless the config now sets one) and logs at warning
-  // level what it does not carry over (flags, learning in progress).
+  // level what it does not carry over (flags, learning in progress). When the
+  // faults: section did not change, the detector stays as it is.
   std::optional<Checkpoint> capture(std::uint64_t fingerprint) const;
   void reconfigure_detector();
 
@@ -131,6 +132,7 @@ class EstimationLoop {
   bool restored_ = false;
   std::optional<FaultDetector> detector_;
   std::vector<bool> baseline_configured_;  // per mode: the baseline is the config's
+  FaultSettings detector_faults_;          // the config's faults: section the detector was made for
   std::vector<ModalParameters> mode_values_, mode_stds_;
   std::vector<FlagChange> flag_changes_;
 
