@@ -10,6 +10,7 @@
 #include <cmath>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -61,7 +62,7 @@ class LogCapture {
 // A checkpoint written after 17 s of the drift record (warm-up 5 s, baselines
 // learned over the next 10 s), and the fault status of that run; made once.
 struct LearnedRun {
-  std::string checkpoint;
+  std::string dir, checkpoint;
   std::vector<Fault> status;
   std::int64_t last_seq = 0;
 };
@@ -69,7 +70,10 @@ struct LearnedRun {
 const LearnedRun& learned_run() {
   static LearnedRun run = [] {
     LearnedRun r;
-    r.checkpoint = drift_data().dir + "/learned.ckpt";
+    // Not in drift_data().dir, which DaemonInProcess's suite removes when it ends.
+    r.dir = (std::filesystem::temp_directory_path() / ("modalwatch_learned_" + std::to_string(::getpid()))).string();
+    std::filesystem::create_directories(r.dir);
+    r.checkpoint = r.dir + "/learned.ckpt";
     Config c = load_config(kDriftConfig);
     c.daemon.checkpoint_path = r.checkpoint;
     lcm_t* lcm = lcm_create("memq://");
@@ -93,6 +97,9 @@ const LearnedRun& learned_run() {
   return run;
 }
 
+// Added to a record index: the seq of a sender that goes on after the checkpoint.
+std::int64_t seq_going_on() { return learned_run().last_seq + 1 - samples_at(17.0); }
+
 // The drift config resuming from the learned checkpoint.
 Config resumed_config(const std::string& checkpoint_copy) {
   std::filesystem::copy_file(learned_run().checkpoint, checkpoint_copy,
@@ -102,9 +109,42 @@ Config resumed_config(const std::string& checkpoint_copy) {
   return c;
 }
 
+// A daemon on its own memq:// instance, resumed from the learned checkpoint
+// (no warm-up), its messages collected in rx.
+struct Resumed {
+  explicit Resumed(const std::string& checkpoint_copy) : c(resumed_config(checkpoint_copy)) {}
+  ~Resumed() {
+    d.reset();
+    lcm_destroy(lcm);
+  }
+  Daemon& start() {
+    rx.subscribe(lcm, c.lcm);
+    d.emplace(c, lcm);
+    d->start();
+    return *d;
+  }
+  // Record time [from, to) s, seq going on from the checkpoint's (or, for a
+  // restarted sender, from 0), and waits until the daemon has handled it all.
+  bool feed(double from, double to, bool restarted = false) {
+    const std::int64_t seq_shift = restarted ? 0 : seq_going_on();
+    publish_paced(lcm, c, *d, samples_at(from), samples_at(to), published, 0, seq_shift);
+    return wait_for([&] { return all_handled(*d) && d->counters().samples_received == published; }, 20.0);
+  }
+  void stop() {
+    d->stop();
+    dispatch_rest(lcm);  // memq queued the daemon's messages
+  }
+
+  Config c;
+  lcm_t* lcm = lcm_create("memq://");
+  Received rx;
+  std::optional<Daemon> d;
+  std::uint64_t published = 0;
+};
+
 class DaemonInProcessOperations : public ScratchDir {
  public:
-  static void TearDownTestSuite() { remove_drift_data(); }
+  static void TearDownTestSuite() { std::filesystem::remove_all(learned_run().dir); }
 };
 
 }  // namespace
@@ -160,19 +200,12 @@ TEST_F(DaemonInProcessOperations, FaultStatusSaysWarmingUpAndLearningUntilItCanF
 // logs it, resets the prefilters (one gap) and goes on with the restored
 // parameters and baselines; a second restart is handled the same way.
 TEST_F(DaemonInProcessOperations, SenderRestartAfterAResumeIsDetectedAndEstimationGoesOn) {
-  Config c = resumed_config(path("state.ckpt"));
+  Resumed r(path("state.ckpt"));
   LogCapture log;
-  lcm_t* lcm = lcm_create("memq://");
-  ASSERT_NE(lcm, nullptr);
-  Received rx;
-  rx.subscribe(lcm, c.lcm);
-  Daemon d(c, lcm);
+  Daemon& d = r.start();
   ASSERT_TRUE(d.restored_from_checkpoint());
-  d.start();
-  std::uint64_t published = 0;
-  const Eigen::Index run = samples_at(6.0);
-  publish_paced(lcm, c, d, 0, run, published);  // seq 0.., utime kUtime0..: both far behind the checkpoint
-  ASSERT_TRUE(wait_for([&] { return all_handled(d) && d.counters().samples_received == published; }, 20.0));
+  const std::uint64_t& published = r.published;
+  ASSERT_TRUE(r.feed(0.0, 6.0, true));  // seq 0.., utime kUtime0..: both far behind the checkpoint
   DaemonCounters k = d.counters();
   EXPECT_EQ(k.sender_restarts, 1u);
   // The run is confirmed by the sample 0.1 s after its first: the 410 before it are dropped.
@@ -182,16 +215,14 @@ TEST_F(DaemonInProcessOperations, SenderRestartAfterAResumeIsDetectedAndEstimati
   EXPECT_EQ(k.gaps, 1u);
   EXPECT_EQ(k.samples_lost, 0u);
   // Again, from 0.
-  publish_paced(lcm, c, d, 0, run, published);
-  ASSERT_TRUE(wait_for([&] { return all_handled(d) && d.counters().samples_received == published; }, 20.0));
+  ASSERT_TRUE(r.feed(0.0, 6.0, true));
   k = d.counters();
   EXPECT_EQ(k.sender_restarts, 2u);
   EXPECT_EQ(k.samples_processed, published - 2 * confirm);
   EXPECT_EQ(k.gaps, 2u);
   std::this_thread::sleep_for(std::chrono::milliseconds(200));
-  d.stop();
-  dispatch_rest(lcm);
-  lcm_destroy(lcm);
+  r.stop();
+  const Received& rx = r.rx;
   EXPECT_FALSE(d.warming_up());
   EXPECT_EQ(log.count("sender restart: seq and utime started again"), 2) << log.text();
 
@@ -216,18 +247,11 @@ TEST_F(DaemonInProcessOperations, SenderRestartAfterAResumeIsDetectedAndEstimati
 // the LCM URL) keeps the restored baselines; a baseline the file now sets
 // replaces the kept one, with a warning.
 TEST_F(DaemonInProcessOperations, ReloadKeepsLearnedAndRestoredBaselines) {
-  Config c = resumed_config(path("state.ckpt"));
+  Resumed r(path("state.ckpt"));
+  const Config& c = r.c;
   LogCapture log;
-  lcm_t* lcm = lcm_create("memq://");
-  ASSERT_NE(lcm, nullptr);
-  Received rx;
-  rx.subscribe(lcm, c.lcm);
-  Daemon d(c, lcm);
-  d.start();
-  std::uint64_t published = 0;
-  const std::int64_t seq_shift = learned_run().last_seq + 1 - samples_at(17.0);  // the sender goes on
-  publish_paced(lcm, c, d, samples_at(17.0), samples_at(18.0), published, 0, seq_shift);
-  ASSERT_TRUE(wait_for([&] { return all_handled(d) && d.counters().samples_received == published; }, 20.0));
+  Daemon& d = r.start();
+  ASSERT_TRUE(r.feed(17.0, 18.0));
 
   Config next = c;
   next.estimator.forgetting[kFlex] = 0.998;
@@ -235,23 +259,16 @@ TEST_F(DaemonInProcessOperations, ReloadKeepsLearnedAndRestoredBaselines) {
   next.faults.thresholds[0].hold_time = 1.5;
   const std::string summary = d.reload(next);
   EXPECT_NE(summary.find("NOT applied"), std::string::npos) << summary;
-  publish_paced(lcm, c, d, samples_at(18.0), samples_at(19.0), published, 0, seq_shift);
-  ASSERT_TRUE(wait_for([&] { return all_handled(d) && d.counters().samples_received == published; }, 20.0));
-  std::size_t after_first = 0;
-  {
-    std::lock_guard<std::mutex> lock(rx.mutex);
-    after_first = rx.status.size();
-  }
+  ASSERT_TRUE(r.feed(18.0, 19.0));
+  const std::size_t after_first = r.rx.count_status();
   // Now the running model again, with a configured baseline for flex (95 Hz): it replaces the restored one.
   Config third = c;
   third.faults.baselines.resize(2);
   third.faults.baselines[kFlex] = ModalParameters{2.0 * std::numbers::pi * 95.0, 0.02, 1.0};
   d.reload(third);
-  publish_paced(lcm, c, d, samples_at(19.0), samples_at(19.5), published, 0, seq_shift);
-  ASSERT_TRUE(wait_for([&] { return all_handled(d) && d.counters().samples_received == published; }, 20.0));
-  d.stop();
-  dispatch_rest(lcm);
-  lcm_destroy(lcm);
+  ASSERT_TRUE(r.feed(19.0, 19.5));
+  r.stop();
+  const Received& rx = r.rx;
 
   ASSERT_GT(after_first, 10u);
   for (std::size_t i = 0; i < rx.status.size(); ++i) {
@@ -272,14 +289,13 @@ TEST_F(DaemonInProcessOperations, ReloadKeepsLearnedAndRestoredBaselines) {
 // drops, every sample is accounted for, and the gap warnings they cause come
 // as one line per 5 s with a count, not one per gap.
 TEST_F(DaemonInProcessOperations, CountsSamplesLostInTransportAndRateLimitsGapWarnings) {
-  Config c = resumed_config(path("state.ckpt"));
+  Resumed r(path("state.ckpt"));
+  const Config& c = r.c;
+  lcm_t* lcm = r.lcm;
   LogCapture log;
-  lcm_t* lcm = lcm_create("memq://");
-  ASSERT_NE(lcm, nullptr);
-  Daemon d(c, lcm);
-  d.start();
+  Daemon& d = r.start();
   const Record& rec = drift_data().record;
-  const std::int64_t seq_shift = learned_run().last_seq + 1 - samples_at(17.0);
+  const std::int64_t seq_shift = seq_going_on();
   std::uint64_t sent = 0, lost = 0, late = 0, duplicated = 0, unique = 0;
   constexpr int kBatch = 64;
   const auto send = [&](Eigen::Index k) {
@@ -311,8 +327,7 @@ TEST_F(DaemonInProcessOperations, CountsSamplesLostInTransportAndRateLimitsGapWa
   ASSERT_TRUE(wait_for([&] { return all_handled(d) && d.counters().samples_received == sent; }, 20.0));
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the subscriber idles: losses are final
-  d.stop();
-  lcm_destroy(lcm);
+  r.stop();
   const DaemonCounters k = d.counters();
   EXPECT_EQ(k.samples_lost, lost);
   EXPECT_EQ(k.samples_dropped, 0u);
@@ -337,25 +352,19 @@ TEST_F(DaemonInProcessOperations, CountsSamplesLostInTransportAndRateLimitsGapWa
 // 3 s at real time: 30), not a second one from the wall-clock timer that is
 // meant for the silence; without input, one per publish period of wall time.
 TEST_F(DaemonInProcessOperations, OneFaultStatusPerPublishPeriod) {
-  Config c = resumed_config(path("state.ckpt"));  // no warm-up fit in the way
-  lcm_t* lcm = lcm_create("memq://");
-  ASSERT_NE(lcm, nullptr);
-  Received rx;
-  rx.subscribe(lcm, c.lcm);
-  Daemon d(c, lcm);
-  d.start();
-  const std::int64_t seq_shift = learned_run().last_seq + 1 - samples_at(17.0);
+  Resumed r(path("state.ckpt"));  // no warm-up fit in the way
+  r.start();
+  const std::int64_t seq_shift = seq_going_on();
   const auto t0 = std::chrono::steady_clock::now();
   const Eigen::Index begin = samples_at(17.0);
-  publish_range(lcm, c.lcm.batches_channel, drift_data().record, begin, samples_at(20.0), 32, 0, seq_shift,
+  publish_range(r.lcm, r.c.lcm.batches_channel, drift_data().record, begin, samples_at(20.0), 32, 0, seq_shift,
                 [&](Eigen::Index next) {
                   std::this_thread::sleep_until(t0 + std::chrono::duration<double>(
                                                          static_cast<double>(next - begin) / kFs));
                 });
   std::this_thread::sleep_for(std::chrono::seconds(3));  // without input
-  d.stop();
-  dispatch_rest(lcm);  // memq queued the daemon's messages
-  lcm_destroy(lcm);
+  r.stop();
+  const Received& rx = r.rx;
   // Without input the status repeats the newest sample's utime.
   const std::int64_t last_utime = kUtime0 + std::llround(drift_data().record.t(samples_at(20.0) - 1) * 1e6);
   std::size_t with_input = 0, without = 0;
@@ -372,21 +381,12 @@ TEST_F(DaemonInProcessOperations, OneFaultStatusPerPublishPeriod) {
 // Loop ticks that overrun set HEALTH_OVERRUN and the overruns counter. A
 // 10 us tick overruns on any machine.
 TEST_F(DaemonInProcessOperations, OverrunsAreInTheHealthBitsAndCounters) {
-  Config c = resumed_config(path("state.ckpt"));
-  c.daemon.loop_rate_hz = 100000.0;
-  lcm_t* lcm = lcm_create("memq://");
-  ASSERT_NE(lcm, nullptr);
-  Received rx;
-  rx.subscribe(lcm, c.lcm);
-  Daemon d(c, lcm);
-  d.start();
-  std::uint64_t published = 0;
-  const std::int64_t seq_shift = learned_run().last_seq + 1 - samples_at(17.0);
-  publish_paced(lcm, c, d, samples_at(17.0), samples_at(19.0), published, 0, seq_shift);
-  ASSERT_TRUE(wait_for([&] { return all_handled(d) && d.counters().samples_received == published; }, 20.0));
-  d.stop();
-  dispatch_rest(lcm);
-  lcm_destroy(lcm);
+  Resumed r(path("state.ckpt"));
+  r.c.daemon.loop_rate_hz = 100000.0;
+  Daemon& d = r.start();
+  ASSERT_TRUE(r.feed(17.0, 19.0));
+  r.stop();
+  const Received& rx = r.rx;
   const DaemonCounters k = d.counters();
   ASSERT_GT(k.overruns, 0u);
   int with_bit = 0;
@@ -411,21 +411,15 @@ TEST_F(DaemonInProcessOperations, CheckpointDirectoryIsCheckedAndTheFirstWriteLo
   EXPECT_NE(message.find("daemon.checkpoint.path"), std::string::npos) << message;
   EXPECT_NE(message.find("no-such-dir"), std::string::npos) << message;
 
-  Config c = resumed_config(path("state.ckpt"));
-  c.daemon.checkpoint_period = 0.1;
+  Resumed r(path("state.ckpt"));
+  r.c.daemon.checkpoint_period = 0.1;
   LogCapture log;
-  lcm_t* lcm = lcm_create("memq://");
-  ASSERT_NE(lcm, nullptr);
-  Daemon d(c, lcm);
-  d.start();
-  std::uint64_t published = 0;
-  const std::int64_t seq_shift = learned_run().last_seq + 1 - samples_at(17.0);
-  publish_paced(lcm, c, d, samples_at(17.0), samples_at(18.0), published, 0, seq_shift);
+  Daemon& d = r.start();
+  ASSERT_TRUE(r.feed(17.0, 18.0));
   ASSERT_TRUE(wait_for([&] { return d.counters().checkpoints_written >= 3; }, 10.0));
   EXPECT_NE(error_of([&] { d.reload(bad); }).find("daemon.checkpoint.path"), std::string::npos);
-  EXPECT_EQ(d.config().daemon.checkpoint_path, c.daemon.checkpoint_path);
-  d.stop();
-  lcm_destroy(lcm);
+  EXPECT_EQ(d.config().daemon.checkpoint_path, r.c.daemon.checkpoint_path);
+  r.stop();
   EXPECT_EQ(log.count("checkpoint written:"), 1) << log.text();
   EXPECT_NE(log.text().find("logged at debug level"), std::string::npos);
 }
@@ -433,23 +427,17 @@ TEST_F(DaemonInProcessOperations, CheckpointDirectoryIsCheckedAndTheFirstWriteLo
 // "input resumed" needs a sample: at start without input the daemon says "no
 // input yet", and a reload that lengthens stale_time does not end that.
 TEST_F(DaemonInProcessOperations, InputResumedIsLoggedOnlyWhenASampleArrives) {
-  Config c = resumed_config(path("state.ckpt"));
-  c.daemon.stale_time = 0.2;
+  Resumed r(path("state.ckpt"));
+  r.c.daemon.stale_time = 0.2;
   LogCapture log;
-  lcm_t* lcm = lcm_create("memq://");
-  ASSERT_NE(lcm, nullptr);
-  Daemon d(c, lcm);
-  d.start();
+  Daemon& d = r.start();
   ASSERT_TRUE(wait_for([&] { return log.count("no input yet") == 1; }, 5.0)) << log.text();
-  Config longer = c;
+  Config longer = r.c;
   longer.daemon.stale_time = 100.0;
   d.reload(longer);
   std::this_thread::sleep_for(std::chrono::milliseconds(400));
   EXPECT_EQ(log.count("input resumed"), 0) << log.text();
-  std::uint64_t published = 0;
-  const std::int64_t seq_shift = learned_run().last_seq + 1 - samples_at(17.0);
-  publish_paced(lcm, c, d, samples_at(17.0), samples_at(17.5), published, 0, seq_shift);
+  ASSERT_TRUE(r.feed(17.0, 17.5));
   ASSERT_TRUE(wait_for([&] { return log.count("input resumed") == 1; }, 5.0)) << log.text();
-  d.stop();
-  lcm_destroy(lcm);
+  r.stop();
 }
