@@ -3,13 +3,14 @@
 // transport, a reload, the states before flags can rise, the pace of the
 // fault status, overruns, checkpoint and input-state logging. Part of the
 // test_daemon binary (it shares the drift record and its helpers).
-#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/sinks/base_sink.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -29,22 +30,17 @@ namespace {
 // The daemon's log lines while it lives (spdlog's default logger, swapped).
 class LogCapture {
  public:
-  LogCapture() : previous_(spdlog::default_logger()) {
-    auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(text_);
-    auto logger = std::make_shared<spdlog::logger>("capture", sink);
+  LogCapture() : previous_(spdlog::default_logger()), sink_(std::make_shared<Sink>()) {
+    auto logger = std::make_shared<spdlog::logger>("capture", sink_);
     logger->set_pattern("%l %v");
     logger->set_level(spdlog::level::info);
-    logger->flush_on(spdlog::level::trace);
     spdlog::set_default_logger(logger);
   }
   ~LogCapture() { spdlog::set_default_logger(previous_); }
   LogCapture(const LogCapture&) = delete;
   LogCapture& operator=(const LogCapture&) = delete;
 
-  std::string text() {
-    spdlog::default_logger()->flush();
-    return text_.str();
-  }
+  std::string text() { return sink_->text(); }
   // Lines that contain `what`.
   int count(const std::string& what) {
     std::istringstream lines(text());
@@ -55,8 +51,28 @@ class LogCapture {
   }
 
  private:
-  std::ostringstream text_;
+  // Written by the daemon's threads, read by the test's: under the sink's mutex.
+  class Sink : public spdlog::sinks::base_sink<std::mutex> {
+   public:
+    std::string text() {
+      std::lock_guard<std::mutex> lock(mutex_);
+      return text_;
+    }
+
+   protected:
+    void sink_it_(const spdlog::details::log_msg& msg) override {
+      spdlog::memory_buf_t line;
+      formatter_->format(msg, line);
+      text_.append(line.data(), line.size());
+    }
+    void flush_() override {}
+
+   private:
+    std::string text_;
+  };
+
   std::shared_ptr<spdlog::logger> previous_;
+  std::shared_ptr<Sink> sink_;
 };
 
 // A checkpoint written after 17 s of the drift record (warm-up 5 s, baselines
