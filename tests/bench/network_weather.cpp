@@ -14,14 +14,15 @@
 // At the end it prints what it did, one key=value per line, for the script's
 // sums, and one "restart record_t=T" line per restart.
 #include <lcm/lcm.h>
-#include <time.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <random>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -34,19 +35,6 @@
 namespace {
 
 using namespace modalwatch;
-
-void sleep_until_s(const timespec& t0, double s) {
-  timespec when = t0;
-  const double whole = std::floor(s);
-  when.tv_sec += static_cast<time_t>(whole);
-  when.tv_nsec += static_cast<long>((s - whole) * 1e9);
-  if (when.tv_nsec >= 1000000000L) {
-    ++when.tv_sec;
-    when.tv_nsec -= 1000000000L;
-  }
-  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &when, nullptr) == EINTR) {
-  }
-}
 
 struct Span {
   double begin, end;  // record time, s
@@ -127,8 +115,7 @@ int main(int argc, char** argv) {
       lcm_publish(lcm, config.lcm.batches_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
       ++packets;
     };
-    timespec t0{};
-    clock_gettime(CLOCK_MONOTONIC, &t0);
+    const auto t0 = std::chrono::steady_clock::now();
     std::vector<StampedSample> buf;
     for (Eigen::Index k = 0; k < N;) {
       const double t = rec.t(k);
@@ -157,7 +144,7 @@ int main(int argc, char** argv) {
         buf.push_back(s);
         ++k;
       }
-      sleep_until_s(t0, (rec.t(k - 1) - rec.t(0)) / speed);
+      std::this_thread::sleep_until(t0 + std::chrono::duration<double>((rec.t(k - 1) - rec.t(0)) / speed));
       const auto n = static_cast<std::uint64_t>(buf.size());
       const bool weather = t >= quiet_until;
       if (weather && unit(rng) < loss) {
