@@ -21,6 +21,7 @@
 
 #include "support.hpp"
 
+#include "modalwatch/daemon/daemon.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/records.hpp"
@@ -123,6 +124,16 @@ struct Received {
   }
 };
 
+// Quantity q (0 wn, 1 zeta, 2 gain) of a mode's fault status.
+inline const modalwatch::quantity_status_t& quantity(const modalwatch::mode_status_t& m, int q) {
+  return q == 0 ? m.wn : q == 1 ? m.zeta : m.gain;
+}
+
+// Entry e = 3 mode + quantity of a fault status.
+inline const modalwatch::quantity_status_t& entry(const modalwatch::fault_status_t& s, int e) {
+  return quantity(s.modes[static_cast<std::size_t>(e / 3)], e % 3);
+}
+
 // Waits until pred() or the timeout; returns pred().
 inline bool wait_for(const std::function<bool()>& pred, double timeout_s) {
   const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
@@ -132,5 +143,44 @@ inline bool wait_for(const std::function<bool()>& pred, double timeout_s) {
   }
   return true;
 }
+
+constexpr int kSuspension = 0, kFlex = 1;
+constexpr double kFs = 4096.0;
+
+inline Eigen::Index samples_at(double t) { return static_cast<Eigen::Index>(std::llround(t * kFs)); }
+
+// Publishes [begin, end) and keeps at most `backlog` samples ahead of the
+// daemon; `published` counts the samples sent so far (memq queues without bound,
+// so the daemon's received counter lags what was sent).
+inline void publish_paced(lcm_t* lcm, const Config& c, Daemon& d, Eigen::Index begin, Eigen::Index end,
+                   std::uint64_t& published, std::int64_t utime_shift = 0, std::int64_t seq_shift = 0,
+                   std::uint64_t backlog = 2048) {
+  const Record& rec = drift_data().record;
+  Eigen::Index done = begin;
+  publish_range(lcm, c.lcm.batches_channel, rec, begin, end, 64, utime_shift, seq_shift, [&](Eigen::Index next) {
+    published += static_cast<std::uint64_t>(next - done);
+    done = next;
+    wait_for(
+        [&] {
+          const DaemonCounters k = d.counters();
+          const std::uint64_t handled = k.samples_processed + k.samples_dropped + k.samples_nonfinite +
+                                        k.samples_duplicate + k.samples_out_of_order;
+          return published < handled + backlog;
+        },
+        10.0);
+  });
+}
+
+inline bool all_handled(Daemon& d) {
+  const DaemonCounters k = d.counters();
+  return k.samples_received == k.samples_processed + k.samples_dropped + k.samples_nonfinite + k.samples_duplicate +
+                                   k.samples_out_of_order;
+}
+
+inline void dispatch_rest(lcm_t* lcm) {
+  while (lcm_handle_timeout(lcm, 50) > 0) {
+  }
+}
+
 
 }  // namespace modalwatch::test_support

@@ -108,20 +108,25 @@ TEST(Messages, GeneratedTypesHaveDistinctFingerprintsAndExpectedSizes) {
   EXPECT_EQ(b.getEncodedSize(), batch_wire_size(5));
   // The output types exist and encode (array lengths set from the vectors).
   fault_status_t f{};
-  f.mode_names = {"m1", "m2"};
-  f.n_modes = static_cast<std::int32_t>(f.mode_names.size());
-  f.flags.assign(6, 0);
-  f.deviation_sigma.assign(6, 0.0);
-  f.deviation_percent.assign(6, 0.0);
-  f.since.assign(6, 0);
-  f.n_entries = static_cast<std::int32_t>(f.flags.size());
+  f.version = fault_status_t::VERSION;
+  f.state = "learning";
+  f.modes.resize(2);
+  f.modes[0].name = "m1";
+  f.modes[1].name = "m2";
+  f.modes[1].zeta.state = "raised";
+  f.modes[1].zeta.deviation_sigma = -131.5;
+  f.n_modes = static_cast<std::int32_t>(f.modes.size());
   Bytes buf(static_cast<std::size_t>(f.getEncodedSize()));
   EXPECT_EQ(f.encode(buf.data(), 0, static_cast<int>(buf.size())), static_cast<int>(buf.size()));
   fault_status_t g{};
   EXPECT_EQ(g.decode(buf.data(), 0, static_cast<int>(buf.size())), static_cast<int>(buf.size()));
-  EXPECT_EQ(g.n_entries, 3 * g.n_modes);
-  EXPECT_EQ(g.mode_names[1], "m2");
+  EXPECT_EQ(g.version, 2);
+  EXPECT_EQ(g.state, "learning");
+  EXPECT_EQ(g.modes[1].name, "m2");
+  EXPECT_EQ(g.modes[1].zeta.state, "raised");
+  EXPECT_EQ(g.modes[1].zeta.deviation_sigma, -131.5);
   EXPECT_EQ(fault_status_t::HEALTH_DECODE_ERRORS, 32);
+  EXPECT_EQ(fault_status_t::HEALTH_OVERRUN, 64);
 }
 
 TEST(Messages, SampleRoundTrip) {

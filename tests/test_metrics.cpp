@@ -157,7 +157,8 @@ MetricsSnapshot example_snapshot() {
   ModeMetrics& flex = s.modes[1];
   flex.value = {2.0 * std::numbers::pi * 50.0, 0.02, 1.5};
   flex.std_dev = {2.0 * std::numbers::pi * 0.25, 0.001, 0.05};
-  flex.status.baseline = {{2.0 * std::numbers::pi * 56.0, 0.025, 1.25}, true};  // learned
+  flex.status.baseline.value = {2.0 * std::numbers::pi * 56.0, 0.025, 1.25};
+  flex.status.baseline.learned = true;
   flex.status.baseline_ready = true;
   QuantityStatus& wn = flex.status.quantity[static_cast<int>(Quantity::wn)];
   wn = {.flagged = true, .deviation_sigma = -24.0, .deviation_relative = -0.125, .since = 12.0};

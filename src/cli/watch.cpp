@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <ctime>
 #include <string>
 
 #include <modalwatch/estimates_t.hpp>
@@ -57,46 +58,61 @@ void on_estimates(const lcm_recv_buf_t* rbuf, const char*, void* user) {
   std::fflush(stdout);
 }
 
+// "hh:mm:ss.mmm", local wall-clock time now (when the message arrived).
+std::string wall_clock_now() {
+  const auto now = std::chrono::system_clock::now();
+  const std::time_t secs = std::chrono::system_clock::to_time_t(now);
+  const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(now.time_since_epoch()).count() % 1000;
+  std::tm local{};
+  localtime_r(&secs, &local);
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%02d:%02d:%02d.%03d", local.tm_hour, local.tm_min, local.tm_sec, static_cast<int>(ms));
+  return buf;
+}
+
 void on_fault_status(const lcm_recv_buf_t* rbuf, const char*, void* user) {
   auto& w = *static_cast<Watcher*>(user);
   Fault msg;
   if (msg.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) < 0) {
-    std::printf("fault status: undecodable message (%u bytes)\n", rbuf->data_size);
+    std::printf("fault status: undecodable message (%u bytes; a fault_status_t other than version %d?)\n",
+                rbuf->data_size, static_cast<int>(Fault::VERSION));
     return;
   }
   if (w.statuses++ % w.args->every != 0) return;
-  static const char* quantity[3] = {"wn", "zeta", "gain"};
   std::string flags;
   char buf[256];
-  bool suppressed = false;
-  for (int e = 0; e < msg.n_entries && e / 3 < msg.n_modes; ++e) {
-    const int f = msg.flags[static_cast<std::size_t>(e)];
-    if (f & Fault::FLAG_SUPPRESSED) suppressed = true;
-    if (!(f & (static_cast<int>(Fault::FLAG_RAISED) | static_cast<int>(Fault::FLAG_PENDING)))) continue;
-    std::snprintf(buf, sizeof buf, "%s%s.%s %s (%+.2f %%, %+.1f sigma)", flags.empty() ? "" : ", ",
-                  msg.mode_names[static_cast<std::size_t>(e / 3)].c_str(), quantity[e % 3],
-                  (f & Fault::FLAG_RAISED) ? "FLAGGED" : "pending", msg.deviation_percent[static_cast<std::size_t>(e)],
-                  msg.deviation_sigma[static_cast<std::size_t>(e)]);
-    flags += buf;
+  for (const auto& m : msg.modes) {
+    const std::pair<const char*, const modalwatch::quantity_status_t*> quantities[] = {
+        {"wn", &m.wn}, {"zeta", &m.zeta}, {"gain", &m.gain}};
+    for (const auto& [name, q] : quantities) {
+      if (q->state != "raised" && q->state != "pending") continue;
+      std::snprintf(buf, sizeof buf, "%s%s.%s %s (%+.2f %%, %+.1f sigma) since t = %.3f s", flags.empty() ? "" : ", ",
+                    m.name.c_str(), name, q->state == "raised" ? "FLAGGED" : "pending", q->deviation_percent,
+                    q->deviation_sigma, q->since_t);
+      flags += buf;
+    }
   }
-  if (flags.empty()) flags = suppressed ? "none (suppressed: warm-up or low excitation)" : "none";
-  std::string health;
-  const std::pair<int, const char*> bits[] = {{Fault::HEALTH_ESTIMATOR_RESET, "estimator-reset"},
-                                              {Fault::HEALTH_INPUT_GAP, "input-gap"},
-                                              {Fault::HEALTH_RING_OVERFLOW, "ring-overflow"},
-                                              {Fault::HEALTH_LOW_EXCITATION, "low-excitation"},
-                                              {Fault::HEALTH_STALE_INPUT, "stale-input"},
-                                              {Fault::HEALTH_DECODE_ERRORS, "decode-errors"}};
-  for (const auto& [bit, name] : bits)
-    if (msg.health & bit) (health += health.empty() ? "" : ",") += name;
-  if (health.empty()) health = "ok";
-  std::printf("faults    t = %9.3f s  | flags: %s | health: %s | received %lld, dropped %lld, nonfinite %lld, "
-              "dup %lld, ooo %lld, gaps %lld, decode errors %lld\n",
-              static_cast<double>(msg.utime) * 1e-6, flags.c_str(), health.c_str(),
-              static_cast<long long>(msg.samples_received), static_cast<long long>(msg.samples_dropped),
+  // Whether flags can rise at all: not while warming up or learning baselines.
+  if (flags.empty()) {
+    if (msg.state == "warming_up")
+      flags = "none (warming up: cannot flag yet)";
+    else if (msg.state == "learning")
+      flags = "none (learning baselines: cannot flag yet)";
+    else if (msg.state == "no_input")
+      flags = "none (no input yet)";
+    else
+      flags = (msg.health & Fault::HEALTH_LOW_EXCITATION) ? "none (suppressed: low excitation)" : "none";
+  }
+  std::printf("faults    t = %9.3f s  %s  | %s | flags: %s | health: %s | received %lld, processed %lld, lost %lld, "
+              "dropped %lld, nonfinite %lld, dup %lld, ooo %lld, gaps %lld, decode errors %lld, overruns %lld, "
+              "restarts %lld\n",
+              msg.t, wall_clock_now().c_str(), msg.state.c_str(), flags.c_str(), msg.health_text.c_str(),
+              static_cast<long long>(msg.samples_received), static_cast<long long>(msg.samples_processed),
+              static_cast<long long>(msg.samples_lost), static_cast<long long>(msg.samples_dropped),
               static_cast<long long>(msg.samples_nonfinite), static_cast<long long>(msg.samples_duplicate),
               static_cast<long long>(msg.samples_out_of_order), static_cast<long long>(msg.gaps),
-              static_cast<long long>(msg.decode_errors));
+              static_cast<long long>(msg.decode_errors), static_cast<long long>(msg.overruns),
+              static_cast<long long>(msg.sender_restarts));
   std::fflush(stdout);
 }
 

@@ -12,6 +12,15 @@
 
 namespace modalwatch::daemon_detail {
 
+void check_checkpoint_directory(const Config& config) {
+  const std::string& path = config.daemon.checkpoint_path;
+  if (path.empty()) return;
+  const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+  if (!dir.empty() && !std::filesystem::is_directory(dir))
+    throw InputError(config.source, "key 'daemon.checkpoint.path': directory '" + dir.string() +
+                                        "' does not exist (create it, or change the path)");
+}
+
 std::optional<Checkpoint> read_matching_checkpoint(const Config& config, std::uint64_t fingerprint) {
   const std::string& path = config.daemon.checkpoint_path;
   if (path.empty()) return std::nullopt;
@@ -67,13 +76,18 @@ bool Checkpointer::write(const std::string& path, const Checkpoint& ck, bool fin
   try {
     write_checkpoint(path, ck);
     bump(counters_.written);
-    if (final_one)
-      spdlog::info("checkpoint written: {} (last seq {})", path, ck.last_seq);
+    // The first periodic one, and the first after a failure, at info: the rest would flood the log.
+    if (final_one || !periodic_ok_logged_)
+      spdlog::info("checkpoint written: {} (last seq {}){}", path, ck.last_seq,
+                   final_one ? "" : fmt::format("; every {} s from now on, logged at debug level",
+                                                config_.daemon.checkpoint_period));
     else
       spdlog::debug("checkpoint written: {} (last seq {})", path, ck.last_seq);
+    periodic_ok_logged_ = true;
     return true;
   } catch (const std::system_error& e) {
     bump(counters_.failures);
+    periodic_ok_logged_ = false;
     spdlog::error("checkpoint NOT written ({}): {}; the previous one is kept, the service continues", path,
                   e.what());
     return false;

@@ -18,6 +18,10 @@
 
 namespace modalwatch::daemon_detail {
 
+// Throws InputError naming the key when daemon.checkpoint.path's directory
+// does not exist: every write would fail.
+void check_checkpoint_directory(const Config& config);
+
 // daemon.checkpoint when it exists, reads, and was written for this
 // configuration (`fingerprint`); otherwise none, with the reason logged.
 std::optional<Checkpoint> read_matching_checkpoint(const Config& config, std::uint64_t fingerprint);
@@ -52,6 +56,7 @@ class Checkpointer {
   std::mutex wake_mutex_;
   std::condition_variable wake_;
   bool stop_ = false;  // under wake_mutex_
+  bool periodic_ok_logged_ = false;  // this thread's, or the control side's after stop()
 };
 
 }  // namespace modalwatch::daemon_detail

@@ -19,12 +19,12 @@ inline void bump(Counter& c, std::uint64_t n = 1) noexcept {
 inline std::uint64_t read(const Counter& c) noexcept { return c.load(std::memory_order_relaxed); }
 
 struct SubscriberCounters {
-  Counter samples_received{0}, ring_full{0}, decode_errors{0};
+  Counter samples_received{0}, ring_full{0}, decode_errors{0}, samples_lost{0};
 };
 
 struct LoopCounters {
   Counter samples_nonfinite{0}, samples_duplicate{0}, samples_out_of_order{0}, samples_processed{0}, gaps{0},
-      resets{0}, overruns{0}, samples_held{0}, held_dropped{0}, snapshots{0}, snapshots_dropped{0}, flag_changes{0};
+      resets{0}, overruns{0}, sender_restarts{0}, samples_held{0}, held_dropped{0}, snapshots{0}, snapshots_dropped{0}, flag_changes{0};
 };
 
 struct PublisherCounters {
@@ -47,9 +47,11 @@ struct Counters {
     c.samples_received = read(subscriber.samples_received);
     c.samples_dropped = read(subscriber.ring_full) + read(loop.held_dropped);
     c.decode_errors = read(subscriber.decode_errors);
+    c.samples_lost = read(subscriber.samples_lost);
     c.samples_nonfinite = read(loop.samples_nonfinite);
     c.samples_duplicate = read(loop.samples_duplicate);
     c.samples_out_of_order = read(loop.samples_out_of_order);
+    c.sender_restarts = read(loop.sender_restarts);
     c.samples_processed = read(loop.samples_processed);
     c.gaps = read(loop.gaps);
     c.resets = read(loop.resets);

@@ -40,6 +40,7 @@ const Config& checked(const Config& config) {
                                         std::to_string(Daemon::kMaxModes) + " submodels (this model has " +
                                         std::to_string(K) + ")");
   check_realtime(config.daemon.realtime_priority, config.source);
+  check_checkpoint_directory(config);
   return config;
 }
 
@@ -182,13 +183,17 @@ void Daemon::stop() {
   m.loop.stop_fitter();
   m.running = false;
   const DaemonCounters c = m.counters.load();
-  spdlog::info("stopped: {} samples received, {} processed, {} dropped, {} decode errors, {} flag changes",
-               c.samples_received, c.samples_processed, c.samples_dropped, c.decode_errors, c.flag_changes);
+  spdlog::info(
+      "stopped: {} samples received: {} processed, {} non-finite, {} dropped, {} duplicate, {} out of order; {} lost in "
+      "transport, {} decode errors, {} sender restarts, {} flag changes",
+      c.samples_received, c.samples_processed, c.samples_nonfinite, c.samples_dropped, c.samples_duplicate,
+      c.samples_out_of_order, c.samples_lost, c.decode_errors, c.sender_restarts, c.flag_changes);
 }
 
 std::string Daemon::reload(const Config& next) {
   Impl& m = *impl_;
   std::lock_guard<std::mutex> control_lock(m.control);
+  check_checkpoint_directory(next);  // throws: the running configuration stays
   const bool same_fingerprint = checkpoint_fingerprint(next) == m.fingerprint;
   const std::vector<std::string> kept = needing_restart(m.config, next, same_fingerprint);
   m.run_state.store(static_cast<int>(RunState::reloading));

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <stdexcept>
 
 #include "loop_probe.hpp"
@@ -13,6 +14,11 @@
 
 namespace modalwatch::daemon_detail {
 namespace {
+
+// How long a run of samples behind the last accepted one must go on to be a
+// sender restart (see estimation_loop.hpp).
+constexpr double kRestartConfirm = 0.1;  // s of sample time
+constexpr int kRestartConfirmSamples = 8;
 
 bool finite(const StampedSample& s) { return std::isfinite(s.u) && std::isfinite(s.y) && std::isfinite(s.r); }
 
@@ -22,13 +28,15 @@ EstimatorSettings with_deferred_fit(EstimatorSettings s) {
   return s;
 }
 
-// The config's detector with the learned baselines kept from before (a
-// checkpoint, the detector of the config a reload replaces), covariance and
-// all, for the modes the config gives no baseline.
+// The config's detector with the baselines kept from before (a checkpoint, the
+// detector of the config a reload replaces), covariance and all, for the modes
+// the config gives no baseline.
 FaultDetector make_detector(const Config& c, const std::vector<std::optional<ModeBaseline>>& kept) {
   FaultDetector detector(fault_detector_settings(c));
-  for (std::size_t i = 0; i < c.faults.baselines.size() && i < kept.size(); ++i)
-    if (!c.faults.baselines[i] && kept[i] && kept[i]->learned) detector.restore_baseline(i, *kept[i]);
+  for (std::size_t i = 0; i < kept.size(); ++i) {
+    const bool configured = i < c.faults.baselines.size() && c.faults.baselines[i].has_value();
+    if (!configured && kept[i]) detector.restore_baseline(static_cast<int>(i), *kept[i]);
+  }
   return detector;
 }
 
@@ -71,7 +79,7 @@ EstimationLoop::EstimationLoop(const Config& config, const std::optional<Checkpo
     const double held = std::ceil(config.daemon.warmup_backlog / config.sample_time);
     backlog_.resize(static_cast<std::size_t>(std::max(1.0, held)));
   }
-  detector_.emplace(make_detector(config, restored_baselines));
+  set_detector(restored_baselines);
   mode_values_.resize(K);
   mode_covariances_.assign(K, Eigen::Matrix3d::Zero());
   flag_changes_.reserve(kQuantities * K);
@@ -130,8 +138,12 @@ void EstimationLoop::run() noexcept {
     std::int64_t now = mono_ns();
     work_off_backlog(final_stop ? std::numeric_limits<std::int64_t>::max() : now + period_ns / 2);
     drain(now);
-    // Without input, the fault status still goes out (with the stale flag).
-    if (now - last_snapshot_ns_ >= status_period_ns) push_snapshot(Snapshot::status_only, now, false);
+    // Without input for a publish period, the fault status still goes out
+    // (stale after daemon.stale_time), and so it does while the warm-up fit
+    // holds the input; otherwise the sample clock paces it.
+    const std::int64_t since_input = now - (last_sample_ns_ ? last_sample_ns_ : start_ns_);
+    if ((since_input >= status_period_ns || fit_in_flight_) && now - last_snapshot_ns_ >= status_period_ns)
+      push_snapshot(Snapshot::status_only, now, false);
     if (watchdog_usec_ > 0 && now - last_watchdog_ns_ >= static_cast<std::int64_t>(watchdog_usec_) * 500) {
       sd_notify(0, "WATCHDOG=1");
       last_watchdog_ns_ = now;
@@ -189,25 +201,63 @@ void EstimationLoop::work_off_backlog(std::int64_t deadline_ns) noexcept {
   }
 }
 
-void EstimationLoop::process(const StampedSample& s) noexcept {
-  if (have_seq_ && s.seq <= last_seq_ && !(have_ref_time_ && s.utime > last_utime_ + gap_us_)) {
-    bump(s.seq == last_seq_ ? counters_.samples_duplicate : counters_.samples_out_of_order);
-    return;
+// Whether `s`, behind the last accepted sample in seq and utime, completes a
+// run that shows a restarted sender.
+bool EstimationLoop::restart_confirmed(const StampedSample& s) noexcept {
+  if (!have_ref_time_ || s.utime + utime_offset_ >= last_utime_) {
+    restart_run_ = 0;
+    return false;
   }
-  have_seq_ = true;
-  last_seq_ = s.seq;
+  if (restart_run_ == 0 || s.seq <= restart_run_seq_ || s.utime <= restart_run_utime_) {
+    restart_run_ = 0;
+    restart_run_first_utime_ = s.utime;
+  }
+  ++restart_run_;
+  restart_run_seq_ = s.seq;
+  restart_run_utime_ = s.utime;
+  return restart_run_ >= kRestartConfirmSamples &&
+         static_cast<double>(s.utime - restart_run_first_utime_) * 1e-6 >= kRestartConfirm;
+}
+
+// From `s` on the sender's utime maps to the loop's clock two gaps after the
+// last sample: the estimator sees a gap (prefilter states reset), nothing else.
+void EstimationLoop::note_restart(const StampedSample& s) noexcept {
+  if (s.utime + utime_offset_ <= last_utime_ + gap_us_) utime_offset_ = last_utime_ + 2 * gap_us_ - s.utime;
+  restart_run_ = 0;
+  bump(counters_.sender_restarts);
+  restart_since_snapshot_ = true;
+}
+
+void EstimationLoop::process(const StampedSample& s) noexcept {
+  if (have_seq_ && s.seq <= last_seq_) {
+    if (have_ref_time_ && s.utime + utime_offset_ > last_utime_ + gap_us_) {
+      note_restart(s);  // seq back, time on past a gap: a new stream
+    } else if (s.seq == last_seq_) {
+      bump(counters_.samples_duplicate);
+      return;
+    } else if (restart_confirmed(s)) {
+      note_restart(s);
+    } else {
+      bump(counters_.samples_out_of_order);
+      return;
+    }
+  }
+  const std::int64_t utime = s.utime + utime_offset_;
   if (!have_time_) {
     have_time_ = true;
-    utime0_ = s.utime;
-    next_publish_utime_ = s.utime + publish_period_us_;
-  } else if (s.utime <= last_utime_) {
+    utime0_ = utime;
+    next_publish_utime_ = utime + publish_period_us_;
+  } else if (utime <= last_utime_) {
     // A later seq with an earlier (or equal) time: the estimator would reject it too.
     bump(counters_.samples_out_of_order);
     return;
   }
-  last_utime_ = s.utime;
+  have_seq_ = true;
+  last_seq_ = s.seq;
+  restart_run_ = 0;
+  last_utime_ = utime;
   have_ref_time_ = true;
-  const double t = static_cast<double>(s.utime - utime0_) * 1e-6;
+  const double t = static_cast<double>(utime - utime0_) * 1e-6;
   // A non-finite sample goes to the estimator too, which keeps its time slot
   // (holds u and r, lets the model stand in for y, does not update): dropping it
   // here would leave a hole of 2 T that resets the prefilters as a gap.
@@ -228,10 +278,10 @@ void EstimationLoop::process(const StampedSample& s) noexcept {
     bump(counters_.resets);
     reset_since_snapshot_ = true;
   }
-  if (s.utime >= next_publish_utime_) {
+  if (utime >= next_publish_utime_) {
     push_snapshot(Snapshot::estimate, mono_ns(), true);
     next_publish_utime_ += publish_period_us_;
-    if (next_publish_utime_ <= s.utime) next_publish_utime_ = s.utime + publish_period_us_;
+    if (next_publish_utime_ <= utime) next_publish_utime_ = utime + publish_period_us_;
   }
 }
 
@@ -245,6 +295,8 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
   snap.n_modes = K;
   snap.utime = have_ref_time_ ? last_utime_ : 0;
   snap.utime0 = utime0_;
+  snap.utime_offset = utime_offset_;
+  snap.have_sample = have_time_;
   snap.last_seq = last_seq_;
   snap.have_seq = have_seq_;
   snap.warming_up = st.warming_up;
@@ -277,13 +329,19 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
   snap.stale = since_input > static_cast<std::int64_t>(config_.daemon.stale_time * 1e9);
   snap.gap = gap_since_snapshot_;
   snap.reset = reset_since_snapshot_;
-  gap_since_snapshot_ = reset_since_snapshot_ = false;
+  snap.sender_restart = restart_since_snapshot_;
+  gap_since_snapshot_ = reset_since_snapshot_ = restart_since_snapshot_ = false;
   const std::uint64_t dropped = read(all_counters_.subscriber.ring_full) + read(counters_.held_dropped);
   const std::uint64_t decode_errors = read(all_counters_.subscriber.decode_errors);
   snap.input_dropped = dropped != dropped_at_snapshot_;
   snap.decode_errors = decode_errors != decode_errors_at_snapshot_;
   dropped_at_snapshot_ = dropped;
   decode_errors_at_snapshot_ = decode_errors;
+  const std::uint64_t overruns = read(counters_.overruns), lost = read(all_counters_.subscriber.samples_lost);
+  snap.overrun = overruns != overruns_at_snapshot_;
+  snap.samples_lost = lost != lost_at_snapshot_;
+  overruns_at_snapshot_ = overruns;
+  lost_at_snapshot_ = lost;
   bump(counters_.snapshots);
   snap.counters = all_counters_.load();
   if (output_.try_push(snap)) output_bell_.ring();
@@ -299,7 +357,7 @@ std::optional<Checkpoint> EstimationLoop::capture(std::uint64_t fingerprint) con
   if (!have_seq_ || estimator_.status().warming_up) return std::nullopt;
   Checkpoint ck;
   ck.config_fingerprint = fingerprint;
-  ck.last_utime = last_utime_;
+  ck.last_utime = last_utime_ - utime_offset_;  // the sender's clock
   ck.last_seq = last_seq_;
   ck.estimator = estimator_.state();
   for (int i = 0; i < estimator_.submodels(); ++i) {
@@ -309,14 +367,50 @@ std::optional<Checkpoint> EstimationLoop::capture(std::uint64_t fingerprint) con
   return ck;
 }
 
-// Learned baselines survive; configured ones come from the rewritten config.
+// Learned and restored baselines survive unless the rewritten config sets one
+// for that mode; configured ones follow the config. What the new detector
+// does not carry over is logged at warning level.
 void EstimationLoop::reconfigure_detector() {
-  std::vector<std::optional<ModeBaseline>> learned(detector_->status().size());
-  for (std::size_t i = 0; i < learned.size(); ++i) {
-    const ModeStatus& s = detector_->status()[i];
-    if (s.baseline_ready && s.baseline.learned) learned[i] = s.baseline;
+  if (config_.faults == detector_faults_) return;  // nothing to apply: flags and learning go on
+  const std::vector<ModeStatus>& status = detector_->status();
+  std::vector<std::optional<ModeBaseline>> kept(status.size());
+  const auto& configured = config_.faults.baselines;
+  const bool estimating = !estimator_.status().warming_up;
+  for (std::size_t i = 0; i < status.size(); ++i) {
+    const ModeStatus& s = status[i];
+    const std::string& name = config_.model.submodels[i].name;
+    const bool now_configured = i < configured.size() && configured[i].has_value();
+    if (s.baseline_ready && !baseline_configured_[i]) {
+      if (!now_configured) kept[i] = s.baseline;
+      else if (!(*configured[i] == s.baseline.value))
+        spdlog::warn("reload: mode '{}': the {} baseline (f = {:.6g} Hz) is replaced by the one in the file", name,
+                     s.baseline.learned ? "learned" : "restored", s.baseline.value.wn / (2.0 * std::numbers::pi));
+    } else if (s.baseline_ready && !now_configured) {
+      spdlog::warn("reload: mode '{}': its configured baseline is gone from the file: learned anew over {} s, no flags "
+                   "for this mode meanwhile",
+                   name, config_.faults.learn_window);
+    } else if (!s.baseline_ready && !now_configured && estimating) {
+      spdlog::warn("reload: mode '{}': the baseline being learned starts again ({} s)", name,
+                   config_.faults.learn_window);
+    }
+    for (int q = 0; q < kQuantities; ++q) {
+      const QuantityStatus& qs = s.quantity[static_cast<std::size_t>(q)];
+      if (qs.flagged || qs.pending)
+        spdlog::warn("reload: mode '{}': a {} flag on {} is cleared; it rises again after its hold time if the "
+                     "deviation persists",
+                     name, qs.flagged ? "raised" : "pending", q == 0 ? "wn" : q == 1 ? "zeta" : "gain");
+    }
   }
-  detector_.emplace(make_detector(config_, learned));
+  set_detector(kept);
+}
+
+void EstimationLoop::set_detector(const std::vector<std::optional<ModeBaseline>>& kept) {
+  const auto& configured = config_.faults.baselines;
+  detector_faults_ = config_.faults;
+  baseline_configured_.assign(config_.model.submodels.size(), false);
+  for (std::size_t i = 0; i < baseline_configured_.size() && i < configured.size(); ++i)
+    baseline_configured_[i] = configured[i].has_value();
+  detector_.emplace(make_detector(config_, kept));
 }
 
 }  // namespace modalwatch::daemon_detail

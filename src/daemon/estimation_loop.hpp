@@ -13,10 +13,17 @@
 //   record and replay faster than real time is just faster. Stale input and
 //   the idle fault status run on the wall clock (CLOCK_MONOTONIC).
 // - Sequence numbers. A seq at or below the last accepted one is a duplicate
-//   (equal) or out of order (below) and is dropped, unless its utime is more
-//   than one gap past the last sample: then the sender has restarted (a new
-//   replay, a controller reboot) and the sample is taken, and the time gap
-//   resets the prefilter states as any gap does.
+//   (equal) or out of order (below) and is dropped, unless the sender has
+//   restarted (a new replay, a controller reboot): its seq went back and
+//   either its utime is more than one gap past the last sample (taken at once),
+//   or its utime went back too and the samples after it go on from there
+//   (in seq and utime) for kRestartConfirm seconds of sample time and at least
+//   kRestartConfirmSamples samples (those are dropped, counted out of order;
+//   reordered packets never go on that long). A restart is counted and
+//   logged; the loop then maps the sender's utime onto its own clock
+//   (utime_offset_), so that sample time goes on past a gap: the prefilter
+//   states reset as after any gap, the parameters, baselines and a restored
+//   checkpoint stay.
 // - NaN/Inf in u, y or r: counted, and passed to the estimator, which keeps the
 //   sample's time slot without updating.
 // - Gaps. The estimator detects them itself (estimator.gap_factor, which
@@ -78,7 +85,10 @@ class EstimationLoop {
   void stop(bool final_stop);
 
   // While stopped: the state to resume from (none during the warm-up), and a
-  // new fault detector for the rewritten config that keeps learned baselines.
+  // new fault detector for the rewritten config that keeps learned and
+  // restored baselines (unless the config now sets one) and logs at warning
+  // level what it does not carry over (flags, learning in progress). When the
+  // faults: section did not change, the detector stays as it is.
   std::optional<Checkpoint> capture(std::uint64_t fingerprint) const;
   void reconfigure_detector();
 
@@ -92,9 +102,12 @@ class EstimationLoop {
   void run() noexcept;
   void drain(std::int64_t now) noexcept;
   void process(const StampedSample& s) noexcept;
+  bool restart_confirmed(const StampedSample& s) noexcept;
+  void note_restart(const StampedSample& s) noexcept;
   void enqueue_held(const StampedSample& s) noexcept;
   void work_off_backlog(std::int64_t deadline_ns) noexcept;
   void push_snapshot(Snapshot::Kind kind, std::int64_t now, bool update_detector) noexcept;
+  void set_detector(const std::vector<std::optional<ModeBaseline>>& kept);
 
   // Wiring.
   const Config& config_;
@@ -118,6 +131,8 @@ class EstimationLoop {
   RecursiveEstimator estimator_;
   bool restored_ = false;
   std::optional<FaultDetector> detector_;
+  std::vector<bool> baseline_configured_;  // per mode: the baseline is the config's
+  FaultSettings detector_faults_;          // the config's faults: section the detector was made for
   std::vector<ModalParameters> mode_values_;
   std::vector<Eigen::Matrix3d> mode_covariances_;  // the detector's input, sized at construction
   std::vector<FlagChange> flag_changes_;
@@ -125,6 +140,12 @@ class EstimationLoop {
   // Input policy and timing.
   bool have_seq_ = false;
   std::int64_t last_seq_ = -1;
+  // utime_ below is the sender's utime + utime_offset_ (changed by a restart).
+  std::int64_t utime_offset_ = 0;
+  bool restart_since_snapshot_ = false;
+  // A run of samples behind the last accepted one: a restart when it goes on.
+  int restart_run_ = 0;
+  std::int64_t restart_run_seq_ = 0, restart_run_utime_ = 0, restart_run_first_utime_ = 0;
   bool have_time_ = false;      // utime0_ set (a sample since start)
   bool have_ref_time_ = false;  // last_utime_ is meaningful (a sample, or a restored checkpoint)
   std::int64_t utime0_ = 0, last_utime_ = 0;
@@ -133,7 +154,8 @@ class EstimationLoop {
 
   // Events for the next snapshot.
   bool gap_since_snapshot_ = false, reset_since_snapshot_ = false;
-  std::uint64_t dropped_at_snapshot_ = 0, decode_errors_at_snapshot_ = 0;
+  std::uint64_t dropped_at_snapshot_ = 0, decode_errors_at_snapshot_ = 0, overruns_at_snapshot_ = 0,
+                lost_at_snapshot_ = 0;
   Snapshot next_snapshot_;  // built in place, copied into the ring
   std::atomic<bool> warming_up_{true};
   bool probe_fired_ = false;

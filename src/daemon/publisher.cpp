@@ -20,35 +20,60 @@ using Fault = modalwatch::fault_status_t;
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kRateLogPeriod = 10.0;  // s
+constexpr double kWarningPeriod = 5.0;   // s, at most one line per repeated warning
 
 const char* quantity_name(Quantity q) {
   static constexpr const char* names[kQuantities] = {"wn", "zeta", "gain"};
   return names[static_cast<int>(q)];
 }
 
-// Detector times are seconds after the first sample; messages carry utime.
-std::int64_t utime_of(const Snapshot& s, double t) { return s.utime0 + std::llround(t * 1e6); }
+// Detector times are seconds after the first sample, on the loop's clock;
+// messages carry the sender's utime.
+std::int64_t utime_of(const Snapshot& s, double t) { return s.utime0 + std::llround(t * 1e6) - s.utime_offset; }
 
-// fault_status_t.flags of one quantity.
-std::int32_t flag_bits(const QuantityStatus& q, bool valid) {
-  std::int32_t f = 0;
-  if (q.flagged) f |= Fault::FLAG_RAISED;
-  if (q.pending) f |= Fault::FLAG_PENDING;
-  if (q.deviation_sigma < 0.0 || q.deviation_relative < 0.0) f |= Fault::FLAG_LOW;
-  if (!valid) f |= Fault::FLAG_SUPPRESSED;
-  return f;
+// The sample time of the newest sample, seconds after the first.
+double t_of(const Snapshot& s) { return s.have_sample ? static_cast<double>(s.utime - s.utime0) * 1e-6 : 0.0; }
+
+// Named states of fault_status_t (its .lcm file defines them).
+const char* quantity_state(const QuantityStatus& q, bool baseline_ready, bool valid) {
+  if (q.flagged) return "raised";
+  if (q.pending) return "pending";
+  if (!baseline_ready) return "learning";
+  if (!valid) return "suppressed";
+  return "ok";
 }
 
-std::int32_t health_bits(const Snapshot& s) {
-  std::int32_t h = 0;
-  if (s.gap) h |= Fault::HEALTH_INPUT_GAP;
-  if (s.reset) h |= Fault::HEALTH_ESTIMATOR_RESET;
-  if (s.low_excitation) h |= Fault::HEALTH_LOW_EXCITATION;
-  if (s.stale) h |= Fault::HEALTH_STALE_INPUT;
-  if (s.input_dropped) h |= Fault::HEALTH_RING_OVERFLOW;
-  if (s.decode_errors) h |= Fault::HEALTH_DECODE_ERRORS;
-  return h;
+int severity(const std::string& state) {
+  static constexpr const char* order[] = {"ok", "suppressed", "learning", "pending", "raised"};
+  for (int i = 4; i > 0; --i)
+    if (state == order[i]) return i;
+  return 0;
 }
+
+const char* daemon_state(const Snapshot& s) {
+  if (!s.have_sample) return "no_input";
+  if (s.warming_up) return "warming_up";
+  for (int i = 0; i < s.n_modes; ++i)
+    if (!s.modes[static_cast<std::size_t>(i)].baseline_ready) return "learning";
+  return "watching";
+}
+
+struct HealthBit {
+  std::int32_t bit;
+  const char* name;
+  bool Snapshot::*set;
+};
+constexpr HealthBit kHealthBits[] = {
+    {Fault::HEALTH_ESTIMATOR_RESET, "estimator_reset", &Snapshot::reset},
+    {Fault::HEALTH_INPUT_GAP, "input_gap", &Snapshot::gap},
+    {Fault::HEALTH_RING_OVERFLOW, "ring_overflow", &Snapshot::input_dropped},
+    {Fault::HEALTH_LOW_EXCITATION, "low_excitation", &Snapshot::low_excitation},
+    {Fault::HEALTH_STALE_INPUT, "stale_input", &Snapshot::stale},
+    {Fault::HEALTH_DECODE_ERRORS, "decode_errors", &Snapshot::decode_errors},
+    {Fault::HEALTH_OVERRUN, "overrun", &Snapshot::overrun},
+    {Fault::HEALTH_SAMPLES_LOST, "samples_lost", &Snapshot::samples_lost},
+    {Fault::HEALTH_SENDER_RESTART, "sender_restart", &Snapshot::sender_restart},
+};
 
 }  // namespace
 
@@ -88,6 +113,7 @@ void Publisher::run() {
       publish_heartbeat(now);
       next_heartbeat_ns_ = now + static_cast<std::int64_t>(config_.daemon.heartbeat_period * 1e9);
     }
+    log_repeated(wiring_.counters.load(), now);
     if (now >= next_rate_log_ns_) {
       log_rates(now);
       next_rate_log_ns_ = now + static_cast<std::int64_t>(kRateLogPeriod * 1e9);
@@ -101,6 +127,36 @@ void Publisher::handle(const Snapshot& s) {
   if (s.kind == Snapshot::estimate) publish_estimates(s);
   if (s.kind != Snapshot::final_state || s.n_changes) publish_fault_status(s);
   log_snapshot(s);
+  log_repeated(s.counters, mono_ns());
+}
+
+template <class Line>
+void Publisher::warn_repeated(RepeatedWarning& w, std::uint64_t total, std::int64_t now, Line&& line) {
+  if (total == w.logged || now < w.next_ns) return;
+  const double over = w.last_ns ? static_cast<double>(now - w.last_ns) * 1e-9 : 0.0;
+  line(total - w.logged, over, total);
+  w.logged = total;
+  w.last_ns = now;
+  w.next_ns = now + static_cast<std::int64_t>(kWarningPeriod * 1e9);
+}
+
+void Publisher::log_repeated(const DaemonCounters& c, std::int64_t now) {
+  // "n in x s" after the first line: x is the time since the previous line.
+  const auto in = [](double over) { return over > 0.0 ? fmt::format(" in the last {:.1f} s", over) : std::string(); };
+  warn_repeated(gaps_, c.gaps, now, [&](std::uint64_t n, double over, std::uint64_t total) {
+    spdlog::warn("input gap: prefilter states reset (parameters kept): {}{}, {} gaps so far", n, in(over), total);
+  });
+  warn_repeated(resets_, c.resets, now, [&](std::uint64_t n, double over, std::uint64_t total) {
+    spdlog::warn("estimator reset to its last good state (last: {}): {}{}, {} resets so far", last_reset_reason_, n,
+                 in(over), total);
+  });
+  warn_repeated(lost_, c.samples_lost, now, [&](std::uint64_t n, double over, std::uint64_t total) {
+    spdlog::warn("samples lost in transport (sequence numbers that never arrived): {}{}, {} so far", n, in(over),
+                 total);
+  });
+  warn_repeated(dropped_, c.samples_dropped, now, [&](std::uint64_t n, double over, std::uint64_t total) {
+    spdlog::warn("samples dropped, input ring or warm-up backlog full: {}{}, {} so far", n, in(over), total);
+  });
 }
 
 bool Publisher::send(const std::string& channel, const auto& message) {
@@ -111,7 +167,7 @@ bool Publisher::send(const std::string& channel, const auto& message) {
 
 void Publisher::publish_estimates(const Snapshot& s) {
   modalwatch::estimates_t msg;
-  msg.utime = s.utime;
+  msg.utime = s.utime - s.utime_offset;
   msg.n_modes = s.n_modes;
   msg.modes.resize(static_cast<std::size_t>(s.n_modes));
   for (int i = 0; i < s.n_modes; ++i) {
@@ -138,23 +194,46 @@ void Publisher::publish_estimates(const Snapshot& s) {
 
 void Publisher::publish_fault_status(const Snapshot& s) {
   Fault msg;
-  msg.utime = s.utime;
+  msg.version = Fault::VERSION;
+  msg.utime = s.utime - s.utime_offset;
+  msg.t = t_of(s);
+  msg.state = daemon_state(s);
   msg.n_modes = s.n_modes;
-  msg.n_entries = kQuantities * s.n_modes;
+  msg.modes.resize(static_cast<std::size_t>(s.n_modes));
   const bool valid = !s.warming_up && !s.low_excitation;
   for (int i = 0; i < s.n_modes; ++i) {
     const auto k = static_cast<std::size_t>(i);
-    msg.mode_names.push_back(config_.model.submodels[k].name);
-    for (const QuantityStatus& q : s.modes[k].quantity) {
-      msg.flags.push_back(flag_bits(q, valid));
-      msg.deviation_sigma.push_back(q.deviation_sigma);
-      msg.deviation_percent.push_back(100.0 * q.deviation_relative);
-      msg.since.push_back((q.flagged || q.pending) ? utime_of(s, q.since) : 0);
+    const ModeStatus& mode = s.modes[k];
+    modalwatch::mode_status_t& m = msg.modes[k];
+    m.name = config_.model.submodels[k].name;
+    m.baseline_ready = mode.baseline_ready;
+    m.state = "ok";
+    modalwatch::quantity_status_t* fields[kQuantities] = {&m.wn, &m.zeta, &m.gain};
+    for (int q = 0; q < kQuantities; ++q) {
+      const QuantityStatus& in = mode.quantity[static_cast<std::size_t>(q)];
+      modalwatch::quantity_status_t& out = *fields[q];
+      out.state = quantity_state(in, mode.baseline_ready, valid);
+      out.deviation_sigma = in.deviation_sigma;
+      out.deviation_percent = 100.0 * in.deviation_relative;
+      const bool timed = in.flagged || in.pending;
+      out.since = timed ? utime_of(s, in.since) : 0;
+      out.since_t = timed ? in.since : 0.0;
+      if (severity(out.state) > severity(m.state)) m.state = out.state;
     }
   }
-  msg.health = health_bits(s);
+  msg.health = 0;
+  for (const HealthBit& h : kHealthBits)
+    if (s.*h.set) {
+      msg.health |= h.bit;
+      (msg.health_text += msg.health_text.empty() ? "" : ",") += h.name;
+    }
+  if (msg.health_text.empty()) msg.health_text = "ok";
   const DaemonCounters& c = s.counters;
   msg.samples_received = static_cast<std::int64_t>(c.samples_received);
+  msg.samples_processed = static_cast<std::int64_t>(c.samples_processed);
+  msg.samples_lost = static_cast<std::int64_t>(c.samples_lost);
+  msg.overruns = static_cast<std::int64_t>(c.overruns);
+  msg.sender_restarts = static_cast<std::int64_t>(c.sender_restarts);
   msg.samples_dropped = static_cast<std::int64_t>(c.samples_dropped);
   msg.samples_nonfinite = static_cast<std::int64_t>(c.samples_nonfinite);
   msg.samples_duplicate = static_cast<std::int64_t>(c.samples_duplicate);
@@ -184,17 +263,23 @@ void Publisher::log_snapshot(const Snapshot& s) {
   for (int k = 0; k < s.n_changes; ++k) {
     const FlagChange& c = s.changes[static_cast<std::size_t>(k)];
     const std::string& name = config_.model.submodels[static_cast<std::size_t>(c.mode)].name;
+    // t: sample time since the first sample; the log line's own stamp is the wall clock.
     if (c.raised)
-      spdlog::warn("FLAG RAISED: mode '{}' {}: {:.6g} vs baseline {:.6g} ({:+.2f} %, {:+.1f} sigma) at utime {}", name,
-                   quantity_name(c.quantity), c.value, c.baseline, 100.0 * c.deviation_relative, c.deviation_sigma,
-                   utime_of(s, c.time));
+      spdlog::warn(
+          "FLAG RAISED: mode '{}' {}: {:.6g} vs baseline {:.6g} ({:+.2f} %, {:+.1f} sigma) at t = {:.3f} s (utime {})",
+          name, quantity_name(c.quantity), c.value, c.baseline, 100.0 * c.deviation_relative, c.deviation_sigma,
+          c.time, utime_of(s, c.time));
     else
-      spdlog::info("flag cleared: mode '{}' {}: {:.6g} vs baseline {:.6g} ({:+.2f} %) at utime {}", name,
-                   quantity_name(c.quantity), c.value, c.baseline, 100.0 * c.deviation_relative, utime_of(s, c.time));
+      spdlog::info("flag cleared: mode '{}' {}: {:.6g} vs baseline {:.6g} ({:+.2f} %) at t = {:.3f} s (utime {})",
+                   name, quantity_name(c.quantity), c.value, c.baseline, 100.0 * c.deviation_relative, c.time,
+                   utime_of(s, c.time));
   }
-  if (s.reset)
-    spdlog::warn("estimator reset to its last good state ({}); {} resets so far", s.reset_reason, s.counters.resets);
-  if (s.gap) spdlog::warn("input gap: prefilter states reset (parameters kept); {} gaps so far", s.counters.gaps);
+  if (s.reset) last_reset_reason_ = s.reset_reason;
+  if (s.sender_restart)
+    spdlog::warn(
+        "sender restart: seq and utime started again (now seq {}, utime {}); prefilter states reset, parameters and "
+        "baselines kept; {} restarts so far",
+        s.last_seq, s.utime - s.utime_offset, s.counters.sender_restarts);
   if (!logged_warmup_over_ && !s.warming_up && s.counters.samples_processed > 0) {
     logged_warmup_over_ = true;
     if (restored_)
@@ -218,12 +303,16 @@ void Publisher::log_snapshot(const Snapshot& s) {
                    m.baseline.value.wn / (2.0 * std::numbers::pi), m.baseline.value.zeta, m.baseline.value.gain);
     }
   }
-  if (s.stale != logged_stale_) {
-    logged_stale_ = s.stale;
-    if (s.stale)
-      spdlog::warn("stale input: no sample for more than {} s", config_.daemon.stale_time);
+  if (s.stale && !logged_stale_) {
+    logged_stale_ = true;
+    received_when_stale_ = s.counters.samples_received;
+    if (s.counters.samples_received == 0)
+      spdlog::warn("no input yet: no sample for more than {} s since start", config_.daemon.stale_time);
     else
-      spdlog::info("input resumed");
+      spdlog::warn("stale input: no sample for more than {} s", config_.daemon.stale_time);
+  } else if (!s.stale && logged_stale_ && s.counters.samples_received > received_when_stale_) {
+    logged_stale_ = false;  // only a sample ends it (a reload of stale_time does not)
+    spdlog::info("input resumed");
   }
 }
 
@@ -234,12 +323,13 @@ void Publisher::log_rates(std::int64_t now) {
     const auto rate = [dt](std::uint64_t a, std::uint64_t b) { return static_cast<double>(a - b) / dt; };
     spdlog::info(
         "rates over {:.1f} s: {:.0f} samples/s in, {:.0f} processed, {:.1f} estimates/s; since start: {} dropped "
-        "(ring full), {} decode errors, {} non-finite, {} duplicate, {} out of order, {} gaps, {} resets, {} "
-        "overruns",
+        "(ring full), {} lost in transport, {} decode errors, {} non-finite, {} duplicate, {} out of order, {} "
+        "gaps, {} resets, {} overruns, {} sender restarts",
         dt, rate(c.samples_received, rate_base_.samples_received),
         rate(c.samples_processed, rate_base_.samples_processed),
-        rate(c.estimates_published, rate_base_.estimates_published), c.samples_dropped, c.decode_errors,
-        c.samples_nonfinite, c.samples_duplicate, c.samples_out_of_order, c.gaps, c.resets, c.overruns);
+        rate(c.estimates_published, rate_base_.estimates_published), c.samples_dropped, c.samples_lost,
+        c.decode_errors, c.samples_nonfinite, c.samples_duplicate, c.samples_out_of_order, c.gaps, c.resets, c.overruns,
+        c.sender_restarts);
   }
   rate_base_ = c;
   rate_base_ns_ = now;

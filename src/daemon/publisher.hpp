@@ -54,6 +54,16 @@ class Publisher {
   bool send(const std::string& channel, const auto& message);
   void log_snapshot(const Snapshot& s);
   void log_rates(std::int64_t now);
+  void log_repeated(const DaemonCounters& c, std::int64_t now);
+
+  // An event that may repeat many times a second (gaps, losses): the first
+  // goes out at once, the rest as one line per kWarningPeriod with a count.
+  struct RepeatedWarning {
+    std::uint64_t logged = 0;  // the counter's value the last line covered
+    std::int64_t last_ns = 0, next_ns = 0;
+  };
+  template <class Line>
+  void warn_repeated(RepeatedWarning& w, std::uint64_t total, std::int64_t now, Line&& line);
 
   const Config& config_;
   Wiring wiring_;
@@ -67,6 +77,9 @@ class Publisher {
   DaemonCounters rate_base_;
   std::int64_t rate_base_ns_ = 0;
   bool logged_warmup_over_ = false, logged_stale_ = false;
+  std::uint64_t received_when_stale_ = 0;
+  RepeatedWarning gaps_, resets_, lost_, dropped_;
+  const char* last_reset_reason_ = "";
   std::uint64_t logged_held_dropped_ = 0;
   std::array<bool, kMaxModes> logged_baseline_{};
 };

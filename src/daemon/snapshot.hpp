@@ -24,8 +24,10 @@ struct Snapshot {
   };
   int kind = estimate;
   int n_modes = 0;
-  std::int64_t utime = 0;   // us, newest sample included (0: none yet)
+  std::int64_t utime = 0;   // us, newest sample included (0: none yet), on the loop's clock
   std::int64_t utime0 = 0;  // us, the first sample's: detector times are seconds after it
+  std::int64_t utime_offset = 0;  // us, loop clock - sender utime (changes at a sender restart)
+  bool have_sample = false;       // a sample was taken since start
   std::int64_t last_seq = -1;
   bool have_seq = false;
   // The estimator's state.
@@ -45,6 +47,9 @@ struct Snapshot {
   bool reset = false;          // the estimator returned to its last good state
   bool input_dropped = false;  // the input ring or the warm-up backlog was full
   bool decode_errors = false;  // undecodable packets arrived
+  bool overrun = false;        // loop ticks overran
+  bool samples_lost = false;   // sequence numbers never arrived
+  bool sender_restart = false; // the sender restarted
   DaemonCounters counters;
 };
 static_assert(std::is_trivially_copyable_v<Snapshot>);

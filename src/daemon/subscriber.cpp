@@ -72,21 +72,30 @@ void Subscriber::on_packet(const lcm_recv_buf_t* rbuf, bool batch) noexcept {
     return;
   }
   bump(counters_.samples_received, static_cast<std::uint64_t>(n));
-  std::uint64_t dropped = 0;
-  for (int i = 0; i < n; ++i)
-    if (!output_.try_push(decoded_[static_cast<std::size_t>(i)])) ++dropped;
+  std::uint64_t dropped = 0, lost = 0;
+  for (int i = 0; i < n; ++i) {
+    const StampedSample& s = decoded_[static_cast<std::size_t>(i)];
+    lost += loss_.observe(s.seq, s.utime);
+    if (!output_.try_push(s)) ++dropped;
+  }
   if (dropped) bump(counters_.ring_full, dropped);
+  if (lost) bump(counters_.samples_lost, lost);
 }
 
 void Subscriber::run() {
   name_this_thread("mw-subscribe");
   make_realtime(realtime_priority_);
   while (!stop_.load(std::memory_order_acquire)) {
-    if (lcm_handle_timeout(lcm_, 20) < 0) {
+    const int handled = lcm_handle_timeout(lcm_, 20);
+    if (handled == 0) {
+      // Idle: what has not arrived by now is lost, not late.
+      if (const std::uint64_t lost = loss_.flush()) bump(counters_.samples_lost, lost);
+    } else if (handled < 0) {
       spdlog::error("lcm_handle failed; retrying in 100 ms");
       std::this_thread::sleep_for(std::chrono::milliseconds(100));
     }
   }
+  if (const std::uint64_t lost = loss_.flush()) bump(counters_.samples_lost, lost);
 }
 
 }  // namespace modalwatch::daemon_detail

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "counters.hpp"
+#include "loss_counter.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/messages.hpp"
 #include "spsc_ring.hpp"
@@ -40,6 +41,7 @@ class Subscriber {
   const bool closed_loop_;
   const int realtime_priority_;
   std::vector<StampedSample> decoded_;  // one packet's samples
+  LossCounter loss_;                    // this thread's only
   lcm_subscription_t* sub_samples_ = nullptr;
   lcm_subscription_t* sub_batches_ = nullptr;
   std::thread thread_;

@@ -49,10 +49,12 @@ namespace modalwatch {
 struct DaemonCounters {
   std::uint64_t samples_received = 0;      // samples decoded from valid packets
   std::uint64_t samples_dropped = 0;       // input ring full, or the warm-up backlog (held_dropped)
+  std::uint64_t samples_lost = 0;          // sequence numbers that never arrived (lost in transport)
   std::uint64_t decode_errors = 0;         // packets rejected by the decoder
   std::uint64_t samples_nonfinite = 0;     // NaN/Inf in u, y or r
   std::uint64_t samples_duplicate = 0;     // seq equal to the last accepted one
-  std::uint64_t samples_out_of_order = 0;  // seq below the last accepted one
+  std::uint64_t samples_out_of_order = 0;  // seq below the last accepted one (or a restart being confirmed)
+  std::uint64_t sender_restarts = 0;       // the sender started its seq and utime again
   std::uint64_t samples_processed = 0;     // passed to the estimator
   std::uint64_t gaps = 0;                  // utime gaps that reset the prefilter states
   std::uint64_t resets = 0;                // estimator returns to its last good state
@@ -74,8 +76,9 @@ class Daemon {
   // Opens config.lcm.url, or uses `lcm` (not owned; it must outlive the Daemon
   // and nobody else may call lcm_handle on it) so an in-process test can share
   // one memq:// instance. Restores daemon.checkpoint when it exists and matches
-  // the config. Throws InputError for an LCM URL that cannot be opened or a
-  // model the daemon cannot carry (more than kMaxModes submodels).
+  // the config. Throws InputError for an LCM URL that cannot be opened, a
+  // model the daemon cannot carry (more than kMaxModes submodels) or a
+  // checkpoint path whose directory does not exist.
   explicit Daemon(const Config& config, lcm_t* lcm = nullptr);
   ~Daemon();  // stop()s
   Daemon(const Daemon&) = delete;
@@ -90,11 +93,16 @@ class Daemon {
 
   // SIGHUP: applies `next` (already validated by load_config) where it can.
   // Applied: daemon rates, stale time, checkpoint path and period, log level,
-  // fault thresholds, learn window and configured baselines (learned ones are
-  // kept). Not applied (logged; a restart applies them): LCM URL and channels,
-  // ring sizes, and the model/estimator; when the model or estimator differ
-  // the running estimator continues unchanged. Returns a one-line summary.
-  // Call from the control thread only, after start().
+  // fault thresholds, learn window and configured baselines. Learned and
+  // restored baselines are kept, also when the file changes something that
+  // needs a restart, unless the file now configures that mode's baseline; what
+  // the reload discards (flags up or pending, learning in progress, a baseline
+  // removed from the file) is logged at warning level. Not applied (logged; a
+  // restart applies them): LCM URL and channels, ring sizes, and the
+  // model/estimator; when the model or estimator differ the running estimator
+  // continues unchanged. Returns a one-line summary. Throws InputError (the
+  // running configuration stays) when the new checkpoint directory does not
+  // exist. Call from the control thread only, after start().
   std::string reload(const Config& next);
 
   // Writes daemon.checkpoint from the final state; call after stop() only
