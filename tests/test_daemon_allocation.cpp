@@ -1,6 +1,6 @@
 // No heap allocation on the daemon's estimation thread after
 // start-up. The Daemon runs in process on memq:// over the drifting flexible
-// beam (warm-up, baseline learning, a fault flag rising) and with bad input
+// beam (warm-up, baseline learning, a fault flag rising, the metrics endpoint on) and with bad input
 // mixed in (NaN, duplicates, reordering, a gap); a LoopProbe starts counting on
 // the estimation thread once the warm-up is over and stops when the loop exits.
 //
@@ -45,6 +45,7 @@ TEST(DaemonAllocation, NoneOnTheEstimationThreadAfterStartUp) {
   const Record& rec = data.record;
   Config c = load_config(kDriftConfig);
   c.daemon.stale_time = 0.2;
+  c.daemon.metrics_listen = "127.0.0.1:0";  // the metrics endpoint on: the loop counts its ticks for it
   lcm_t* lcm = lcm_create("memq://");
   ASSERT_NE(lcm, nullptr);
   Received rx;

@@ -170,7 +170,7 @@ MetricsSnapshot example_snapshot() {
   s.counters.samples_dropped = 3;
   s.counters.decode_errors = 2;
   s.counters.flag_changes = 1;
-  s.samples_lost = 7;
+  s.counters.samples_lost = 7;
   s.tick.record(3'000);        // le 5 us
   s.tick.record(5'000);        // le 5 us (the bound is inclusive)
   s.tick.record(700'000);      // le 1 ms

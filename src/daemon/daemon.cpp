@@ -76,6 +76,8 @@ std::vector<std::string> needing_restart(const Config& now, const Config& next, 
       next.daemon.warmup_backlog != now.daemon.warmup_backlog)
     kept.emplace_back("ring sizes");
   if (next.daemon.realtime_priority != now.daemon.realtime_priority) kept.emplace_back("realtime priority");
+  if (next.daemon.metrics_listen != now.daemon.metrics_listen || next.axis != now.axis)
+    kept.emplace_back("metrics endpoint (address, axis)");
   return kept;
 }
 

@@ -135,7 +135,8 @@ void EstimationLoop::run() noexcept {
       probe_->warmed_up();
       probe_fired_ = true;
     }
-    std::int64_t now = mono_ns();
+    const std::int64_t tick_start = mono_ns();
+    std::int64_t now = tick_start;
     work_off_backlog(final_stop ? std::numeric_limits<std::int64_t>::max() : now + period_ns / 2);
     drain(now);
     // Without input for a publish period, the fault status still goes out
@@ -156,6 +157,7 @@ void EstimationLoop::run() noexcept {
     }
     ++tick;
     now = mono_ns();
+    tick_histogram_.record(now - tick_start);
     if (now > tick_origin_ns_ + tick * period_ns) {  // this tick ended after the next one was due
       bump(counters_.overruns);
       tick = (now - tick_origin_ns_) / period_ns + 1;  // the next tick on the grid
@@ -344,6 +346,7 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
   lost_at_snapshot_ = lost;
   bump(counters_.snapshots);
   snap.counters = all_counters_.load();
+  snap.tick = tick_histogram_;
   if (output_.try_push(snap)) output_bell_.ring();
   else bump(counters_.snapshots_dropped);
   last_snapshot_ns_ = now;

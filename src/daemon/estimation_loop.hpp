@@ -136,6 +136,7 @@ class EstimationLoop {
   std::vector<ModalParameters> mode_values_;
   std::vector<Eigen::Matrix3d> mode_covariances_;  // the detector's input, sized at construction
   std::vector<FlagChange> flag_changes_;
+  TickHistogram tick_histogram_;  // durations of the loop's ticks, for the metrics endpoint
 
   // Input policy and timing.
   bool have_seq_ = false;

@@ -95,7 +95,7 @@ constexpr CounterSeries kCounterSeries[] = {
     {"modalwatch_samples_dropped_total", "Samples dropped because the input ring or the warm-up backlog was full.",
      [](const MetricsSnapshot& s) { return s.counters.samples_dropped; }},
     {"modalwatch_samples_lost_total", "Samples lost in transport (sequence numbers skipped).",
-     [](const MetricsSnapshot& s) { return s.samples_lost; }},
+     [](const MetricsSnapshot& s) { return s.counters.samples_lost; }},
     {"modalwatch_samples_nonfinite_total", "Samples with NaN or Inf in u, y or r.",
      [](const MetricsSnapshot& s) { return s.counters.samples_nonfinite; }},
     {"modalwatch_samples_duplicate_total", "Samples dropped for a repeated sequence number.",

@@ -74,7 +74,6 @@ struct MetricsSnapshot {
   bool low_excitation = false;  // flags suppressed for lack of excitation
   bool stale = false;           // no input for longer than daemon.stale_time
   DaemonCounters counters;
-  std::uint64_t samples_lost = 0;  // sequence numbers skipped: samples lost in transport
   TickHistogram tick;
 };
 

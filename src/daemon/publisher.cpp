@@ -80,6 +80,11 @@ constexpr HealthBit kHealthBits[] = {
 Publisher::Publisher(const Config& config, const Wiring& wiring, bool restored)
     : config_(config), wiring_(wiring), counters_(wiring.counters.publisher), restored_(restored) {
   encoded_.reserve(4096);
+  if (!config.daemon.metrics_listen.empty()) {
+    std::vector<std::string> names;
+    for (const Submodel& m : config.model.submodels) names.push_back(m.name);
+    metrics_.emplace(MetricsSettings{config.daemon.metrics_listen}, config.axis, std::move(names));
+  }
 }
 
 void Publisher::start() {
@@ -128,6 +133,24 @@ void Publisher::handle(const Snapshot& s) {
   if (s.kind != Snapshot::final_state || s.n_changes) publish_fault_status(s);
   log_snapshot(s);
   log_repeated(s.counters, mono_ns());
+  if (metrics_) export_metrics(s);
+}
+
+void Publisher::export_metrics(const Snapshot& s) {
+  MetricsSnapshot& m = metrics_snapshot_;
+  m.n_modes = s.n_modes;
+  for (int i = 0; i < s.n_modes; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    m.modes[k].value = s.value[k];
+    m.modes[k].std_dev = s.std_dev[k];
+    m.modes[k].status = s.modes[k];
+  }
+  m.warming_up = s.warming_up;
+  m.low_excitation = s.low_excitation;
+  m.stale = s.stale;
+  m.counters = s.counters;
+  m.tick = s.tick;
+  metrics_->update(m);
 }
 
 template <class Line>

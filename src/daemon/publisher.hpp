@@ -7,6 +7,7 @@
 // the latency path waits for it (a full snapshot ring drops snapshots).
 #include <array>
 #include <atomic>
+#include <optional>
 #include <cstdint>
 #include <thread>
 #include <vector>
@@ -15,6 +16,7 @@
 
 #include "counters.hpp"
 #include "doorbell.hpp"
+#include "metrics.hpp"
 #include "modalwatch/io/config.hpp"
 #include "snapshot.hpp"
 #include "spsc_ring.hpp"
@@ -51,6 +53,7 @@ class Publisher {
   void publish_estimates(const Snapshot& s);
   void publish_fault_status(const Snapshot& s);
   void publish_heartbeat(std::int64_t now);
+  void export_metrics(const Snapshot& s);
   bool send(const std::string& channel, const auto& message);
   void log_snapshot(const Snapshot& s);
   void log_rates(std::int64_t now);
@@ -72,6 +75,8 @@ class Publisher {
   std::thread thread_;
   std::atomic<bool> stop_{false};
   std::vector<std::uint8_t> encoded_;
+  std::optional<MetricsEndpoint> metrics_;  // daemon.metrics.listen; fed from the snapshots
+  MetricsSnapshot metrics_snapshot_;
   std::int64_t next_heartbeat_ns_ = 0, next_rate_log_ns_ = 0;
   // What was logged already: each event is logged once, when it happens.
   DaemonCounters rate_base_;

@@ -10,6 +10,7 @@
 #include "modalwatch/daemon/daemon.hpp"
 #include "modalwatch/fault_detector.hpp"
 #include "modalwatch/model.hpp"
+#include "metrics.hpp"
 
 namespace modalwatch::daemon_detail {
 
@@ -51,6 +52,7 @@ struct Snapshot {
   bool samples_lost = false;   // sequence numbers never arrived
   bool sender_restart = false; // the sender restarted
   DaemonCounters counters;
+  TickHistogram tick;  // the loop's tick durations since start (metrics)
 };
 static_assert(std::is_trivially_copyable_v<Snapshot>);
 
