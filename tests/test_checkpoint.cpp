@@ -132,8 +132,13 @@ TEST(Checkpoint, WrongMagicVersionAndAbsurdLengthsAreNamed) {
   b[0] = 'X';
   EXPECT_NE(error_of([&] { decode_checkpoint(b, "m"); }).find("wrong magic"), std::string::npos);
   b = good;
-  put_le(b, 8, 2, 4);
-  EXPECT_NE(error_of([&] { decode_checkpoint(b, "v"); }).find("format version 2"), std::string::npos);
+  put_le(b, 8, kCheckpointVersion + 1, 4);
+  EXPECT_NE(error_of([&] { decode_checkpoint(b, "v"); }).find("format version " + std::to_string(kCheckpointVersion + 1)),
+            std::string::npos);
+  b = good;
+  put_le(b, 8, 1, 4);  // before the estimator state carried stabilised forgetting's reference
+  EXPECT_NE(error_of([&] { decode_checkpoint(b, "v1"); }).find("format version 1 carries no stabilised-forgetting"),
+            std::string::npos);
   b = good;
   put_le(b, 12, std::uint64_t{1} << 60, 8);
   EXPECT_NE(error_of([&] { decode_checkpoint(b, "l"); }).find("exceeds the limit"), std::string::npos);

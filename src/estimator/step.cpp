@@ -142,10 +142,13 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     for (const auto& b : blocks) sum += std::abs(b.xu);
     return std::abs(e) > kRoundOff * sum;
   };
+  // While the restarted filters settle (settling > 0), the output error is their
+  // transient: neither outliers nor noise, so e_var (and with it every std)
+  // keeps its value; e_short follows it to tell when it has died out.
   if (!std::isfinite(s.y)) {
     y = y_hat;
-  } else if (e_count > 100 && outlier_run < kOutlierRun && e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var &&
-             above_round_off()) {
+  } else if (settling == 0 && e_count > 100 && outlier_run < kOutlierRun &&
+             e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var && above_round_off()) {
     y = y_hat;
     ++outlier_run;
     ++status.outliers;
@@ -153,7 +156,8 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     update = false;
   } else {
     outlier_run = 0;
-    e_var = e_count == 0 ? e * e : e_alpha * e_var + (1.0 - e_alpha) * e * e;
+    if (e_count == 0) e_var = e * e;
+    else if (settling == 0) e_var = e_alpha * e_var + (1.0 - e_alpha) * e * e;
     e_short = e_count == 0 ? e * e : e_short_alpha * e_short + (1.0 - e_short_alpha) * e * e;
     ++e_count;
   }
@@ -164,7 +168,8 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   const bool diverging =
       allow_update && e_var_good > 0.0 && e_short > cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
   if (settling > 0) {
-    const bool settled = !(e_short > kSettledRatio * kSettledRatio * e_var_good);
+    if (transient > 0) --transient;
+    const bool settled = transient == 0 && !(e_short > kSettledRatio * kSettledRatio * e_var_good);
     settling = settled ? 0 : settling - 1;
     if (!settled) update = false;
   } else if (rearm > 0) {

@@ -290,6 +290,13 @@ Checkpoint decode_checkpoint(std::span<const std::uint8_t> bytes, const std::str
     h.fail("not a modalwatch checkpoint (wrong magic)");
   h.raw(8, "magic");
   const std::uint32_t version = h.u32("version");
+  // Version 1 lacks stabilised forgetting's reference (theta_ref, P_ref): a
+  // run resumed from it would stabilise toward another point than the run that
+  // wrote it. Refused, like any other version.
+  if (version == 1)
+    throw InputError(source, "checkpoint: byte offset 8: format version 1 carries no stabilised-forgetting "
+                             "reference; this build reads version " + std::to_string(kCheckpointVersion) +
+                             " only (the estimator starts afresh)");
   if (version != kCheckpointVersion)
     throw InputError(source, "checkpoint: byte offset 8: format version " + std::to_string(version) +
                                  ", this build reads version " + std::to_string(kCheckpointVersion));
