@@ -95,9 +95,9 @@ struct Block {
   Stabilisation stabilisation = Stabilisation::off;
   double stabilisation_ratio = 0.0;  // P_ref's relative std (EstimatorSettings::stabilisation)
   ThetaVec theta_ref;  // normalised
-  // P_ref_j / (nt (1 - lambda)): the variance of the pseudo-measurement
-  // theta_ref_j that gives theta_j back, once every nt updates, the information
-  // nt (1 - lambda) / P_ref_j forgotten over those updates.
+  // P_ref_j / (K nt (1 - lambda)): the variance of the pseudo-measurement
+  // theta_ref_j that gives theta_j back, once every K nt updates (K blocks), the
+  // information K nt (1 - lambda) / P_ref_j forgotten over those updates.
   ThetaVec ref_var;
   BlockFilters filters;
   double xu = 0.0, xz = 0.0;  // B/(p^l A) driven by u and by z, at t_k

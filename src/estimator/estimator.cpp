@@ -111,14 +111,15 @@ void RecursiveEstimator::Impl::set_reference(Block& b, double stabilisation) con
 
 // P_ref = diag((stabilisation theta_ref)^2) / sigma^2 (P carries theta^2 per
 // output^2), never below diag(P(t0)) (p_bound / covariance_bound): a parameter
-// that is zero in theta_ref is not pinned there. Given back on one coordinate
-// per update in turn, nt times the information (1 - lambda) / P_ref_j.
+// that is zero in theta_ref is not pinned there. Given back to one block per
+// update and one coordinate per round in turn: K nt times the information
+// (1 - lambda) / P_ref_j once every K nt updates.
 void RecursiveEstimator::Impl::set_reference_variance(Block& b) const {
   const double rho2 = b.stabilisation_ratio * b.stabilisation_ratio;
   for (int j = 0; j < b.nt; ++j) {
     const double p_ref =
         std::max(rho2 * b.theta_ref(j) * b.theta_ref(j) / e_var, b.p_bound(j) / cfg.covariance_bound);
-    b.ref_var(j) = p_ref / (b.nt * (1.0 - b.lambda));
+    b.ref_var(j) = p_ref / (static_cast<double>(blocks.size()) * b.nt * (1.0 - b.lambda));
   }
   b.stabilisation = Block::Stabilisation::on;
 }

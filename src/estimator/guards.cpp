@@ -44,14 +44,15 @@ void RecursiveEstimator::Impl::restart_filters() {
 }
 
 // Samples until the free response of the slowest mode (and first-order
-// submodel) of the current model has decayed to kTransientDecay of its start:
+// submodel) of the current model has decayed to kTransientDecay (a tenth) of
+// its start:
 // the restarted prefilters and the plant's response to the input before the gap
 // differ by that response, and the output error can fall near the noise level
 // while its part correlated with the instrument still biases theta. Submodels
 // with poles at the origin or of other orders have no such bound (the output
 // error alone decides for them).
 std::uint64_t RecursiveEstimator::Impl::transient_samples() const {
-  constexpr double kTransientDecay = 0.01;
+  constexpr double kTransientDecay = 0.1;
   double rate = std::numeric_limits<double>::infinity();  // slowest decay rate, 1/s
   for (const auto& b : blocks) {
     if (b.l != 0) continue;

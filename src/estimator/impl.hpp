@@ -62,6 +62,10 @@ struct RecursiveEstimator::Impl {
   std::uint64_t rearm = 0;   // samples until the divergence detector is armed again
   std::uint64_t settling = 0;  // after a filter restart: samples left to catch up (no update meanwhile)
   std::uint64_t transient = 0;  // ... of which the first ones, while the modes' free response dies out
+  // Stabilised forgetting's turn (update.hpp): one block per update, and one of
+  // its coordinates per round over the blocks; status.updates = K round + block.
+  std::size_t stabilise_block = 0;
+  std::uint64_t stabilise_round = 0;
   bool inputs_lost = false;     // a non-finite u or r was skipped: the filters restart on the next sample
   int outlier_run = 0;       // consecutive samples replaced as outliers
   double pow_short = 0.0, pow_ref = 0.0, pow_alpha = 0.0, pow_ref_alpha = 0.0;

@@ -303,6 +303,8 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
   next.last_u = st.last_u_;
   next.last_r = st.last_r_;
   next.status = st.status_;
+  next.stabilise_block = static_cast<std::size_t>(next.status.updates % K);
+  next.stabilise_round = next.status.updates / K;
   next.status.last_reset_reason = reason;
   next.status.warming_up = !st.warmed_up_ && next.cfg.warmup_samples > 0;
   if (!st.warmed_up_ && next.cfg.warmup_samples == 0) {

@@ -142,13 +142,13 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     for (const auto& b : blocks) sum += std::abs(b.xu);
     return std::abs(e) > kRoundOff * sum;
   };
-  // While the restarted filters settle (settling > 0), the output error is their
-  // transient: neither outliers nor noise, so e_var (and with it every std)
-  // keeps its value; e_short follows it to tell when it has died out.
+  // While the restarted filters settle (settling > 0), the output error is
+  // mostly their transient, not noise: e_var (and with it every std) keeps its
+  // value, and e_short follows the error to tell when the transient has died out.
   if (!std::isfinite(s.y)) {
     y = y_hat;
-  } else if (settling == 0 && e_count > 100 && outlier_run < kOutlierRun &&
-             e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var && above_round_off()) {
+  } else if (e_count > 100 && outlier_run < kOutlierRun && e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var &&
+             above_round_off()) {
     y = y_hat;
     ++outlier_run;
     ++status.outliers;
@@ -164,7 +164,9 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   // Divergence: the output error an order of magnitude above what it was when
   // the last good state was saved. Plant changes that the estimator can follow
   // raise it far less.
-  constexpr double kSettledRatio = 3.0;  // output error RMS within 3x its last good value
+  // Settled: output error RMS within 1.25x its last good value. Looser, the
+  // updates resume on what is left of the transient, and e_var (every std) grows with it.
+  constexpr double kSettledRatio = 1.25;
   const bool diverging =
       allow_update && e_var_good > 0.0 && e_short > cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
   if (settling > 0) {
@@ -281,6 +283,10 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
 // After a healthy update of every block: counted, and now and then the last good state.
 inline unsigned RecursiveEstimator::Impl::finish_update() {
   ++status.updates;
+  if (++stabilise_block == blocks.size()) {
+    stabilise_block = 0;
+    ++stabilise_round;
+  }
   if (++updates_since_good >= 256 && e_short < 4.0 * e_var) save_good();
   return kUpdated;
 }

@@ -134,14 +134,18 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
   double* P = b.P.data();  // nt x nt, column-major
   double* theta = b.theta.data();
   if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), b.lambda, y_f)) return false;
-  // Stabilised forgetting, one coordinate per update in turn (the same one for
-  // every refinement of a sample). P_ref needs sigma^2: the warm-up's fit, or
-  // the first residuals without a warm-up; then it stays fixed, as theta_ref.
+  // Stabilised forgetting on one block per update and one of its coordinates
+  // per round, in turn (the same for every refinement of a sample), with K nt
+  // times the information per update (set_reference_variance). P_ref needs
+  // sigma^2: the warm-up's fit, or the first residuals without a warm-up; then
+  // it stays fixed, as theta_ref.
   using Stabilisation = detail::Block::Stabilisation;
-  if (b.stabilisation == Stabilisation::pending && e_var > 0.0) set_reference_variance(b);
-  if (b.stabilisation == Stabilisation::on) {
-    const int j = static_cast<int>(status.updates % static_cast<unsigned>(nt));
-    stabilise<N>(nt, P, theta, j, b.theta_ref[j], b.ref_var[j]);
+  if (&b == &blocks[stabilise_block] && b.stabilisation != Stabilisation::off) {
+    if (b.stabilisation == Stabilisation::pending && e_var > 0.0) set_reference_variance(b);
+    if (b.stabilisation == Stabilisation::on) {
+      const int j = static_cast<int>(stabilise_round % static_cast<unsigned>(nt));
+      stabilise<N>(nt, P, theta, j, b.theta_ref[j], b.ref_var[j]);
+    }
   }
   // A mode with a_1, a_2 > 0 is stable: the common case, decided here.
   const bool stable_mode = b.n == 2 && theta[0] > 0.0 && theta[1] > 0.0;
