@@ -332,21 +332,33 @@ TEST(RecursiveEstimator, BadSamplesAreCountedAndNeverBecomeNaN) {
   (void)T;
 }
 
+// The flexible beam with the plant's own noise level (snr_db 30), without its drift.
+struct SteadyBeam {
+  Config config;
+  PlantSpec plant;
+  Record record;
+};
+SteadyBeam steady_beam(double duration) {
+  SteadyBeam b{load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/flexible-beam.yaml"), {}, {}};
+  ExperimentSpec e = *b.config.experiment;
+  e.duration = duration;
+  b.plant = *b.config.plant;
+  for (auto& m : b.plant.modes) m.wn = m.zeta = m.gain = Trajectory{};
+  b.record = simulate(b.plant, e).record;
+  return b;
+}
+
 // Ten NaN outputs in a row, later ten infinite inputs in a row: missing, like a
 // gap. No reset (a reset froze the estimates and inflated their std some 50
 // times); the estimates stay as near the truth as those of the same record
 // without them (the updates they miss while the filters settle move them a
 // little) and their std as large.
 TEST(RecursiveEstimator, RunsOfNonFiniteSamplesAreSkippedWithoutAReset) {
-  // The flexible beam (4096 Hz, zeta 0.01 at 90 Hz) without its drift; the
-  // damage at t = 20 s and 25 s.
-  const Config c = load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/flexible-beam.yaml");
-  ExperimentSpec e = *c.experiment;
-  e.duration = 35.0;
-  PlantSpec plant = *c.plant;
-  for (auto& m : plant.modes) m.wn = m.zeta = m.gain = Trajectory{};
-  const Record r = simulate(plant, e).record;
-  const AdditiveModel truth_model = plant_model_at(plant, 0.0);
+  // The flexible beam (4096 Hz, zeta 0.01 at 90 Hz); the damage at t = 20 s and 25 s.
+  const SteadyBeam beam = steady_beam(35.0);
+  const Config& c = beam.config;
+  const Record& r = beam.record;
+  const AdditiveModel truth_model = plant_model_at(beam.plant, 0.0);
   const EstimatorSettings& s = c.estimator;
   RecursiveEstimator clean(c.model, s), damaged(c.model, s);
   constexpr double kNaN = std::numeric_limits<double>::quiet_NaN(), kInf = std::numeric_limits<double>::infinity();
@@ -386,13 +398,10 @@ TEST(RecursiveEstimator, RunsOfNonFiniteSamplesAreSkippedWithoutAReset) {
 // a divergence: gaps alone must never send the estimator back to its last good
 // state (the daemon sees one at every restart and every lost sample).
 TEST(RecursiveEstimator, GapsDoNotLookLikeDivergence) {
-  const Config c = load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/flexible-beam.yaml");
-  ExperimentSpec e = *c.experiment;
-  e.duration = 40.0;
-  // The plant's own noise level (snr_db 30), without its drift.
-  PlantSpec plant = *c.plant;
-  for (auto& m : plant.modes) m.wn = m.zeta = m.gain = Trajectory{};
-  const Record r = simulate(plant, e).record;
+  const SteadyBeam beam = steady_beam(40.0);
+  const Config& c = beam.config;
+  const PlantSpec& plant = beam.plant;
+  const Record& r = beam.record;
   RecursiveEstimator est(c.model, c.estimator);
   double shift = 0.0;
   int gaps = 0;
