@@ -3,9 +3,11 @@
 // and the newest sample they include, so that a restart resumes without a new
 // warm-up.
 //
-// File format (version 1), little-endian throughout:
+// File format (version 2), little-endian throughout:
 //   offset 0   8 bytes  magic "MWCHKPT\0"
-//          8   u32      format version (1)
+//          8   u32      format version (2; version 1, without stabilised
+//                       forgetting's reference in the estimator state, is
+//                       refused by name and the daemon starts with a warm-up)
 //         12   u64      payload length L (at most kMaxCheckpointPayload)
 //         20   L bytes  payload: fingerprint, last utime and sequence number,
 //                       the estimator state (EstimatorState::write), baselines
