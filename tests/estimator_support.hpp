@@ -18,6 +18,7 @@ inline EstimatorSettings settings_for(const Config& c, std::vector<double> forge
   EstimatorSettings s = c.estimator;  // completed from the rest of the file by load_config
   s.forgetting = std::move(forgetting);
   s.random_walks.clear();  // the shipped random walks go with the shipped forgetting: lambda alone here
+  s.stabilisations.clear();  // estimator.stabilisation for every submodel, whatever their number
   s.warmup_samples = warmup;
   return s;
 }

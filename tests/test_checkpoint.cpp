@@ -140,8 +140,14 @@ TEST(Checkpoint, WrongMagicVersionAndAbsurdLengthsAreNamed) {
   b[0] = 'X';
   EXPECT_NE(error_of([&] { decode_checkpoint(b, "m"); }).find("wrong magic"), std::string::npos);
   b = good;
-  put_le(b, 8, 3, 4);
-  EXPECT_NE(error_of([&] { decode_checkpoint(b, "v"); }).find("format version 3"), std::string::npos);
+  put_le(b, 8, kCheckpointVersion + 1, 4);
+  EXPECT_NE(error_of([&] { decode_checkpoint(b, "v"); }).find("format version " + std::to_string(kCheckpointVersion + 1)),
+            std::string::npos);
+  b = good;
+  put_le(b, 8, 1, 4);  // before the estimator state carried stabilised forgetting's reference
+  EXPECT_NE(error_of([&] { decode_checkpoint(b, "v1"); }).find("format version 1 carries no stabilised-forgetting"),
+            std::string::npos);
+  b = good;
   put_le(b, 8, 0, 4);
   EXPECT_NE(error_of([&] { decode_checkpoint(b, "v"); }).find("format version 0"), std::string::npos);
   b = good;
@@ -203,41 +209,6 @@ TEST(Checkpoint, FingerprintCoversStructureLoopAndForgettingButNotTheRest) {
   d = c;
   d.model.submodels[0] = make_rigid_body(c.model.submodels[0].name, 1.0);
   EXPECT_NE(checkpoint_fingerprint(d), f);
-}
-
-// A version-1 file (baselines as wn, zeta, gain only) still reads: its baselines
-// come back learned, with zero covariance.
-TEST(Checkpoint, ReadsVersionOneBaselinesAsLearnedWithoutCovariance) {
-  Checkpoint cp = real_checkpoint();
-  cp.baselines = {std::nullopt, std::nullopt, std::nullopt};
-  std::vector<std::uint8_t> b = encode_checkpoint(cp);
-  b.resize(b.size() - 4 - 3);  // CRC and the three absent baselines
-  const auto f64 = [&](double v) {
-    b.resize(b.size() + 8);
-    put_le(b, b.size() - 8, std::bit_cast<std::uint64_t>(v), 8);
-  };
-  b.push_back(1);
-  f64(20.0);
-  f64(0.1);
-  f64(1.0);
-  b.push_back(0);
-  b.push_back(1);
-  f64(4.0);
-  f64(0.05);
-  f64(0.5);
-  put_le(b, 8, 1, 4);
-  put_le(b, 12, b.size() - 20, 8);
-  b.resize(b.size() + 4);
-  reseal(b);
-  const Checkpoint back = decode_checkpoint(b, "v1");
-  ASSERT_EQ(back.baselines.size(), 3u);
-  ASSERT_TRUE(back.baselines[0] && back.baselines[2]);
-  EXPECT_FALSE(back.baselines[1]);
-  EXPECT_EQ(back.baselines[0]->value.wn, 20.0);
-  EXPECT_EQ(back.baselines[2]->value.gain, 0.5);
-  EXPECT_TRUE(back.baselines[2]->learned);
-  EXPECT_EQ(back.baselines[2]->covariance, (std::array<double, 9>{}));
-  EXPECT_EQ(back.estimator, cp.estimator);
 }
 
 TEST(Checkpoint, EncodeRefusesWhatDecodeWouldReject) {

@@ -118,9 +118,10 @@ TEST(RecursiveEstimator, StateAndRestoreResumeWithoutWarmupAsAfterAGap) {
   EXPECT_TRUE(resumed.step(sample(half, true)) & kGap);
   gapped.step(sample(half, true));
   smooth.step(sample(half, false));
-  // No warm-up: the filters run and, once their output has caught up with the
-  // data, theta updates. Here that takes the slowest closed-loop pole of the
-  // instrument's loop (0.9956 per sample: 11 s) more than the plant's modes.
+  // No warm-up: the filters run and, once the free response of the model's
+  // slowest mode has decayed to a tenth and their output has caught up with the
+  // data, theta updates. Here the decay decides: mode 2's estimate at the
+  // restart decays at 0.0625 /s, 2.3 / 0.0625 = 37 s.
   Eigen::Index first_update = -1;
   for (Eigen::Index k = half + 1; k < half + 1000; ++k) {
     EXPECT_FALSE(resumed.step(sample(k, true)) & kWarmingUp);

@@ -68,6 +68,21 @@ struct EstimatorSettings {
   // the drift a mode may follow is a property of that mode.
   std::vector<double> random_walks;
   double covariance_bound = 100.0; // diag(P_i) is held below this times diag(P_i(t0))
+  // Stabilised forgetting (Kulhavy & Zarrop 1993). Where the data leave a
+  // direction of theta_i open (a setpoint with few frequencies, a closed loop
+  // that filters them), exponential forgetting winds P_i up there and theta_i
+  // wanders with the noise. Instead, the information forgotten at each update
+  // is given back as (1 - lambda_i) R_ref toward theta_ref = theta_i(t0):
+  //   R_i = lambda_i R_i + (1 - lambda_i) R_ref + psi phi^T,
+  //   R_ref = diag(P_ref)^-1, P_ref = diag((stabilisation theta_ref)^2) / sigma^2
+  // (never below diag(P_i(t0))). In an open direction P_i tends to P_ref and
+  // theta_i returns to theta_ref within about one memory 1/(1 - lambda_i), so
+  // its excursions stay within about stabilisation x |theta_ref|; where the
+  // data inform theta_i, the pull is their information over R_ref times weaker.
+  // 0: plain exponential forgetting. No effect on a submodel with lambda_i = 1.
+  double stabilisation = 0.2;
+  // Per submodel (empty: stabilisation for every one), as random_walks.
+  std::vector<double> stabilisations;
   double divergence_ratio = 10.0;  // residual RMS this many times its last good value: reset
   double gap_factor = 1.5;         // a time step above gap_factor T is a gap: filter states reset
   double outlier_sigma = 10.0;     // |y - y_hat| above this many residual std: sample replaced
@@ -186,12 +201,16 @@ class EstimatorState {
   AdditiveModel model_;
   // Per submodel, when warmed up: the time scale (theta' = diag(ws^j) theta),
   // P-bar (normalised), the bound on its diagonal, the last good theta
-  // (physical units) and P-bar.
+  // (physical units) and P-bar; stabilised forgetting's reference theta
+  // (physical units) and its pseudo-measurement variance (normalised, 0 while
+  // sigma^2 is not known yet or without stabilisation).
   std::vector<double> time_scale_;
   std::vector<Eigen::MatrixXd> P_;
   std::vector<Eigen::VectorXd> P_bound_;
   std::vector<Eigen::VectorXd> good_theta_;
   std::vector<Eigen::MatrixXd> good_P_;
+  std::vector<Eigen::VectorXd> reference_theta_;
+  std::vector<Eigen::VectorXd> reference_variance_;
   // Output-error statistics (variance over the residual window, short window
   // for divergence, its value at the last good state) and excitation power.
   double noise_variance_ = 0.0, residual_short_ = 0.0, noise_variance_good_ = 0.0;

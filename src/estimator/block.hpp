@@ -90,6 +90,15 @@ struct Block {
   ThetaVec theta;  // theta-bar, normalised
   ThetaMat P;      // P-bar, normalised
   ThetaVec p_bound;  // per-direction bound on diag(P): covariance_bound x diag(P(t0))
+  // Stabilised forgetting: off, waiting for sigma^2 (P_ref needs it), or on.
+  enum class Stabilisation : unsigned char { off, pending, on };
+  Stabilisation stabilisation = Stabilisation::off;
+  double stabilisation_ratio = 0.0;  // P_ref's relative std (EstimatorSettings::stabilisation)
+  ThetaVec theta_ref;  // normalised
+  // P_ref_j / (K nt (1 - lambda)): the variance of the pseudo-measurement
+  // theta_ref_j that gives theta_j back, once every K nt updates (K blocks), the
+  // information K nt (1 - lambda) / P_ref_j forgotten over those updates.
+  ThetaVec ref_var;
   BlockFilters filters;
   double xu = 0.0, xz = 0.0;  // B/(p^l A) driven by u and by z, at t_k
   ThetaVec good_theta;

@@ -44,7 +44,8 @@ bool EstimatorSettings::operator==(const EstimatorSettings& o) const {
          warmup_iterations == o.warmup_iterations && defer_warmup_fit == o.defer_warmup_fit &&
          same_covariances() && initial_covariance_relative == o.initial_covariance_relative &&
          random_walk == o.random_walk && random_walks == o.random_walks &&
-         covariance_bound == o.covariance_bound && divergence_ratio == o.divergence_ratio &&
+         covariance_bound == o.covariance_bound && stabilisation == o.stabilisation &&
+         stabilisations == o.stabilisations && divergence_ratio == o.divergence_ratio &&
          gap_factor == o.gap_factor && outlier_sigma == o.outlier_sigma &&
          residual_window == o.residual_window && low_excitation_ratio == o.low_excitation_ratio &&
          low_excitation_window == o.low_excitation_window;
@@ -85,6 +86,7 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
       }
     }
     b.p_bound = cfg.covariance_bound * b.P.diagonal().cwiseMax(1e-300);
+    set_reference(b, cfg.stabilisations.empty() ? cfg.stabilisation : cfg.stabilisations[i]);
     b.filters.init(b.a_poly(), b.denominator(), b.ws * T, cfg.output_hold, b.biproper);
     b.phi.resize(b.nt);
     b.psi.resize(b.nt);
@@ -94,6 +96,32 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
   controller = cfg.controller;
   controller.reset();
   save_good();
+}
+
+// Stabilised forgetting's reference: theta_ref is theta when the block is
+// built (theta(t0), or the restored estimate, whose reference restore() sets);
+// P_ref once sigma^2 is known (set_reference_variance).
+void RecursiveEstimator::Impl::set_reference(Block& b, double stabilisation) const {
+  const bool on = stabilisation > 0.0 && b.lambda < 1.0;
+  b.stabilisation = on ? Block::Stabilisation::pending : Block::Stabilisation::off;
+  b.stabilisation_ratio = stabilisation;
+  b.theta_ref = b.theta;
+  b.ref_var = ThetaVec::Zero(b.nt);
+}
+
+// P_ref = diag((stabilisation theta_ref)^2) / sigma^2 (P carries theta^2 per
+// output^2), never below diag(P(t0)) (p_bound / covariance_bound): a parameter
+// that is zero in theta_ref is not pinned there. Given back to one block per
+// update and one coordinate per round in turn: K nt times the information
+// (1 - lambda) / P_ref_j once every K nt updates.
+void RecursiveEstimator::Impl::set_reference_variance(Block& b) const {
+  const double rho2 = b.stabilisation_ratio * b.stabilisation_ratio;
+  for (int j = 0; j < b.nt; ++j) {
+    const double p_ref =
+        std::max(rho2 * b.theta_ref(j) * b.theta_ref(j) / e_var, b.p_bound(j) / cfg.covariance_bound);
+    b.ref_var(j) = p_ref / (static_cast<double>(blocks.size()) * b.nt * (1.0 - b.lambda));
+  }
+  b.stabilisation = Block::Stabilisation::on;
 }
 
 RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const EstimatorSettings& settings)
@@ -117,6 +145,12 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
     throw std::invalid_argument("estimator: one random walk per submodel (or none)");
   for (double q : settings.random_walks)
     if (!(q >= 0.0 && std::isfinite(q))) throw std::invalid_argument("estimator: random walk negative or not finite");
+  if (!settings.stabilisations.empty() && settings.stabilisations.size() != initial.submodels.size())
+    throw std::invalid_argument("estimator: one stabilisation per submodel (or none)");
+  for (double q : settings.stabilisations)
+    if (!(q >= 0.0 && std::isfinite(q))) throw std::invalid_argument("estimator: stabilisation negative or not finite");
+  if (!(settings.stabilisation >= 0.0 && std::isfinite(settings.stabilisation)))
+    throw std::invalid_argument("estimator: stabilisation negative or not finite");
   if (settings.block_iterations < 1 || settings.refinements < 0 || settings.update_divisor < 1)
     throw std::invalid_argument("estimator: M_l >= 1, M_s >= 0 and the update divisor >= 1");
   if (settings.closed_loop && settings.controller.empty())
@@ -162,16 +196,18 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
   }
   Sample sample = s;
   unsigned flags = 0;
-  const bool bad_values =
-      !std::isfinite(s.u) || !std::isfinite(s.y) || (m.cfg.closed_loop && !std::isfinite(s.r));
+  // A non-finite value is missing, like a gap, never information: no update
+  // on it. Without y the model stands in for it (advance()) and the filters
+  // stay on the sample grid with the true u and r; without u (or r in closed
+  // loop) the filters cannot follow the data, so the sample is skipped and the
+  // filters restart on the next one, as after a gap.
+  const bool inputs_missing = !std::isfinite(s.u) || (m.cfg.closed_loop && !std::isfinite(s.r));
+  const bool bad_values = inputs_missing || !std::isfinite(s.y);
   if (bad_values) {
-    // Keep the time slot so that the filters stay on the sample grid: hold the
-    // inputs, let the model stand in for y, and do not update on it.
     ++m.status.rejected_nonfinite;
     flags |= kRejectedNonFinite;
-    sample.u = m.last_u;
-    sample.r = m.last_r;
     sample.y = std::numeric_limits<double>::quiet_NaN();  // replaced by y_hat in advance()
+    if (!std::isfinite(sample.r)) sample.r = m.last_r;    // open loop: r is not used
   }
   const double T = m.cfg.sample_time;
   if (m.have_prev) {
@@ -195,6 +231,14 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
   m.have_prev = true;
   m.just_restored = false;
   if (bad_values && (m.status.warming_up || m.blocks.empty())) return flags;
+  if (inputs_missing) {
+    m.inputs_lost = true;
+    return flags;
+  }
+  if (m.inputs_lost) {
+    m.inputs_lost = false;
+    if (!(flags & kGap)) m.restart_filters();
+  }
   m.last_u = sample.u;
   m.last_r = sample.r;
   ++m.status.samples;

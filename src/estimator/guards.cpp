@@ -3,8 +3,10 @@
 // then and returns to on a reset (a divergence, a non-finite model or update).
 // The per-sample checks that trigger them (outliers, divergence, excitation)
 // are steps 2 and 3 of step.cpp; the stability projection is update.hpp's.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include <Eigen/Core>
 
@@ -23,18 +25,47 @@ void RecursiveEstimator::Impl::reset_filters() {
 // After a gap (or a reset) the filters restart from rest, and the model output
 // needs a few time constants of the slowest mode to catch up with the data. That
 // transient is neither a divergence nor information about theta: as in the
-// warm-up (section 4.7), the filters run without updating theta until the output
-// error is back near the noise level (at most kSettleWindows residual windows,
-// after which updates resume so that a plant that changed during the gap can
-// still be followed); the divergence detector is not consulted meanwhile.
+// warm-up (section 4.7), the filters run without updating theta, first until
+// the modes' free response has died out (transient_samples()), then until the
+// output error is back near the noise level (at most kSettleWindows residual
+// windows more, after which updates resume so that a plant that changed during
+// the gap can still be followed); the divergence detector is not consulted
+// meanwhile. A gap within that time starts the wait again: a cluster of gaps
+// is missing information, never new information.
 void RecursiveEstimator::Impl::restart_filters() {
   constexpr double kSettleWindows = 4.0;
   reset_filters();
   // Unsettled until the short-term error, started at the divergence level, has
   // come down to near the noise level on the restarted filters' own output.
   e_short = cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
-  settling = static_cast<std::uint64_t>(kSettleWindows / (1.0 - e_alpha));
+  transient = transient_samples();
+  settling = transient + static_cast<std::uint64_t>(kSettleWindows / (1.0 - e_alpha));
   outlier_run = 0;
+}
+
+// Samples until the free response of the slowest mode (and first-order
+// submodel) of the current model has decayed to kTransientDecay (a tenth) of
+// its start:
+// the restarted prefilters and the plant's response to the input before the gap
+// differ by that response, and the output error can fall near the noise level
+// while its part correlated with the instrument still biases theta. Submodels
+// with poles at the origin or of other orders have no such bound (the output
+// error alone decides for them).
+std::uint64_t RecursiveEstimator::Impl::transient_samples() const {
+  constexpr double kTransientDecay = 0.1;
+  double rate = std::numeric_limits<double>::infinity();  // slowest decay rate, 1/s
+  for (const auto& b : blocks) {
+    if (b.l != 0) continue;
+    if (b.n == 1 && b.theta(0) > 0.0) rate = std::min(rate, b.scale(0) / b.theta(0));  // A = 1 + a1 p
+    if (b.n != 2) continue;
+    const double a1 = b.theta(0) / b.scale(0), a2 = b.theta(1) / b.scale(1);  // A = 1 + a1 p + a2 p^2
+    if (!(a1 > 0.0 && a2 > 0.0)) continue;
+    const double disc = a1 * a1 - 4.0 * a2;  // real poles: the slower one
+    rate = std::min(rate, (disc < 0.0 ? a1 : a1 - std::sqrt(disc)) / (2.0 * a2));
+  }
+  if (!std::isfinite(rate) || !(rate > 0.0)) return 0;
+  const double samples = std::ceil(-std::log(kTransientDecay) / (rate * cfg.sample_time));
+  return samples < 1e12 ? static_cast<std::uint64_t>(samples) : std::uint64_t{1000000000000};
 }
 
 void RecursiveEstimator::Impl::save_good() {

@@ -49,7 +49,7 @@ struct RecursiveEstimator::Impl {
   double t_prev = 0.0;
   bool have_prev = false;
   bool just_restored = false;  // restore() ran and no sample has come since
-  double last_u = 0.0, last_r = 0.0;  // held in place of a non-finite sample
+  double last_u = 0.0, last_r = 0.0;  // the last finite inputs (r held in place of a non-finite one in open loop)
   std::uint64_t since_update = 0;
   std::uint64_t updates_since_good = 0;
 
@@ -61,6 +61,12 @@ struct RecursiveEstimator::Impl {
   double e_var_good = 0.0;   // e_var when the last good state was saved
   std::uint64_t rearm = 0;   // samples until the divergence detector is armed again
   std::uint64_t settling = 0;  // after a filter restart: samples left to catch up (no update meanwhile)
+  std::uint64_t transient = 0;  // ... of which the first ones, while the modes' free response dies out
+  // Stabilised forgetting's turn (update.hpp): one block per update, and one of
+  // its coordinates per round over the blocks; status.updates = K round + block.
+  std::size_t stabilise_block = 0;
+  std::uint64_t stabilise_round = 0;
+  bool inputs_lost = false;     // a non-finite u or r was skipped: the filters restart on the next sample
   int outlier_run = 0;       // consecutive samples replaced as outliers
   double pow_short = 0.0, pow_ref = 0.0, pow_alpha = 0.0, pow_ref_alpha = 0.0;
   std::uint64_t pow_count = 0;
@@ -78,8 +84,11 @@ struct RecursiveEstimator::Impl {
   void allocate_window() {
     for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) w->resize(cfg.warmup_samples);
   }
+  void set_reference(detail::Block& b, double stabilisation) const;
+  void set_reference_variance(detail::Block& b) const;
   void reset_filters();
   void restart_filters();
+  std::uint64_t transient_samples() const;
   void save_good();
   void restore_good(const char* reason);
   unsigned advance(const Sample& s, bool allow_update) { return (this->*kernel)(s, allow_update); }

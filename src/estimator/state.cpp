@@ -45,6 +45,7 @@ bool EstimatorState::operator==(const EstimatorState& o) const {
       a.low_excitation == b.low_excitation && a.warmup_fit_used == b.warmup_fit_used;
   return warmed_up_ == o.warmed_up_ && model_ == o.model_ && time_scale_ == o.time_scale_ && same(P_, o.P_) &&
          same(P_bound_, o.P_bound_) && same(good_theta_, o.good_theta_) && same(good_P_, o.good_P_) &&
+         same(reference_theta_, o.reference_theta_) && same(reference_variance_, o.reference_variance_) &&
          noise_variance_ == o.noise_variance_ && residual_short_ == o.residual_short_ &&
          noise_variance_good_ == o.noise_variance_good_ && residual_count_ == o.residual_count_ &&
          rearm_ == o.rearm_ && input_power_ == o.input_power_ && input_power_reference_ == o.input_power_reference_ &&
@@ -71,6 +72,8 @@ void EstimatorState::write(StateWriter& out) const {
       out.reals(P_bound_.at(i), "P bound");
       out.reals(good_theta_.at(i), "last good theta");
       out.matrix(good_P_.at(i), "last good P");
+      out.reals(reference_theta_.at(i), "reference theta");
+      out.reals(reference_variance_.at(i), "reference variance");
     }
   }
   out.real(noise_variance_, "noise variance");
@@ -127,6 +130,8 @@ EstimatorState EstimatorState::read(StateReader& in) {
       e.P_bound_.push_back(in.reals(nt, "P bound"));
       e.good_theta_.push_back(in.reals(nt, "last good theta"));
       e.good_P_.push_back(in.matrix(nt, "last good P"));
+      e.reference_theta_.push_back(in.reals(nt, "reference theta"));
+      e.reference_variance_.push_back(in.reals(nt, "reference variance"));
     }
   }
   e.noise_variance_ = in.real("noise variance");
@@ -172,6 +177,8 @@ EstimatorState RecursiveEstimator::state() const {
       st.P_bound_.emplace_back(b.p_bound);
       st.good_theta_.emplace_back(b.good_theta.cwiseQuotient(b.scale));
       st.good_P_.emplace_back(b.good_P);
+      st.reference_theta_.emplace_back(b.theta_ref.cwiseQuotient(b.scale));
+      st.reference_variance_.emplace_back(b.ref_var);
     }
   }
   st.noise_variance_ = m.e_var;
@@ -211,17 +218,21 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
   }
   if (st.warmed_up_) {
     if (st.P_.size() != K || st.time_scale_.size() != K || st.P_bound_.size() != K || st.good_theta_.size() != K ||
-        st.good_P_.size() != K)
-      fail("per-submodel arrays (P, time_scale, P_bound, good_theta, good_P) do not have one entry per submodel");
+        st.good_P_.size() != K || st.reference_theta_.size() != K || st.reference_variance_.size() != K)
+      fail("per-submodel arrays (P, time_scale, P_bound, good_theta, good_P, reference theta and variance) do not "
+           "have one entry per submodel");
     for (std::size_t i = 0; i < K; ++i) {
       const Eigen::Index nt = m.initial.submodels[i].n_theta();
       const std::string where = "submodel " + std::to_string(i + 1) + ": ";
       if (st.P_[i].rows() != nt || st.P_[i].cols() != nt || st.good_P_[i].rows() != nt || st.good_P_[i].cols() != nt ||
-          st.P_bound_[i].size() != nt || st.good_theta_[i].size() != nt)
-        fail(where + "P, P_bound, good_theta or good_P do not match n_theta = " + std::to_string(nt));
+          st.P_bound_[i].size() != nt || st.good_theta_[i].size() != nt || st.reference_theta_[i].size() != nt ||
+          st.reference_variance_[i].size() != nt)
+        fail(where + "P, P_bound, good_theta, good_P or the reference do not match n_theta = " + std::to_string(nt));
       if (!st.P_[i].allFinite() || !st.good_P_[i].allFinite() || !st.P_bound_[i].allFinite() ||
-          !st.good_theta_[i].allFinite())
-        fail(where + "non-finite P, P_bound, good_theta or good_P");
+          !st.good_theta_[i].allFinite() || !st.reference_theta_[i].allFinite() ||
+          !st.reference_variance_[i].allFinite())
+        fail(where + "non-finite P, P_bound, good_theta, good_P or reference");
+      if ((st.reference_variance_[i].array() < 0.0).any()) fail(where + "reference variance must be >= 0");
       if (!(st.time_scale_[i] > 0.0) || !finite(st.time_scale_[i])) fail(where + "time_scale must be finite and > 0");
       if ((st.P_bound_[i].array() <= 0.0).any()) fail(where + "P_bound must be > 0");
     }
@@ -260,6 +271,13 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
       b.p_bound = st.P_bound_[i];
       b.good_theta = st.good_theta_[i].cwiseProduct(Eigen::VectorXd(b.scale));
       b.good_P = st.good_P_[i];
+      // Stabilised forgetting goes on toward the saved reference (theta(t0) of
+      // the run that wrote the state, P_ref once it was set), not the restored theta.
+      b.theta_ref = st.reference_theta_[i].cwiseProduct(Eigen::VectorXd(b.scale));
+      if (b.stabilisation != Block::Stabilisation::off && (st.reference_variance_[i].array() > 0.0).all()) {
+        b.ref_var = st.reference_variance_[i];
+        b.stabilisation = Block::Stabilisation::on;
+      }
       b.filters.init(b.a_poly(), b.denominator(), b.ws * next.cfg.sample_time, next.cfg.output_hold, b.biproper);
     }
     next.buffered = 0;
@@ -285,6 +303,8 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
   next.last_u = st.last_u_;
   next.last_r = st.last_r_;
   next.status = st.status_;
+  next.stabilise_block = static_cast<std::size_t>(next.status.updates % K);
+  next.stabilise_round = next.status.updates / K;
   next.status.last_reset_reason = reason;
   next.status.warming_up = !st.warmed_up_ && next.cfg.warmup_samples > 0;
   if (!st.warmed_up_ && next.cfg.warmup_samples == 0) {

@@ -142,6 +142,9 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     for (const auto& b : blocks) sum += std::abs(b.xu);
     return std::abs(e) > kRoundOff * sum;
   };
+  // While the restarted filters settle (settling > 0), the output error is
+  // mostly their transient, not noise: e_var (and with it every std) keeps its
+  // value, and e_short follows the error to tell when the transient has died out.
   if (!std::isfinite(s.y)) {
     y = y_hat;
   } else if (e_count > 100 && outlier_run < kOutlierRun && e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var &&
@@ -153,18 +156,22 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     update = false;
   } else {
     outlier_run = 0;
-    e_var = e_count == 0 ? e * e : e_alpha * e_var + (1.0 - e_alpha) * e * e;
+    if (e_count == 0) e_var = e * e;
+    else if (settling == 0) e_var = e_alpha * e_var + (1.0 - e_alpha) * e * e;
     e_short = e_count == 0 ? e * e : e_short_alpha * e_short + (1.0 - e_short_alpha) * e * e;
     ++e_count;
   }
   // Divergence: the output error an order of magnitude above what it was when
   // the last good state was saved. Plant changes that the estimator can follow
   // raise it far less.
-  constexpr double kSettledRatio = 3.0;  // output error RMS within 3x its last good value
+  // Settled: output error RMS within 1.25x its last good value. Looser, the
+  // updates resume on what is left of the transient, and e_var (every std) grows with it.
+  constexpr double kSettledRatio = 1.25;
   const bool diverging =
       allow_update && e_var_good > 0.0 && e_short > cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
   if (settling > 0) {
-    const bool settled = !(e_short > kSettledRatio * kSettledRatio * e_var_good);
+    if (transient > 0) --transient;
+    const bool settled = transient == 0 && !(e_short > kSettledRatio * kSettledRatio * e_var_good);
     settling = settled ? 0 : settling - 1;
     if (!settled) update = false;
   } else if (rearm > 0) {
@@ -276,6 +283,10 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
 // After a healthy update of every block: counted, and now and then the last good state.
 inline unsigned RecursiveEstimator::Impl::finish_update() {
   ++status.updates;
+  if (++stabilise_block == blocks.size()) {
+    stabilise_block = 0;
+    ++stabilise_round;
+  }
   if (++updates_since_good >= 256 && e_short < 4.0 * e_var) save_good();
   return kUpdated;
 }

@@ -93,6 +93,29 @@ MODALWATCH_HOT bool iv_update(int nt_runtime, double* P, double* theta, const do
   return true;
 }
 
+// Stabilised forgetting (Kulhavy & Zarrop 1993) on coordinate j: the
+// information R = P^-1 gets 1/ref_var back in direction j, R' = R + e_j e_j^T /
+// ref_var, and theta = R'^-1 (R theta + e_j theta_ref_j / ref_var): a scalar
+// pseudo-measurement theta_ref_j of theta_j with variance ref_var, a rank-one
+// update of P (symmetric on entry, kept so on the upper triangle).
+template <int N>
+MODALWATCH_HOT void stabilise(int nt_runtime, double* P, double* theta, int j, double theta_ref, double ref_var) {
+  const int nt = N > 0 ? N : nt_runtime;
+  double c[kMaxTheta];
+  for (int i = 0; i < nt; ++i) c[i] = P[i + j * nt];
+  const double inv = 1.0 / (ref_var + c[j]);
+  const double g = (theta_ref - theta[j]) * inv;
+  for (int i = 0; i < nt; ++i) theta[i] += c[i] * g;
+  for (int k = 0; k < nt; ++k) {
+    const double ck = c[k] * inv;
+    for (int i = 0; i <= k; ++i) {
+      const double v = P[i + k * nt] - c[i] * ck;
+      P[i + k * nt] = v;
+      P[k + i * nt] = v;
+    }
+  }
+}
+
 }  // namespace
 
 // One block's update from theta-bar(t_{k-1}), P-bar(t_{k-1}); the filtered
@@ -111,6 +134,19 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
   double* P = b.P.data();  // nt x nt, column-major
   double* theta = b.theta.data();
   if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), b.lambda, y_f)) return false;
+  // Stabilised forgetting on one block per update and one of its coordinates
+  // per round, in turn (the same for every refinement of a sample), with K nt
+  // times the information per update (set_reference_variance). P_ref needs
+  // sigma^2: the warm-up's fit, or the first residuals without a warm-up; then
+  // it stays fixed, as theta_ref.
+  using Stabilisation = detail::Block::Stabilisation;
+  if (&b == &blocks[stabilise_block] && b.stabilisation != Stabilisation::off) {
+    if (b.stabilisation == Stabilisation::pending && e_var > 0.0) set_reference_variance(b);
+    if (b.stabilisation == Stabilisation::on) {
+      const int j = static_cast<int>(stabilise_round % static_cast<unsigned>(nt));
+      stabilise<N>(nt, P, theta, j, b.theta_ref[j], b.ref_var[j]);
+    }
+  }
   // A mode with a_1, a_2 > 0 is stable: the common case, decided here.
   const bool stable_mode = b.n == 2 && theta[0] > 0.0 && theta[1] > 0.0;
   if (b.n > 0 && !stable_mode) {

@@ -5,7 +5,9 @@
 //
 // File format (version 2), little-endian throughout:
 //   offset 0   8 bytes  magic "MWCHKPT\0"
-//          8   u32      format version (2)
+//          8   u32      format version (2; version 1, without stabilised
+//                       forgetting's reference in the estimator state, is
+//                       refused by name and the daemon starts with a warm-up)
 //         12   u64      payload length L (at most kMaxCheckpointPayload)
 //         20   L bytes  payload: fingerprint, last utime and sequence number,
 //                       the estimator state (EstimatorState::write), baselines:
@@ -14,8 +16,6 @@
 //                       (row-major over wn, zeta, gain)
 //       20+L   u32      CRC-32 (IEEE 802.3, as zlib) of bytes [0, 20+L)
 // Doubles are IEEE-754 binary64 bit patterns, so a round trip is exact.
-// Version 1 (baselines as wn, zeta, gain only) is still read: its baselines come
-// back as learned, with zero covariance (unknown), as that version restored them.
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -30,7 +30,6 @@
 namespace modalwatch {
 
 inline constexpr std::uint32_t kCheckpointVersion = 2;
-inline constexpr std::uint32_t kOldestCheckpointVersion = 1;  // still read
 inline constexpr std::uint64_t kMaxCheckpointPayload = 16u << 20;  // 16 MiB: far above any real model
 
 struct Checkpoint {

@@ -20,6 +20,7 @@ namespace modalwatch {
 struct SubmodelSettings {
   double forgetting = 1.0;  // lambda in (0, 1], eq. (13)
   std::optional<double> random_walk;  // this submodel's Q (else estimator.random_walk)
+  std::optional<double> stabilisation;  // this submodel's stabilised forgetting (else estimator.stabilisation)
   bool operator==(const SubmodelSettings&) const = default;
 };
 

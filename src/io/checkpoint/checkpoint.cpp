@@ -292,10 +292,16 @@ Checkpoint decode_checkpoint(std::span<const std::uint8_t> bytes, const std::str
     h.fail("not a modalwatch checkpoint (wrong magic)");
   h.raw(8, "magic");
   const std::uint32_t version = h.u32("version");
-  if (version < kOldestCheckpointVersion || version > kCheckpointVersion)
+  // Version 1 lacks stabilised forgetting's reference (theta_ref, P_ref): a
+  // run resumed from it would stabilise toward another point than the run that
+  // wrote it. Refused, like any other version.
+  if (version == 1)
+    throw InputError(source, "checkpoint: byte offset 8: format version 1 carries no stabilised-forgetting "
+                             "reference; this build reads version " + std::to_string(kCheckpointVersion) +
+                             " only (the estimator starts afresh)");
+  if (version != kCheckpointVersion)
     throw InputError(source, "checkpoint: byte offset 8: format version " + std::to_string(version) +
-                                 ", this build reads versions " + std::to_string(kOldestCheckpointVersion) + " to " +
-                                 std::to_string(kCheckpointVersion));
+                                 ", this build reads version " + std::to_string(kCheckpointVersion));
   const std::uint64_t length = h.u64("payload length");
   if (length > kMaxCheckpointPayload)
     throw InputError(source, "checkpoint: byte offset 12: payload length " + std::to_string(length) +
@@ -333,11 +339,8 @@ Checkpoint decode_checkpoint(std::span<const std::uint8_t> bytes, const std::str
       b.value.wn = r.f64("baseline wn");
       b.value.zeta = r.f64("baseline zeta");
       b.value.gain = r.f64("baseline gain");
-      b.learned = true;  // version 1 kept no more
-      if (version >= 2) {
-        b.learned = r.flag("baseline learned");
-        for (double& v : b.covariance) v = r.f64("baseline covariance");
-      }
+      b.learned = r.flag("baseline learned");
+      for (double& v : b.covariance) v = r.f64("baseline covariance");
       c.baselines.emplace_back(b);
     } else {
       c.baselines.emplace_back(std::nullopt);

@@ -54,6 +54,9 @@ void complete_estimator(Config& config) {
   for (const auto& s : config.submodel_settings) e.forgetting.push_back(s.forgetting);
   e.random_walks.clear();
   for (const auto& s : config.submodel_settings) e.random_walks.push_back(s.random_walk.value_or(e.random_walk));
+  e.stabilisations.clear();
+  for (const auto& s : config.submodel_settings)
+    e.stabilisations.push_back(s.stabilisation.value_or(e.stabilisation));
 }
 
 YAML::Node load_yaml(const std::string& text, const std::string& source) {
