@@ -24,7 +24,6 @@
 #include <sstream>
 #include <string>
 
-
 // ---------------------------------------------------------------------------
 // Counting
 namespace {
@@ -119,7 +118,7 @@ void* pvalloc(std::size_t size) noexcept {
 [[gnu::noinline]] void raw_free(void* p) noexcept { std::free(p); }
 #define RAW_MALLOC std::malloc
 #define RAW_FREE raw_free
-#define RAW_MEMALIGN(a, s) std::aligned_alloc((a), ((s) + (a) - 1) / (a) * (a))
+#define RAW_MEMALIGN(a, s) std::aligned_alloc((a), ((s) + (a)-1) / (a) * (a))
 #endif
 
 namespace {
@@ -182,13 +181,13 @@ void operator delete[](void* p, std::align_val_t, const std::nothrow_t&) noexcep
 namespace modalwatch::test_support {
 
 void AllocationCounter::start() {
-    // backtrace() loads libgcc's unwinder on first use (which allocates): do that now.
-    void* warm[4];
-    backtrace(warm, 4);
-    t_counts = {};
-    t_frame_count = 0;
-    t_first_kind = nullptr;
-    t_counting = true;
+  // backtrace() loads libgcc's unwinder on first use (which allocates): do that now.
+  void* warm[4];
+  backtrace(warm, 4);
+  t_counts = {};
+  t_frame_count = 0;
+  t_first_kind = nullptr;
+  t_counting = true;
 }
 
 AllocationCounts AllocationCounter::stop() {
@@ -214,8 +213,8 @@ std::string first_allocation_trace() {
         if (len > 0) file.assign(exe, static_cast<std::size_t>(len));
       }
       // Return addresses point after the call: look up the byte before.
-      const auto offset = static_cast<std::uintptr_t>(static_cast<char*>(t_frames[i]) -
-                                                      static_cast<char*>(info.dli_fbase)) - 1;
+      const auto offset =
+          static_cast<std::uintptr_t>(static_cast<char*>(t_frames[i]) - static_cast<char*>(info.dli_fbase)) - 1;
       char cmd[4096];
       std::snprintf(cmd, sizeof cmd, "addr2line -C -f -i -p -e '%s' 0x%zx 2>/dev/null", file.c_str(),
                     static_cast<std::size_t>(offset));
@@ -224,8 +223,7 @@ std::string first_allocation_trace() {
         while (std::fgets(line, sizeof line, p)) where += line;
         pclose(p);
       }
-      if (where.empty() || where.rfind("??", 0) == 0)
-{
+      if (where.empty() || where.rfind("??", 0) == 0) {
         char raw[64];
         std::snprintf(raw, sizeof raw, "+0x%zx ", static_cast<std::size_t>(offset));
         where = file + raw + (info.dli_sname ? info.dli_sname : "") + "\n";

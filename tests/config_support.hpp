@@ -16,8 +16,8 @@
 
 #include "support.hpp"
 
-#include "modalwatch/io/config.hpp"
 #include "modalwatch/error.hpp"
+#include "modalwatch/io/config.hpp"
 
 namespace fs = std::filesystem;
 using modalwatch::Config;
@@ -28,58 +28,57 @@ using modalwatch::parse_config;
 
 namespace {
 
-#define EXPECT_CONTAINS(text, part) \
-  EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
+#define EXPECT_CONTAINS(text, part) EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
 
 constexpr double kTwoPi = 6.283185307179586476925286766559;
 
 // A valid open-loop file; tests edit single lines, so the line numbers in the
 // expected messages can be read off here.
 const std::string kBase =
-    "sample_rate_hz: 20\n"          // 1
-    "model:\n"                      // 2
-    "  loop: open\n"                // 3
-    "  submodels:\n"                // 4
-    "    - name: m1\n"              // 5
-    "      kind: mode\n"            // 6
-    "      wn: 2.0\n"               // 7
-    "      zeta: 0.25\n"            // 8
-    "      gain: 3.0\n"             // 9
-    "      forgetting: 0.99\n"      // 10
-    "    - name: m2\n"              // 11
-    "      frequency_hz: 1.0\n"     // 12
-    "      zeta: 0.1\n"             // 13
-    "      gain: 1.0\n";            // 14
+    "sample_rate_hz: 20\n"       // 1
+    "model:\n"                   // 2
+    "  loop: open\n"             // 3
+    "  submodels:\n"             // 4
+    "    - name: m1\n"           // 5
+    "      kind: mode\n"         // 6
+    "      wn: 2.0\n"            // 7
+    "      zeta: 0.25\n"         // 8
+    "      gain: 3.0\n"          // 9
+    "      forgetting: 0.99\n"   // 10
+    "    - name: m2\n"           // 11
+    "      frequency_hz: 1.0\n"  // 12
+    "      zeta: 0.1\n"          // 13
+    "      gain: 1.0\n";         // 14
 
 // Closed loop with a controller, a plant and a simulation.
 const std::string kClosed =
-    "sample_rate_hz: 20\n"                          // 1
-    "model:\n"                                      // 2
-    "  loop: closed\n"                              // 3
-    "  submodels:\n"                                // 4
+    "sample_rate_hz: 20\n"                            // 1
+    "model:\n"                                        // 2
+    "  loop: closed\n"                                // 3
+    "  submodels:\n"                                  // 4
     "    - {name: m1, wn: 2, zeta: 0.25, gain: 3}\n"  // 5
-    "controller:\n"                                 // 6
-    "  numerator: [0.02329, -0.02058, 0.00454]\n"   // 7
-    "  denominator: [1, -1, 0]\n"                   // 8
-    "plant:\n"                                      // 9
-    "  noise_variance: 0.01\n"                      // 10
-    "  modes:\n"                                    // 11
-    "    - name: m1\n"                              // 12
-    "      wn: 2.0\n"                               // 13
-    "      zeta: 0.25\n"                            // 14
-    "      gain: 3.0\n"                             // 15
-    "      trajectory:\n"                           // 16
-    "        wn: [[100, 2.0], [300, 1.6]]\n"        // 17
-    "    - name: body\n"                            // 18
-    "      kind: rigid_body\n"                      // 19
-    "      gain: 0.01\n"                            // 20
-    "simulation:\n"                                 // 21
-    "  duration: 10\n"                              // 22
-    "  seed: 7\n"                                   // 23
-    "  reference:\n"                                // 24
-    "    type: sum_of_sines\n"                      // 25
-    "    amplitudes: [3, 1]\n"                      // 26
-    "    frequencies_rad_s: [0.005, 2]\n";          // 27
+    "controller:\n"                                   // 6
+    "  numerator: [0.02329, -0.02058, 0.00454]\n"     // 7
+    "  denominator: [1, -1, 0]\n"                     // 8
+    "plant:\n"                                        // 9
+    "  noise_variance: 0.01\n"                        // 10
+    "  modes:\n"                                      // 11
+    "    - name: m1\n"                                // 12
+    "      wn: 2.0\n"                                 // 13
+    "      zeta: 0.25\n"                              // 14
+    "      gain: 3.0\n"                               // 15
+    "      trajectory:\n"                             // 16
+    "        wn: [[100, 2.0], [300, 1.6]]\n"          // 17
+    "    - name: body\n"                              // 18
+    "      kind: rigid_body\n"                        // 19
+    "      gain: 0.01\n"                              // 20
+    "simulation:\n"                                   // 21
+    "  duration: 10\n"                                // 22
+    "  seed: 7\n"                                     // 23
+    "  reference:\n"                                  // 24
+    "    type: sum_of_sines\n"                        // 25
+    "    amplitudes: [3, 1]\n"                        // 26
+    "    frequencies_rad_s: [0.005, 2]\n";            // 27
 
 // `text` with the first occurrence of `from` replaced by `to`.
 [[maybe_unused]] std::string edit(std::string text, const std::string& from, const std::string& to) {

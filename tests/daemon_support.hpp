@@ -24,16 +24,16 @@
 #include "modalwatch/daemon/daemon.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
-#include "modalwatch/io/records.hpp"
 #include "modalwatch/io/messages.hpp"
+#include "modalwatch/io/records.hpp"
 
 namespace modalwatch::test_support {
 
 // config/flexible-beam-drift.yaml: 4096 Hz, modes "suspension" and "flex"; flex
 // loses 15 % stiffness over t in [30, 32] s.
 inline const std::string kDriftConfig = std::string(MODALWATCH_SOURCE_DIR) + "/config/flexible-beam-drift.yaml";
-constexpr double kDriftStart = 30.0;          // s
-constexpr std::int64_t kUtime0 = 1'000'000;   // us, utime of sample 0 on the wire
+constexpr double kDriftStart = 30.0;         // s
+constexpr std::int64_t kUtime0 = 1'000'000;  // us, utime of sample 0 on the wire
 
 // The drift record and (track_csv, when asked for) `modalwatch track`'s
 // estimates of it, made once per process.
@@ -46,7 +46,8 @@ struct DriftData {
 inline const DriftData& drift_data() {
   static DriftData d = [] {
     DriftData x;
-    x.dir = (std::filesystem::temp_directory_path() / ("modalwatch_daemon_data_" + std::to_string(::getpid()))).string();
+    x.dir =
+        (std::filesystem::temp_directory_path() / ("modalwatch_daemon_data_" + std::to_string(::getpid()))).string();
     std::filesystem::create_directories(x.dir);
     x.record_csv = x.dir + "/record.csv";
     x.track_csv = x.dir + "/est.csv";
@@ -153,8 +154,8 @@ inline Eigen::Index samples_at(double t) { return static_cast<Eigen::Index>(std:
 // daemon; `published` counts the samples sent so far (memq queues without bound,
 // so the daemon's received counter lags what was sent).
 inline void publish_paced(lcm_t* lcm, const Config& c, Daemon& d, Eigen::Index begin, Eigen::Index end,
-                   std::uint64_t& published, std::int64_t utime_shift = 0, std::int64_t seq_shift = 0,
-                   std::uint64_t backlog = 2048) {
+                          std::uint64_t& published, std::int64_t utime_shift = 0, std::int64_t seq_shift = 0,
+                          std::uint64_t backlog = 2048) {
   const Record& rec = drift_data().record;
   Eigen::Index done = begin;
   publish_range(lcm, c.lcm.batches_channel, rec, begin, end, 64, utime_shift, seq_shift, [&](Eigen::Index next) {
@@ -173,14 +174,13 @@ inline void publish_paced(lcm_t* lcm, const Config& c, Daemon& d, Eigen::Index b
 
 inline bool all_handled(Daemon& d) {
   const DaemonCounters k = d.counters();
-  return k.samples_received == k.samples_processed + k.samples_dropped + k.samples_nonfinite + k.samples_duplicate +
-                                   k.samples_out_of_order;
+  return k.samples_received ==
+         k.samples_processed + k.samples_dropped + k.samples_nonfinite + k.samples_duplicate + k.samples_out_of_order;
 }
 
 inline void dispatch_rest(lcm_t* lcm) {
   while (lcm_handle_timeout(lcm, 50) > 0) {
   }
 }
-
 
 }  // namespace modalwatch::test_support

@@ -17,7 +17,7 @@ inline Config paper_config() { return load_config(std::string(MODALWATCH_SOURCE_
 inline EstimatorSettings settings_for(const Config& c, std::vector<double> forgetting, int warmup) {
   EstimatorSettings s = c.estimator;  // completed from the rest of the file by load_config
   s.forgetting = std::move(forgetting);
-  s.random_walks.clear();  // the shipped random walks go with the shipped forgetting: lambda alone here
+  s.random_walks.clear();    // the shipped random walks go with the shipped forgetting: lambda alone here
   s.stabilisations.clear();  // estimator.stabilisation for every submodel, whatever their number
   s.warmup_samples = warmup;
   return s;
@@ -47,8 +47,7 @@ inline SignalSpec prbs(double amplitude, int bits = 12, int clock = 2) {
 }
 
 inline void run(RecursiveEstimator& est, const Record& r) {
-  for (Eigen::Index k = 0; k < r.size(); ++k)
-    est.step({r.t(k), r.u(k), r.y(k), r.has_reference() ? r.r(k) : 0.0});
+  for (Eigen::Index k = 0; k < r.size(); ++k) est.step({r.t(k), r.u(k), r.y(k), r.has_reference() ? r.r(k) : 0.0});
 }
 
 }  // namespace modalwatch::test_support

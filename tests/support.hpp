@@ -1,14 +1,14 @@
 #pragma once
 // Helpers shared by the test suites: running the real modalwatch binary, and
 // expanding an additive model into its unfactored B/A.
+#include <sys/wait.h>
+#include <unistd.h>
 #include <array>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <string>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <gtest/gtest.h>
 

@@ -14,9 +14,9 @@
 #include <gtest/gtest.h>
 
 #include "allocation_counter.hpp"
-#include "modalwatch/io/config.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/fault_detector.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/simulator.hpp"
 
 namespace modalwatch {
@@ -163,8 +163,10 @@ TEST(FaultDetectorAllocation, UpdateAllocatesNothing) {
       cov[i] = Eigen::Vector3d(std_dev[i].wn, std_dev[i].zeta, std_dev[i].gain).cwiseAbs2().asDiagonal();
     }
     changes.clear();
-    if (k % 2 == 0) detector.update(t, value, cov, k % 97 != 0, changes);
-    else detector.update(t, value, std_dev, true, changes);
+    if (k % 2 == 0)
+      detector.update(t, value, cov, k % 97 != 0, changes);
+    else
+      detector.update(t, value, std_dev, true, changes);
     for (const FlagChange& c : changes) (c.raised ? raised : fallen) += 1;
   }
   const test_support::AllocationCounts counts = AllocationCounter::stop();

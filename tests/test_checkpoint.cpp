@@ -6,12 +6,12 @@
 #include <sys/resource.h>
 #include <unistd.h>
 
+#include <bit>
 #include <cerrno>
 #include <csignal>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <bit>
 #include <iterator>
 #include <limits>
 #include <system_error>
@@ -20,11 +20,11 @@
 
 #include "support.hpp"
 
+#include "io/checkpoint/crc32.hpp"
+#include "modalwatch/error.hpp"
 #include "modalwatch/io/checkpoint.hpp"
 #include "modalwatch/io/config.hpp"
-#include "modalwatch/error.hpp"
 #include "modalwatch/simulator.hpp"
-#include "io/checkpoint/crc32.hpp"
 
 namespace modalwatch {
 namespace {
@@ -64,9 +64,7 @@ void put_le(std::vector<std::uint8_t>& b, std::size_t at, std::uint64_t v, int n
   for (int i = 0; i < n; ++i) b[at + i] = static_cast<std::uint8_t>(v >> (8 * i));
 }
 // Recomputes the trailing CRC, so that the decoder gets past it to the field under test.
-void reseal(std::vector<std::uint8_t>& b) {
-  put_le(b, b.size() - 4, crc32(std::span(b).first(b.size() - 4)), 4);
-}
+void reseal(std::vector<std::uint8_t>& b) { put_le(b, b.size() - 4, crc32(std::span(b).first(b.size() - 4)), 4); }
 
 TEST(Checkpoint, Crc32IsTheStandardOne) {
   const std::string s = "123456789";
@@ -141,8 +139,9 @@ TEST(Checkpoint, WrongMagicVersionAndAbsurdLengthsAreNamed) {
   EXPECT_NE(error_of([&] { decode_checkpoint(b, "m"); }).find("wrong magic"), std::string::npos);
   b = good;
   put_le(b, 8, kCheckpointVersion + 1, 4);
-  EXPECT_NE(error_of([&] { decode_checkpoint(b, "v"); }).find("format version " + std::to_string(kCheckpointVersion + 1)),
-            std::string::npos);
+  EXPECT_NE(
+      error_of([&] { decode_checkpoint(b, "v"); }).find("format version " + std::to_string(kCheckpointVersion + 1)),
+      std::string::npos);
   b = good;
   put_le(b, 8, 1, 4);  // before the estimator state carried stabilised forgetting's reference
   EXPECT_NE(error_of([&] { decode_checkpoint(b, "v1"); }).find("format version 1 carries no stabilised-forgetting"),

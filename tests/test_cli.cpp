@@ -23,16 +23,14 @@ Outcome run(const std::string& args) { return test_support::run_cli(args); }
 
 class Cli : public test_support::ScratchDir {
  public:
-  static std::string config(const std::string& name) {
-    return std::string(MODALWATCH_SOURCE_DIR) + "/config/" + name;
-  }
+  static std::string config(const std::string& name) { return std::string(MODALWATCH_SOURCE_DIR) + "/config/" + name; }
 };
 
 bool contains(const std::string& text, const std::string& what) { return text.find(what) != std::string::npos; }
 
 TEST_F(Cli, SimulateThenFitPrintsTheModalTableAndWritesAReusableModel) {
   const Outcome sim = run("simulate --config " + config("paper-sim.yaml") + " --out " + path("d.csv") + " --truth " +
-                      path("truth.csv") + " --duration 200");
+                          path("truth.csv") + " --duration 200");
   ASSERT_EQ(sim.code, 0) << sim.output;
   const Record r = read_record(path("d.csv"));
   EXPECT_EQ(r.size(), 4000);
@@ -41,7 +39,7 @@ TEST_F(Cli, SimulateThenFitPrintsTheModalTableAndWritesAReusableModel) {
   EXPECT_EQ(truth.column("mode3_wn"), 7);
 
   const Outcome fit = run("fit --config " + config("paper-sim.yaml") + " --data " + path("d.csv") + " --to 90 --out " +
-                      path("fitted.yaml"));
+                          path("fitted.yaml"));
   ASSERT_EQ(fit.code, 0) << fit.output;
   for (const char* s : {"mode1", "mode2", "mode3", "f [Hz]", "zeta", "fit on the data"})
     EXPECT_TRUE(contains(fit.output, s)) << s << "\n" << fit.output;

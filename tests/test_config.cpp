@@ -107,20 +107,20 @@ TEST(Config, EstimatorParsesEveryKey) {
   EXPECT_EQ(e.forgetting, (std::vector<double>{0.99, 1.0}));
   EXPECT_EQ(e.random_walks, (std::vector<double>{1e-4, 1e-4}));  // estimator.random_walk for each
   // A submodel's own random walk overrides the section's, and survives the round trip.
-  const Config own = parse_config(edit(kBase, "      forgetting: 0.99", "      forgetting: 0.99\n      random_walk: 3.0e-4") +
-                                      kEstimator,
-                                  "test.yaml");
+  const Config own = parse_config(
+      edit(kBase, "      forgetting: 0.99", "      forgetting: 0.99\n      random_walk: 3.0e-4") + kEstimator,
+      "test.yaml");
   EXPECT_EQ(own.estimator.random_walks, (std::vector<double>{3e-4, 1e-4}));
   EXPECT_EQ(parse_config(modalwatch::config_to_yaml(own, own.model), "again.yaml").estimator.random_walks,
             own.estimator.random_walks);
   EXPECT_EQ(parse_error(edit(kBase, "      forgetting: 0.99", "      forgetting: 0.99\n      random_walk: -1")),
             "test.yaml:11: key 'model.submodels[0].random_walk': must be >= 0 (got -1)");
   // Boundary values that are allowed.
-  const std::string edge = edit(edit(edit(edit(edit(kEstimator, "refinements: 2", "refinements: 0"), "warmup: 12.5",
-                                                  "warmup: 0"),
-                                             "random_walk: 1.0e-4", "random_walk: 0"),
-                                        "low_excitation_ratio: 0.2", "low_excitation_ratio: 0"),
-                                   "residual_window: 30", "residual_window: 0");
+  const std::string edge =
+      edit(edit(edit(edit(edit(kEstimator, "refinements: 2", "refinements: 0"), "warmup: 12.5", "warmup: 0"),
+                     "random_walk: 1.0e-4", "random_walk: 0"),
+                "low_excitation_ratio: 0.2", "low_excitation_ratio: 0"),
+           "residual_window: 30", "residual_window: 0");
   const Config z = parse_config(kBase + edge, "test.yaml");
   EXPECT_EQ(z.estimator.refinements, 0);
   EXPECT_EQ(z.estimator.warmup_samples, 0);
@@ -135,12 +135,11 @@ TEST(Config, EstimatorWarmupIsRoundedToSamples) {
     return parse_config(kBase + "estimator:\n  warmup: " + warmup + "\n", "test.yaml").estimator.warmup_samples;
   };
   EXPECT_EQ(samples("50"), 1000);
-  EXPECT_EQ(samples("0.03"), 1);   // 0.6 samples
+  EXPECT_EQ(samples("0.03"), 1);    // 0.6 samples
   EXPECT_EQ(samples("1.024"), 20);  // 20.48 samples
   EXPECT_EQ(samples("1.026"), 21);  // 20.52 samples
-  const Config beam = parse_config(edit(kBase, "sample_rate_hz: 20", "sample_rate_hz: 4096") +
-                                       "estimator:\n  warmup: 5\n",
-                                   "test.yaml");
+  const Config beam = parse_config(
+      edit(kBase, "sample_rate_hz: 20", "sample_rate_hz: 4096") + "estimator:\n  warmup: 5\n", "test.yaml");
   EXPECT_EQ(beam.estimator.warmup_samples, 20480);
 }
 
@@ -287,9 +286,7 @@ TEST(Config, EveryShippedConfigLoads) {
   EXPECT_GE(count, 1);
 }
 
-
 }  // namespace
-
 
 TEST(Config, LcmDefaultsStayOnTheHost) {
   const Config c = parse_config(kBase, "test.yaml");
@@ -300,11 +297,11 @@ TEST(Config, LcmDefaultsStayOnTheHost) {
 
 TEST(Config, LcmSectionAndRoundTrip) {
   const std::string lcm =
-      "lcm:\n"                                   // 15
-      "  url: memq://\n"                         // 16
-      "  channels:\n"                            // 17
-      "    samples: X_SAMPLES\n"                 // 18
-      "    fault_status: \"X'S STATUS\"\n";    // 19
+      "lcm:\n"                               // 15
+      "  url: memq://\n"                     // 16
+      "  channels:\n"                        // 17
+      "    samples: X_SAMPLES\n"             // 18
+      "    fault_status: \"X'S STATUS\"\n";  // 19
   const Config c = parse_config(kBase + lcm, "test.yaml");
   EXPECT_EQ(c.lcm.url, "memq://");
   EXPECT_EQ(c.lcm.samples_channel, "X_SAMPLES");
@@ -468,8 +465,9 @@ TEST(ConfigErrors, DaemonAndFaults) {
             "baselines)");
   EXPECT_EQ(parse_error(kBase + "faults:\n  baselines:\n    m1: {wn: 1, zeta: 0.1, gain: 1, std: {zeta: -0.1}}\n"),
             "test.yaml:17: key 'faults.baselines.m1.std.zeta': must be >= 0 (got -0.1)");
-  EXPECT_EQ(parse_error(kBase + "faults:\n  baselines:\n    m1: {wn: 1, zeta: 0.1, gain: 1, std: {frequency_hz: -1}}\n"),
-            "test.yaml:17: key 'faults.baselines.m1.std.frequency_hz': must be >= 0 (got -1)");
+  EXPECT_EQ(
+      parse_error(kBase + "faults:\n  baselines:\n    m1: {wn: 1, zeta: 0.1, gain: 1, std: {frequency_hz: -1}}\n"),
+      "test.yaml:17: key 'faults.baselines.m1.std.frequency_hz': must be >= 0 (got -1)");
   EXPECT_EQ(parse_error(kBase + "faults:\n  baselines:\n    m1: {wn: 1, zeta: 0.1, gain: 1, std: {q: 1}}\n"),
             "test.yaml:17: key 'faults.baselines.m1.std.q': unknown key for a baseline's std (allowed: wn, "
             "frequency_hz, zeta, gain)");
@@ -481,8 +479,7 @@ TEST(ConfigErrors, DaemonAndFaults) {
             "(got \"localhost:70000\")");
   EXPECT_EQ(parse_error(kBase + "daemon:\n  metrics: {port: 1}\n"),
             "test.yaml:16: key 'daemon.metrics.port': unknown key for daemon.metrics (allowed: listen)");
-  EXPECT_EQ(parse_error("axis: [x]\n" + kBase),
-            "test.yaml:1: key 'axis': expected a non-empty string (got [x])");
+  EXPECT_EQ(parse_error("axis: [x]\n" + kBase), "test.yaml:1: key 'axis': expected a non-empty string (got [x])");
 }
 
 // The new detector keys, a baseline's std, axis and daemon.metrics: parsed,

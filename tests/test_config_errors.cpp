@@ -111,8 +111,7 @@ TEST(ConfigErrors, EstimatorValues) {
       {"refinements: 2", "refinements: -1", "test.yaml:17: key 'estimator.refinements': must be >= 0 (got -1)"},
       {"refinements: 2", "refinements: two",
        "test.yaml:17: key 'estimator.refinements': expected an integer (got two)"},
-      {"update_divisor: 4", "update_divisor: 0",
-       "test.yaml:18: key 'estimator.update_divisor': must be >= 1 (got 0)"},
+      {"update_divisor: 4", "update_divisor: 0", "test.yaml:18: key 'estimator.update_divisor': must be >= 1 (got 0)"},
       {"warmup: 12.5", "warmup: -1", "test.yaml:19: key 'estimator.warmup': must be >= 0 (got -1)"},
       {"warmup: 12.5", "warmup: 0.02",
        "test.yaml:19: key 'estimator.warmup': shorter than one sample period (use 0 for no warm-up) (got 0.02)"},
@@ -153,11 +152,12 @@ TEST(ConfigErrors, EstimatorValues) {
 
 TEST(ConfigErrors, EstimatorKeysAndShape) {
   const auto unknown = parse_error(kBase + kEstimator + "  forgetting: 0.99\n");
-  EXPECT_EQ(unknown,
-            "test.yaml:31: key 'estimator.forgetting': unknown key for estimator (allowed: block_iterations, "
-            "refinements, update_divisor, warmup, fit_on_warmup, warmup_iterations, initial_covariance_relative, "
-            "random_walk, covariance_bound, stabilisation, divergence_ratio, gap_factor, outlier_sigma, residual_window, "
-            "low_excitation_ratio, low_excitation_window)");
+  EXPECT_EQ(
+      unknown,
+      "test.yaml:31: key 'estimator.forgetting': unknown key for estimator (allowed: block_iterations, "
+      "refinements, update_divisor, warmup, fit_on_warmup, warmup_iterations, initial_covariance_relative, "
+      "random_walk, covariance_bound, stabilisation, divergence_ratio, gap_factor, outlier_sigma, residual_window, "
+      "low_excitation_ratio, low_excitation_window)");
   EXPECT_EQ(parse_error(kBase + kEstimator + "  warmup: 3\n"),
             "test.yaml:31: key 'estimator.warmup': duplicate key (first at line 19)");
   EXPECT_EQ(parse_error(kBase + "estimator: rsrivc\n"),
@@ -183,13 +183,13 @@ TEST(ConfigErrors, EmptySubmodelList) {
 }
 
 const std::string kTf =
-    "sample_rate_hz: 20\n"                                                  // 1
-    "model:\n"                                                              // 2
-    "  submodels:\n"                                                        // 3
-    "    - name: tf\n"                                                      // 4
-    "      kind: transfer_function\n"                                       // 5
-    "      a: [0.1, 0.01]\n"                                                // 6
-    "      b: [1, 0.5]\n";                                                  // 7
+    "sample_rate_hz: 20\n"             // 1
+    "model:\n"                         // 2
+    "  submodels:\n"                   // 3
+    "    - name: tf\n"                 // 4
+    "      kind: transfer_function\n"  // 5
+    "      a: [0.1, 0.01]\n"           // 6
+    "      b: [1, 0.5]\n";             // 7
 
 TEST(ConfigErrors, TransferFunctionOrders) {
   EXPECT_NO_THROW(parse_config(kTf, "test.yaml"));
@@ -199,8 +199,7 @@ TEST(ConfigErrors, TransferFunctionOrders) {
   EXPECT_CONTAINS(msg, "n + l = 2 + 0");
   EXPECT_CONTAINS(msg, "(got [1, 0.5, 0.2, 0.1])");
   // Rigid poles allow a higher B.
-  EXPECT_NO_THROW(parse_config(edit(kTf, "b: [1, 0.5]", "b: [1, 0.5, 0.2, 0.1]\n      rigid_poles: 1"),
-                               "test.yaml"));
+  EXPECT_NO_THROW(parse_config(edit(kTf, "b: [1, 0.5]", "b: [1, 0.5, 0.2, 0.1]\n      rigid_poles: 1"), "test.yaml"));
   EXPECT_EQ(parse_error(edit(kTf, "b: [1, 0.5]", "b: []")),
             "test.yaml:7: key 'model.submodels[0].b': must not be empty (got [])");
   EXPECT_EQ(parse_error(edit(kTf, "a: [0.1, 0.01]", "a: [0.1, 0]")),
@@ -237,8 +236,9 @@ TEST(ConfigErrors, InitialCovariance) {
             "entries, one per parameter of theta = [a_1 .. a_n, b_0 .. b_m] (got [])");
   // A transfer function with n = 2, m = 1.
   const auto tf = parse_error(edit(kTf, "b: [1, 0.5]", "b: [1, 0.5]\n      initial_covariance: [1, 1, 1]"));
-  EXPECT_CONTAINS(tf, "test.yaml:8: key 'model.submodels[0].initial_covariance': must have n + m + 1 = 2 + 1 + 1 = 4 "
-                      "entries");
+  EXPECT_CONTAINS(tf,
+                  "test.yaml:8: key 'model.submodels[0].initial_covariance': must have n + m + 1 = 2 + 1 + 1 = 4 "
+                  "entries");
   // Not a key of the true plant.
   EXPECT_CONTAINS(parse_error(edit(kClosed, "      gain: 0.01", "      gain: 0.01\n      initial_covariance: [1]")),
                   "test.yaml:21: key 'plant.modes[1].initial_covariance': unknown key for kind rigid_body");
@@ -249,8 +249,9 @@ TEST(ConfigErrors, RigidPoles) {
             "test.yaml:8: key 'model.submodels[0].rigid_poles': must be in 0..2 (got 3)");
   EXPECT_EQ(parse_error(edit(kTf, "b: [1, 0.5]", "b: [1, 0.5]\n      rigid_poles: 1.5")),
             "test.yaml:8: key 'model.submodels[0].rigid_poles': expected an integer (got 1.5)");
-  const std::string rb = "sample_rate_hz: 20\nmodel:\n  submodels:\n    - {name: b, kind: rigid_body, gain: 2, "
-                         "rigid_poles: -1}\n";
+  const std::string rb =
+      "sample_rate_hz: 20\nmodel:\n  submodels:\n    - {name: b, kind: rigid_body, gain: 2, "
+      "rigid_poles: -1}\n";
   EXPECT_EQ(parse_error(rb), "test.yaml:4: key 'model.submodels[0].rigid_poles': must be in 0..2 (got -1)");
   EXPECT_EQ(parse_error(edit(edit(rb, "gain: 2", "gain: 0"), "rigid_poles: -1", "rigid_poles: 1")),
             "test.yaml:4: key 'model.submodels[0].gain': must be != 0 (got 0)");
@@ -263,7 +264,8 @@ TEST(ConfigErrors, ClosedLoopNeedsController) {
 
 TEST(ConfigErrors, Controller) {
   EXPECT_NO_THROW(parse_config(kClosed, "test.yaml"));
-  const auto improper = parse_error(edit(kClosed, "numerator: [0.02329, -0.02058, 0.00454]", "numerator: [1, 2, 3, 4]"));
+  const auto improper =
+      parse_error(edit(kClosed, "numerator: [0.02329, -0.02058, 0.00454]", "numerator: [1, 2, 3, 4]"));
   EXPECT_CONTAINS(improper, "test.yaml:7: key 'controller.numerator': improper controller");
   EXPECT_CONTAINS(improper, "(got [1, 2, 3, 4])");
   EXPECT_EQ(parse_error(edit(kClosed, "denominator: [1, -1, 0]", "denominator: [0, 1, -1]")),

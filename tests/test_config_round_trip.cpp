@@ -10,8 +10,7 @@ class ConfigFiles : public ::testing::Test {
  protected:
   void SetUp() override {
     std::random_device rd;
-    dir_ = fs::temp_directory_path() /
-           ("modalwatch-config-" + std::to_string(::getpid()) + "-" + std::to_string(rd()));
+    dir_ = fs::temp_directory_path() / ("modalwatch-config-" + std::to_string(::getpid()) + "-" + std::to_string(rd()));
     fs::create_directories(dir_ / "signals");
   }
   void TearDown() override { fs::remove_all(dir_); }
@@ -25,15 +24,15 @@ class ConfigFiles : public ::testing::Test {
 
 // Open loop at 10 Hz for 1 s: 10 samples t = 0 .. 0.9.
 const std::string kCsvSignal =
-    "sample_rate_hz: 10\n"                           // 1
-    "model:\n"                                       // 2
+    "sample_rate_hz: 10\n"                                   // 1
+    "model:\n"                                               // 2
     "  submodels: [{name: m, wn: 1, zeta: 0.1, gain: 1}]\n"  // 3
-    "simulation:\n"                                  // 4
-    "  duration: 1\n"                                // 5
-    "  input:\n"                                     // 6
-    "    type: csv\n"                                // 7
-    "    path: signals/u.csv\n"                      // 8
-    "    column: v\n";                               // 9
+    "simulation:\n"                                          // 4
+    "  duration: 1\n"                                        // 5
+    "  input:\n"                                             // 6
+    "    type: csv\n"                                        // 7
+    "    path: signals/u.csv\n"                              // 8
+    "    column: v\n";                                       // 9
 
 TEST_F(ConfigFiles, CsvSignalIsInterpolatedOntoTheGrid) {
   // v = 10 t on a coarser, offset grid: interpolation must give v(k T) = k.
@@ -263,8 +262,8 @@ TEST(ConfigRoundTrip, AllKindsAndSignals) {
        {"{type: square, frequency_hz: 3, amplitude: 2, offset: 0.5}",
         "{type: multisine, f_min_hz: 1, f_max_hz: 100, period_s: 10, rms: 0.2}",
         "{type: sum_of_sines, amplitudes: [1, 2], frequencies_hz: [1, 2], phases: [0.1, 0.2]}"}) {
-    const Config s = parse_config(edit(yaml, "{type: prbs, register_bits: 12, clock_period: 2, amplitude: 0.1}", signal),
-                                  "test.yaml");
+    const Config s = parse_config(
+        edit(yaml, "{type: prbs, register_bits: 12, clock_period: 2, amplitude: 0.1}", signal), "test.yaml");
     const Config back = round_trip(s, s.model);
     expect_same_config(back, s);
     EXPECT_EQ(back.experiment->excitation.frequency_hz, s.experiment->excitation.frequency_hz);

@@ -14,21 +14,20 @@
 
 #include "support.hpp"
 
+#include "modalwatch/error.hpp"
 #include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/records.hpp"
-#include "modalwatch/error.hpp"
 
 namespace fs = std::filesystem;
 using modalwatch::InputError;
-using modalwatch::read_record;
 using modalwatch::parse_record;
 using modalwatch::parse_table;
+using modalwatch::read_record;
 using modalwatch::read_table;
 
 namespace {
 
-#define EXPECT_CONTAINS(text, part) \
-  EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
+#define EXPECT_CONTAINS(text, part) EXPECT_NE(std::string(text).find(part), std::string::npos) << "message: " << (text)
 
 using modalwatch::test_support::error_of;
 
@@ -36,8 +35,7 @@ class CsvTest : public ::testing::Test {
  protected:
   void SetUp() override {
     std::random_device rd;
-    dir_ = fs::temp_directory_path() /
-           ("modalwatch-csv-" + std::to_string(::getpid()) + "-" + std::to_string(rd()));
+    dir_ = fs::temp_directory_path() / ("modalwatch-csv-" + std::to_string(::getpid()) + "-" + std::to_string(rd()));
     fs::create_directories(dir_);
   }
   void TearDown() override { fs::remove_all(dir_); }
@@ -181,8 +179,9 @@ TEST_F(CsvTest, UnevenSamplingNamesRow) {
   // Steps of 1 s and one of 1.1 s (t = 6.1, row 8): the mean is 1.01 s, so only
   // the long step is off by more than 1 %.
   const auto msg = error_of([&] {
-    read_record(file("u.csv", "t,u,y\n0,0,0\n1,0,0\n2,0,0\n3,0,0\n4,0,0\n5,0,0\n6.1,0,0\n7.1,0,0\n"
-                              "8.1,0,0\n9.1,0,0\n10.1,0,0\n"));
+    read_record(file("u.csv",
+                     "t,u,y\n0,0,0\n1,0,0\n2,0,0\n3,0,0\n4,0,0\n5,0,0\n6.1,0,0\n7.1,0,0\n"
+                     "8.1,0,0\n9.1,0,0\n10.1,0,0\n"));
   });
   EXPECT_CONTAINS(msg, "row 8, column 't'");
   EXPECT_CONTAINS(msg, "uneven sampling");
@@ -202,8 +201,7 @@ TEST_F(CsvTest, ReadOptionsAllowNonFiniteSamplesButNotTime) {
   const auto bad_t = file("nant.csv", "t,u,y\n0,1,1\nnan,1,1\n");
   EXPECT_CONTAINS(error_of([&] { read_record(bad_t, options); }), "row 3, column 't'");
   // Non-numeric text stays an error.
-  EXPECT_CONTAINS(error_of([&] { read_record(file("txt.csv", "t,u,y\n0,x,1\n"), options); }),
-                  "row 2, column 'u'");
+  EXPECT_CONTAINS(error_of([&] { read_record(file("txt.csv", "t,u,y\n0,x,1\n"), options); }), "row 2, column 'u'");
 }
 
 TEST_F(CsvTest, ReadOptionsAllowGaps) {
@@ -272,10 +270,11 @@ TEST_F(CsvTest, WriteFailureThrowsAndLeavesNothing) {
   // Renaming onto a directory fails after the temporary was written: it is removed.
   fs::create_directory(dir_ / "adir");
   const auto onto_dir = (dir_ / "adir").string();
-  EXPECT_CONTAINS(error_of([&] { modalwatch::write_table(onto_dir, {"a"}, Eigen::MatrixXd::Zero(2, 1)); }),
-                  onto_dir);
+  EXPECT_CONTAINS(error_of([&] { modalwatch::write_table(onto_dir, {"a"}, Eigen::MatrixXd::Zero(2, 1)); }), onto_dir);
   EXPECT_EQ(entries(), 1);
-  EXPECT_CONTAINS(error_of([&] { modalwatch::write_table(path("y.csv"), {"a", "b"}, Eigen::MatrixXd::Zero(2, 1)); }),
+  EXPECT_CONTAINS(error_of([&] {
+                    modalwatch::write_table(path("y.csv"), {"a", "b"}, Eigen::MatrixXd::Zero(2, 1));
+                  }),
                   "2 column names for 1 columns");
   EXPECT_CONTAINS(error_of([&] { modalwatch::write_table(path("y.csv"), {"a,b"}, Eigen::MatrixXd::Zero(2, 1)); }),
                   "invalid column name");
@@ -336,7 +335,8 @@ TEST_F(CsvTest, TextEntryPointsMatchTheFileReaders) {
   EXPECT_EQ(from_text.y, from_file.y);
   EXPECT_EQ(from_text.r, from_file.r);
   EXPECT_EQ(parse_table("t,u\n0,1\n", "mem").data(0, 1), 1.0);
-  EXPECT_EQ(error_of([&] { parse_record(text, "mem.csv"); }), "mem.csv: row 3, column 'u': not a finite number (got 'nan')");
+  EXPECT_EQ(error_of([&] { parse_record(text, "mem.csv"); }),
+            "mem.csv: row 3, column 'u': not a finite number (got 'nan')");
 }
 
 // RecordReader (`modalwatch track`'s reader): the same rows and the same

@@ -22,9 +22,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstddef>
 #include <cstring>
-#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -35,9 +35,9 @@
 
 #include "daemon_support.hpp"
 
-#include "modalwatch/io/checkpoint.hpp"
 #include "daemon/loop_probe.hpp"
 #include "modalwatch/daemon/daemon.hpp"
+#include "modalwatch/io/checkpoint.hpp"
 
 using namespace modalwatch;
 using namespace modalwatch::test_support;
@@ -85,7 +85,8 @@ TEST_F(DaemonInProcess, FlagsTheDriftingModeOnlyAndMatchesTrack) {
       if (entry(s, e).state == "raised" && first_raise[e] < 0.0)
         first_raise[e] = static_cast<double>(entry(s, e).since - kUtime0) * 1e-6;
   }
-  for (int q = 0; q < 3; ++q) EXPECT_LT(first_raise[3 * kSuspension + q], 0.0) << "suspension quantity " << q << " flagged";
+  for (int q = 0; q < 3; ++q)
+    EXPECT_LT(first_raise[3 * kSuspension + q], 0.0) << "suspension quantity " << q << " flagged";
   const double flex_wn = first_raise[3 * kFlex + 0];
   EXPECT_GT(flex_wn, kDriftStart) << "flex wn flagged before the drift";
   EXPECT_LE(flex_wn, kDriftStart + 20.0) << "flex wn not flagged within 20 s of the drift start";
@@ -119,8 +120,10 @@ TEST_F(DaemonInProcess, FlagsTheDriftingModeOnlyAndMatchesTrack) {
     const std::int64_t first = std::llround(rec.t(0) * 1e6);
     for (Eigen::Index k = 0; k < rec.size(); ++k) {
       const Eigen::Index b = k / 64 * 64;  // publish_paced's batches
-      const std::int64_t utime = std::llround(rec.t(b) * 1e6) + std::llround(static_cast<double>(k - b) * rec.sample_time() * 1e6);
-      std::fprintf(f, "%.17g,%.17g,%.17g,%.17g\n", static_cast<double>(utime - first) * 1e-6, rec.u(k), rec.y(k), rec.r(k));
+      const std::int64_t utime =
+          std::llround(rec.t(b) * 1e6) + std::llround(static_cast<double>(k - b) * rec.sample_time() * 1e6);
+      std::fprintf(f, "%.17g,%.17g,%.17g,%.17g\n", static_cast<double>(utime - first) * 1e-6, rec.u(k), rec.y(k),
+                   rec.r(k));
     }
     std::fclose(f);
   }
@@ -192,7 +195,8 @@ TEST_F(DaemonInProcess, FlagsTheDriftingModeOnlyAndMatchesTrack) {
   for (const auto& m : rx.estimates) {
     const Eigen::Index k = samples_at(static_cast<double>(m.utime - kUtime0) * 1e-6);
     for (int i = 0; i < 2; ++i)
-      worst_csv = std::max(worst_csv, std::abs(m.modes[i].wn - data.track.data(k, c_wn[i])) / data.track.data(k, c_wn[i]));
+      worst_csv =
+          std::max(worst_csv, std::abs(m.modes[i].wn - data.track.data(k, c_wn[i])) / data.track.data(k, c_wn[i]));
   }
   EXPECT_LT(worst_csv, 1e-5);
   // And they are right: flex at the end near 82.98 Hz, suspension at 6 Hz.
@@ -366,10 +370,12 @@ TEST_F(DaemonInProcess, SurvivesBadInputAndCountsIt) {
   k += 2;
   // Wait for every packet, not only the garbage: under TSan the subscriber may
   // still be decoding the valid ones (5 NaN + 4 duplicate + 2 reordered samples).
-  ASSERT_TRUE(wait_for([&] {
-    const DaemonCounters n = d.counters();
-    return n.decode_errors == 52 && n.samples_received == received_before + 11 && all_handled(d);
-  }, 10.0));
+  ASSERT_TRUE(wait_for(
+      [&] {
+        const DaemonCounters n = d.counters();
+        return n.decode_errors == 52 && n.samples_received == received_before + 11 && all_handled(d);
+      },
+      10.0));
   {
     const DaemonCounters n = d.counters();
     EXPECT_EQ(n.decode_errors, 52u);
@@ -402,8 +408,8 @@ TEST_F(DaemonInProcess, SurvivesBadInputAndCountsIt) {
   lcm_destroy(lcm);
 
   const DaemonCounters n = d.counters();
-  EXPECT_EQ(n.samples_received,
-            n.samples_processed + n.samples_dropped + n.samples_nonfinite + n.samples_duplicate + n.samples_out_of_order);
+  EXPECT_EQ(n.samples_received, n.samples_processed + n.samples_dropped + n.samples_nonfinite + n.samples_duplicate +
+                                    n.samples_out_of_order);
   EXPECT_EQ(n.decode_errors, 52u);
   EXPECT_EQ(n.samples_nonfinite, 5u);
   EXPECT_EQ(n.samples_duplicate, 3u);

@@ -73,14 +73,16 @@ TEST(DaemonAllocation, NoneOnTheEstimationThreadAfterStartUp) {
     ASSERT_TRUE(wait_for([&] { return probe.started.load(); }, 20.0)) << "the warm-up never ended";
     // Bad input after the warm-up: NaN, a duplicate, a late (reordered) sample.
     for (int i = 0; i < 3; ++i) {
-      StampedSample s{kUtime0 + std::llround(rec.t(mid + i) * 1e6), mid + i, rec.u(mid + i), std::nan(""), rec.r(mid + i)};
+      StampedSample s{kUtime0 + std::llround(rec.t(mid + i) * 1e6), mid + i, rec.u(mid + i), std::nan(""),
+                      rec.r(mid + i)};
       const auto bytes = encode_sample(s);
       lcm_publish(lcm, c.lcm.samples_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
       if (i == 1) lcm_publish(lcm, c.lcm.samples_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
     }
     {  // an old sample arriving late: out of order
       const Eigen::Index k = mid - 5;
-      const auto bytes = encode_sample(StampedSample{kUtime0 + std::llround(rec.t(k) * 1e6), k, rec.u(k), rec.y(k), rec.r(k)});
+      const auto bytes =
+          encode_sample(StampedSample{kUtime0 + std::llround(rec.t(k) * 1e6), k, rec.u(k), rec.y(k), rec.r(k)});
       lcm_publish(lcm, c.lcm.samples_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
     }
     // Then silence (stale input), and the rest 2 s later in sample time (a gap), with the drift.

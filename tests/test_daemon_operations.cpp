@@ -357,8 +357,8 @@ TEST_F(DaemonInProcessOperations, CountsSamplesLostInTransportAndRateLimitsGapWa
   // the others are below it (out of order), as the samples of a late packet are.
   EXPECT_EQ(k.samples_duplicate, duplicated / kBatch);
   EXPECT_EQ(k.samples_out_of_order, late + duplicated - duplicated / kBatch);
-  EXPECT_EQ(k.samples_received,
-            k.samples_processed + k.samples_nonfinite + k.samples_dropped + k.samples_duplicate + k.samples_out_of_order);
+  EXPECT_EQ(k.samples_received, k.samples_processed + k.samples_nonfinite + k.samples_dropped + k.samples_duplicate +
+                                    k.samples_out_of_order);
   EXPECT_EQ(k.samples_received, sent);
   EXPECT_EQ(sent - duplicated + k.samples_lost, unique);  // every sample sent once arrived or is counted lost
   // One gap per lost pair and per late packet, ~150 in all: the first line at
@@ -379,11 +379,11 @@ TEST_F(DaemonInProcessOperations, OneFaultStatusPerPublishPeriod) {
   const std::int64_t seq_shift = seq_going_on();
   const auto t0 = std::chrono::steady_clock::now();
   const Eigen::Index begin = samples_at(17.0);
-  publish_range(r.lcm, r.c.lcm.batches_channel, drift_data().record, begin, samples_at(20.0), 32, 0, seq_shift,
-                [&](Eigen::Index next) {
-                  std::this_thread::sleep_until(t0 + std::chrono::duration<double>(
-                                                         static_cast<double>(next - begin) / kFs));
-                });
+  publish_range(
+      r.lcm, r.c.lcm.batches_channel, drift_data().record, begin, samples_at(20.0), 32, 0, seq_shift,
+      [&](Eigen::Index next) {
+        std::this_thread::sleep_until(t0 + std::chrono::duration<double>(static_cast<double>(next - begin) / kFs));
+      });
   std::this_thread::sleep_for(std::chrono::seconds(3));  // without input
   r.stop();
   const Received& rx = r.rx;
@@ -396,7 +396,7 @@ TEST_F(DaemonInProcessOperations, OneFaultStatusPerPublishPeriod) {
   }
   EXPECT_GE(rx.estimates.size(), 29u);
   EXPECT_EQ(with_input, rx.estimates.size());  // flag changes would add theirs: none here
-  EXPECT_GE(without, 25u);  // about 3 s / 0.1 s after the input stops
+  EXPECT_GE(without, 25u);                     // about 3 s / 0.1 s after the input stops
   EXPECT_LE(without, 35u);
 }
 

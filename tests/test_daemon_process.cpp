@@ -15,9 +15,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstddef>
 #include <cstring>
-#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -28,14 +28,13 @@
 
 #include "daemon_support.hpp"
 
-#include "modalwatch/io/checkpoint.hpp"
 #include "daemon/loop_probe.hpp"
 #include "modalwatch/daemon/daemon.hpp"
+#include "modalwatch/io/checkpoint.hpp"
 
 using namespace modalwatch;
 using namespace modalwatch::test_support;
 using Fault = modalwatch::fault_status_t;
-
 
 namespace {
 
@@ -178,7 +177,8 @@ TEST_F(DaemonProcess, SigtermCheckpointsAndRestartResumesWithoutWarmup) {
   ASSERT_EQ(ck.estimator.model().submodels.size(), 2u);
   // The checkpoint holds the estimate after the last sample, the last message the
   // one at the last 0.1 s boundary before it: close, not equal.
-  EXPECT_NEAR(modal_parameters(ck.estimator.model().submodels[kFlex]).wn, before.modes[kFlex].wn, 2e-3 * before.modes[kFlex].wn);
+  EXPECT_NEAR(modal_parameters(ck.estimator.model().submodels[kFlex]).wn, before.modes[kFlex].wn,
+              2e-3 * before.modes[kFlex].wn);
 
   // Restart: resumes from the checkpoint, no warm-up: the first estimates are the
   // checkpointed ones carried on, not the configured initial guess.
@@ -271,9 +271,7 @@ TEST_F(DaemonProcess, SighupAppliesAValidConfigAndKeepsTheRunningOneOnAnInvalid)
     EXPECT_LE(n, 9u);  // 4 s at 0.5 s (0.1 s would give 40)
   }
   // Invalid: the running config stays, and says why.
-  {
-    std::ofstream(cfg, std::ios::app) << "  bogus_key: 1\n";
-  }
+  { std::ofstream(cfg, std::ios::app) << "  bogus_key: 1\n"; }
   ::kill(pid_, SIGHUP);
   ASSERT_TRUE(wait_for([&] { return log().find("reload rejected") != std::string::npos; }, 5.0)) << log();
   EXPECT_NE(log().find("bogus_key"), std::string::npos) << log();
@@ -467,7 +465,8 @@ TEST_F(DaemonProcess, NotifiesSystemdReadyWatchdogReloadingStopping) {
   });
   const auto count = [&](const std::string& what) {
     std::lock_guard<std::mutex> lock(mutex);
-    return std::count_if(got.begin(), got.end(), [&](const auto& m) { return m.first.find(what) != std::string::npos; });
+    return std::count_if(got.begin(), got.end(),
+                         [&](const auto& m) { return m.first.find(what) != std::string::npos; });
   };
   env_ = {{"NOTIFY_SOCKET", "@" + name}, {"WATCHDOG_USEC", "200000"}};
   const std::string cfg = write_config("c.yaml", "", "");

@@ -4,26 +4,26 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <limits>
-#include <stdexcept>
 #include <numbers>
 #include <optional>
 #include <ostream>
 #include <random>
+#include <stdexcept>
 #include <string>
-#include <filesystem>
-#include <fstream>
-#include <iterator>
 
 #include <gtest/gtest.h>
 
+#include "../src/cli/json_writer.hpp"
+#include "modalwatch/diagnose.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/records.hpp"
-#include "modalwatch/diagnose.hpp"
 #include "modalwatch/simulator.hpp"
 #include "support.hpp"
-#include "../src/cli/json_writer.hpp"
 
 namespace modalwatch {
 namespace {
@@ -94,7 +94,8 @@ Diagnosed run(const PlantSpec& plant, bool closed) {
     for (const auto& [k, v] : s.params) std::printf(" %s=%.5g", k.c_str(), v);
     std::printf("\n");
     for (const Candidate& c : s.ranking) {
-      std::printf("      cand %-10s val %.4g bic %.1f %s", effect_name(c.kind), c.validation_rms, c.bic, c.note.c_str());
+      std::printf("      cand %-10s val %.4g bic %.1f %s", effect_name(c.kind), c.validation_rms, c.bic,
+                  c.note.c_str());
       for (const auto& [k, v] : c.params) std::printf(" %s=%.5g", k.c_str(), v);
       std::printf("\n");
     }
@@ -159,12 +160,24 @@ TEST_P(DiagnoseEffect, RanksTheEffectFirstAndRecoversIt) {
   EXPECT_EQ(effect_name(d.result.steps[0].ranking.front().kind), c.name);
   const DiagnoseStep& added = d.result.steps[1];
   ASSERT_EQ(added.effect, c.name);
-  if (c.name == "mode") { EXPECT_NEAR(param(added, "wn"), 60.0, 0.02 * 60.0); }
-  if (c.name == "delay") { EXPECT_EQ(param(added, "samples"), 3.0); }
-  if (c.name == "coulomb") { EXPECT_NEAR(param(added, "fc"), 0.3, 0.1 * 0.3); }
-  if (c.name == "cubic") { EXPECT_NEAR(param(added, "c"), cubic_for(c.closed), 0.1 * cubic_for(c.closed)); }
-  if (c.name == "offset") { EXPECT_NEAR(param(added, "value"), 0.2, 0.1 * 0.2); }
-  if (c.name == "rigid_body") { EXPECT_NEAR(param(added, "gain"), 0.2, 0.1 * 0.2); }
+  if (c.name == "mode") {
+    EXPECT_NEAR(param(added, "wn"), 60.0, 0.02 * 60.0);
+  }
+  if (c.name == "delay") {
+    EXPECT_EQ(param(added, "samples"), 3.0);
+  }
+  if (c.name == "coulomb") {
+    EXPECT_NEAR(param(added, "fc"), 0.3, 0.1 * 0.3);
+  }
+  if (c.name == "cubic") {
+    EXPECT_NEAR(param(added, "c"), cubic_for(c.closed), 0.1 * cubic_for(c.closed));
+  }
+  if (c.name == "offset") {
+    EXPECT_NEAR(param(added, "value"), 0.2, 0.1 * 0.2);
+  }
+  if (c.name == "rigid_body") {
+    EXPECT_NEAR(param(added, "gain"), 0.2, 0.1 * 0.2);
+  }
   // The validation error drops at least 5x with the effect alone.
   EXPECT_LE(added.validation_rms, d.before / 5.0) << "before " << d.before << " after " << added.validation_rms;
 }
@@ -191,7 +204,9 @@ TEST_P(DiagnoseNoEffect, AddsNothing) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Synthetic, DiagnoseNoEffect, ::testing::Values(false, true),
-                         [](const ::testing::TestParamInfo<bool>& i) { return std::string(i.param ? "closed" : "open"); });
+                         [](const ::testing::TestParamInfo<bool>& i) {
+                           return std::string(i.param ? "closed" : "open");
+                         });
 
 // ------------------------------------------------------------ one effects model
 
@@ -231,7 +246,9 @@ TEST_P(AugmentedModelMatchesSimulator, WithEveryEffect) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Effects, AugmentedModelMatchesSimulator, ::testing::Values(false, true),
-                         [](const ::testing::TestParamInfo<bool>& i) { return std::string(i.param ? "closed" : "open"); });
+                         [](const ::testing::TestParamInfo<bool>& i) {
+                           return std::string(i.param ? "closed" : "open");
+                         });
 
 // ------------------------------------------------------------ residual tests
 
@@ -386,7 +403,7 @@ TEST(DiagnoseReportJson, EscapesStringsAndWritesNonFiniteAsNull) {
   bad.begin_object();
   EXPECT_THROW(bad.value(1.0), std::logic_error);  // no key
   EXPECT_THROW(bad.end_array(), std::logic_error);
-  EXPECT_THROW(bad.finish(), std::logic_error);    // still open
+  EXPECT_THROW(bad.finish(), std::logic_error);  // still open
 }
 
 // Single-quoted for sh: the paths below hold quotes and newlines.
@@ -444,8 +461,9 @@ assert s["steps"][0]["effect"] == "none" and s["steps"][0]["submodels"][0]["name
 d = json.load(open(sys.argv[2], encoding="utf-8"))
 open(sys.argv[3], "wb").write((d["config"] + "\0" + d["data"] + "\0" + d["report"]).encode("utf-8"))
 )");
-  ASSERT_EQ(std::system(("/usr/bin/python3 " + checker + " " + sh_quote(report + "/summary.json") + " " + paths +
-                         " " + path("parsed.bin")).c_str()),
+  ASSERT_EQ(std::system(("/usr/bin/python3 " + checker + " " + sh_quote(report + "/summary.json") + " " + paths + " " +
+                         path("parsed.bin"))
+                            .c_str()),
             0);
   std::ifstream parsed(path("parsed.bin"), std::ios::binary);
   const std::string nul(1, '\0');
@@ -459,10 +477,10 @@ const std::string kShared = MODALWATCH_SHARED_DATA;
 
 // The measured records are read in place from MODALWATCH_SHARED_DATA; without
 // them these tests skip.
-#define SKIP_WITHOUT_SHARED(file)                                                                  \
-  do {                                                                                             \
-    if (!std::filesystem::exists(kShared + "/" + (file)))                                          \
-      GTEST_SKIP() << "measured record " << (file) << " not found in " << kShared                  \
+#define SKIP_WITHOUT_SHARED(file)                                                                     \
+  do {                                                                                                \
+    if (!std::filesystem::exists(kShared + "/" + (file)))                                             \
+      GTEST_SKIP() << "measured record " << (file) << " not found in " << kShared                     \
                    << " (configure with -DMODALWATCH_SHARED_DATA=<folder of the benchmark records>)"; \
   } while (false)
 

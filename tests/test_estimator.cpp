@@ -20,12 +20,12 @@
 #include "estimator_support.hpp"
 #include "support.hpp"
 
-#include "modalwatch/io/config.hpp"
 #include "modalwatch/estimator.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/prefilter.hpp"
-#include "modalwatch/transfer_function.hpp"
 #include "modalwatch/simulator.hpp"
 #include "modalwatch/srivc.hpp"
+#include "modalwatch/transfer_function.hpp"
 
 namespace modalwatch {
 namespace {
@@ -307,10 +307,10 @@ TEST(RecursiveEstimator, BadSamplesAreCountedAndNeverBecomeNaN) {
     const double t = r.t(k);
     if (k == 2500) s.y = std::numeric_limits<double>::quiet_NaN();  // a NaN sample
     if (k == 2600) s.u = std::numeric_limits<double>::infinity();
-    if (k == 3000) t_shift = 10.0, s.t += 10.0;                       // a 10 s gap
-    if (k == 3500) s.y = 1e12;                                        // a wild sample
-    if (t > 250.0 && t <= 310.0) s.u = 0.0, s.r = 0.0;                // 60 s without input
-    if (k == 4000) est.step(s);                                       // a duplicate
+    if (k == 3000) t_shift = 10.0, s.t += 10.0;         // a 10 s gap
+    if (k == 3500) s.y = 1e12;                          // a wild sample
+    if (t > 250.0 && t <= 310.0) s.u = 0.0, s.r = 0.0;  // 60 s without input
+    if (k == 4000) est.step(s);                         // a duplicate
     est.step(s);
     for (int i = 0; i < 3; ++i) {
       const ModeEstimate m = est.mode(i);
@@ -455,8 +455,12 @@ void expect_kernels_agree(const AdditiveModel& model, const KernelRun& run_case,
     ASSERT_EQ(portable.step(s), fma.step(s)) << run_case.name << ": flags differ at k=" << k;
     for (int i = 0; i < K; ++i) {
       const ModeEstimate a = portable.mode(i), b = fma.mode(i);
-      for (auto [x, y] : {std::pair{a.value.wn, b.value.wn}, {a.value.zeta, b.value.zeta}, {a.value.gain, b.value.gain},
-                          {a.std.wn, b.std.wn}, {a.std.zeta, b.std.zeta}, {a.std.gain, b.std.gain}})
+      for (auto [x, y] : {std::pair{a.value.wn, b.value.wn},
+                          {a.value.zeta, b.value.zeta},
+                          {a.value.gain, b.value.gain},
+                          {a.std.wn, b.std.wn},
+                          {a.std.zeta, b.std.zeta},
+                          {a.std.gain, b.std.gain}})
         compare(x, y, k);
     }
     compare(portable.residual_rms(), fma.residual_rms(), k);
@@ -496,7 +500,8 @@ TEST(RecursiveEstimator, AvxFmaKernelGivesThePortableEstimatesToRoundOff) {
   refined.settings.refinements = 2;
   expect_kernels_agree(c.model, refined, 1e-12);
   // An interpolated output (FOH): four Prefilters per block, not the bank.
-  KernelRun foh{"closed loop, FOH output", settings_for(c, {0.999, 0.999, 0.999}, 1000), shipped.record.segment(0, 6000)};
+  KernelRun foh{"closed loop, FOH output", settings_for(c, {0.999, 0.999, 0.999}, 1000),
+                shipped.record.segment(0, 6000)};
   foh.settings.output_hold = Hold::foh;
   expect_kernels_agree(c.model, foh, 1e-12);
 }
@@ -554,7 +559,7 @@ RandomCase random_case(std::uint64_t seed) {
   rc.plant.snr_db = 30.0;
   ExperimentSpec& e = rc.experiment;
   e.sample_time = 1.0 / (ws[2] / (2 * kPi) * 20.0);  // 20 samples per period of the fastest mode
-  e.duration = 600.0 * 2 * kPi / ws[0];               // 600 periods of the slowest
+  e.duration = 600.0 * 2 * kPi / ws[0];              // 600 periods of the slowest
   e.seed = seed;
   e.closed_loop = true;
   // Proportional control: each positive-gain mode has its phase in (-180, 0) deg,
@@ -562,7 +567,8 @@ RandomCase random_case(std::uint64_t seed) {
   // continuous time; sampling adds lag, so k backs off until the sampled loop is
   // provably stable (spectral radius of the ZOH loop) with margin.
   const double T = e.sample_time;
-  Eigen::MatrixXd phi = Eigen::MatrixXd::Zero(6, 6), gamma = Eigen::MatrixXd::Zero(6, 1), cmat = Eigen::MatrixXd::Zero(1, 6);
+  Eigen::MatrixXd phi = Eigen::MatrixXd::Zero(6, 6), gamma = Eigen::MatrixXd::Zero(6, 1),
+                  cmat = Eigen::MatrixXd::Zero(1, 6);
   for (int i = 0; i < 3; ++i) {
     const Discretization d = discretize(rc.truth.submodels[i].denominator(), T, Hold::zoh);
     phi.block(2 * i, 2 * i, 2, 2) = d.phi;
@@ -611,12 +617,14 @@ TEST(RecursiveEstimator, TwentyRandomPlantsConvergeAndTrackWithoutDivergence) {
     const Tracking tr = track(est, sim, sim.record.t(sim.record.size() / 5));
     double worst = 0.0;
     for (int i = 0; i < 3; ++i) worst = std::max(worst, tr.percentile(tr.wn[i], 0.95));
-    std::printf("plant %2llu: warm-up fit %d, reason '%s', clamps %llu, outliers %llu, low %llu\n", static_cast<unsigned long long>(seed),
-                est.status().warmup_fit_used, est.status().last_reset_reason,
-                static_cast<unsigned long long>(est.status().covariance_clamps), static_cast<unsigned long long>(est.status().outliers),
+    std::printf("plant %2llu: warm-up fit %d, reason '%s', clamps %llu, outliers %llu, low %llu\n",
+                static_cast<unsigned long long>(seed), est.status().warmup_fit_used, est.status().last_reset_reason,
+                static_cast<unsigned long long>(est.status().covariance_clamps),
+                static_cast<unsigned long long>(est.status().outliers),
                 static_cast<unsigned long long>(est.status().low_excitation_samples));
     std::printf("plant %2llu: f = %.2f %.2f %.2f Hz  zeta = %.3f %.3f %.3f  wn p95 %.3f %%  resets %llu\n",
-                static_cast<unsigned long long>(seed), rc.truth.submodels[0].response(0).real() * 0 + modal_parameters(rc.truth.submodels[0]).hz(),
+                static_cast<unsigned long long>(seed),
+                rc.truth.submodels[0].response(0).real() * 0 + modal_parameters(rc.truth.submodels[0]).hz(),
                 modal_parameters(rc.truth.submodels[1]).hz(), modal_parameters(rc.truth.submodels[2]).hz(),
                 modal_parameters(rc.truth.submodels[0]).zeta, modal_parameters(rc.truth.submodels[1]).zeta,
                 modal_parameters(rc.truth.submodels[2]).zeta, worst,
@@ -626,7 +634,6 @@ TEST(RecursiveEstimator, TwentyRandomPlantsConvergeAndTrackWithoutDivergence) {
   }
   EXPECT_EQ(failures, 0);
 }
-
 
 }  // namespace
 }  // namespace modalwatch

@@ -71,7 +71,6 @@ class StateTape final : public StateWriter, public StateReader {
   std::size_t next_ = 0;
 };
 
-
 // The seed's record, interrupted half way: state(), a fresh estimator with the
 // same settings, restore(), the rest, as a daemon restart does it (the restarted
 // daemon's next sample comes after a time gap). Everything the estimator carries
@@ -215,7 +214,6 @@ TEST(RecursiveEstimator, RestoreRejectsAStateOfAnotherStructureOrWithNonFiniteNu
   EXPECT_EQ(again.status().samples, 10u);
 }
 
-
 TEST(RecursiveEstimator, AfterRestoreTheFirstSampleIsAGapEvenOnARestartedClock) {
   const Config c = paper_config();
   ExperimentSpec e = *c.experiment;
@@ -240,9 +238,9 @@ TEST(RecursiveEstimator, AfterRestoreTheFirstSampleIsAGapEvenOnARestartedClock) 
   EXPECT_EQ(resumed.status().rejected_out_of_order, saved.status().rejected_out_of_order + 1);
   EXPECT_GT(resumed.status().updates, saved.status().updates + static_cast<std::uint64_t>(r.size() - half) / 2);
   for (int i = 0; i < 3; ++i)
-    EXPECT_NEAR(resumed.mode(i).value.wn / modal_parameters(c.plant->modes[i].submodel).wn, 1.0, 0.03) << "mode " << i + 1;
+    EXPECT_NEAR(resumed.mode(i).value.wn / modal_parameters(c.plant->modes[i].submodel).wn, 1.0, 0.03)
+        << "mode " << i + 1;
 }
-
 
 // The daemon runs the warm-up fit on another thread (defer_warmup_fit) while
 // samples keep arriving; `modalwatch track` runs it inside step(). Both must
@@ -341,7 +339,8 @@ TEST(RecursiveEstimator, WarmupFitJobMisuseIsRejected) {
   EXPECT_THROW(est.apply_warmup_fit(std::move(job)), std::logic_error);
   // The warm-up starts again, with a window of its own.
   unsigned flags = 0;
-  for (Eigen::Index k = 200; k < 400 && !(flags & kWarmupFitPending); ++k) flags = est.step({r.t(k), r.u(k), r.y(k), r.r(k)});
+  for (Eigen::Index k = 200; k < 400 && !(flags & kWarmupFitPending); ++k)
+    flags = est.step({r.t(k), r.u(k), r.y(k), r.r(k)});
   ASSERT_TRUE(est.warmup_fit_pending());
   WarmupFit again = est.take_warmup_fit();
   again.run();

@@ -29,17 +29,23 @@ const std::vector<ModalParameters> kBaseline = {{60.0, 0.05, 2.0}, {150.0, 0.03,
 
 double& at(ModalParameters& p, Quantity q) {
   switch (q) {
-    case Quantity::wn: return p.wn;
-    case Quantity::zeta: return p.zeta;
-    default: return p.gain;
+    case Quantity::wn:
+      return p.wn;
+    case Quantity::zeta:
+      return p.zeta;
+    default:
+      return p.gain;
   }
 }
 
 double get(const ModalParameters& p, Quantity q) {
   switch (q) {
-    case Quantity::wn: return p.wn;
-    case Quantity::zeta: return p.zeta;
-    default: return p.gain;
+    case Quantity::wn:
+      return p.wn;
+    case Quantity::zeta:
+      return p.zeta;
+    default:
+      return p.gain;
   }
 }
 
@@ -210,8 +216,8 @@ TEST(FaultDetector, NoiseConsistentWithTheReportedStdNeverFlagsOverTenThousandUp
 
 TEST(FaultDetector, LargeChangeWithHugeUncertaintyDoesNotFlag) {
   Stream s(configured());
-  s.value[0].wn = 0.7 * kBaseline[0].wn;      // -30 %
-  s.std_dev[0].wn = 0.2 * kBaseline[0].wn;    // but 1.5 sigma
+  s.value[0].wn = 0.7 * kBaseline[0].wn;    // -30 %
+  s.std_dev[0].wn = 0.2 * kBaseline[0].wn;  // but 1.5 sigma
   s.run(30.0);
   EXPECT_FALSE(s.detector.any_flag());
   EXPECT_FALSE(s.q(0, Quantity::wn).pending);
@@ -496,7 +502,7 @@ TEST(FaultDetector, ConfiguredAndLearnedBaselinesMix) {
 TEST(FaultDetector, InvalidUpdatesPauseLearningAndAreLeftOutOfTheMean) {
   constexpr double window = 10.0;
   Stream s(learned(1, window));
-  s.run(6.0);  // 60 valid updates at the baseline: 5.9 s of the window
+  s.run(6.0);                              // 60 valid updates at the baseline: 5.9 s of the window
   s.value[0] = scaled(kBaseline[0], 3.0);  // garbage while the excitation is low
   s.run(100.0, false);
   EXPECT_FALSE(s.detector.status()[0].baseline_ready);

@@ -10,15 +10,15 @@
 #include <random>
 #include <vector>
 
-#include <Eigen/Cholesky>
 #include <gtest/gtest.h>
+#include <Eigen/Cholesky>
 
 #include "modalwatch/fault_detector.hpp"
 
 namespace modalwatch {
 namespace {
 
-constexpr double kPeriod = 0.1;  // s between updates (the publish period)
+constexpr double kPeriod = 0.1;                 // s between updates (the publish period)
 constexpr double kMemory = kDefaultMemoryTime;  // s
 const std::vector<ModalParameters> kTruth = {{60.0, 0.05, 2.0}, {150.0, 0.03, 0.5}, {400.0, 0.02, 0.1}};
 
@@ -37,7 +37,10 @@ Eigen::Matrix3d covariance(const ModalParameters& x, double rel) {
 // One mode's estimates, advanced by kPeriod per call.
 struct Estimates {
   Estimates(const ModalParameters& truth, const Eigen::Matrix3d& c, std::uint64_t seed, double tau = kMemory)
-      : mean(vec(truth)), cov(c), l(Eigen::LLT<Eigen::Matrix3d>(c).matrixL()), rho(std::exp(-kPeriod / tau)),
+      : mean(vec(truth)),
+        cov(c),
+        l(Eigen::LLT<Eigen::Matrix3d>(c).matrixL()),
+        rho(std::exp(-kPeriod / tau)),
         rng(seed) {
     e = Eigen::Vector3d(z(rng), z(rng), z(rng));  // stationary from the start
   }
@@ -93,9 +96,15 @@ struct Feed {
 
 ModalParameters with(ModalParameters p, Quantity q, double factor) {
   switch (q) {
-    case Quantity::wn: p.wn *= factor; break;
-    case Quantity::zeta: p.zeta *= factor; break;
-    default: p.gain *= factor; break;
+    case Quantity::wn:
+      p.wn *= factor;
+      break;
+    case Quantity::zeta:
+      p.zeta *= factor;
+      break;
+    default:
+      p.gain *= factor;
+      break;
   }
   return p;
 }
@@ -156,9 +165,10 @@ TEST(FaultStatistics, StationaryEstimatesRaiseFalseAlarmsAtTheStatedRateAndNoneA
     ASSERT_FALSE(d.detector.any_flag()) << "defaults, update " << j;
   }
   const double expected = kTruth.size() * hours / interval;
-  std::printf("  %g mode-hours at %g h between false alarms: %d alarms (%d chi-square, %d CUSUM), %g expected"
-              " (%g each)\n",
-              kTruth.size() * hours, interval, alarms, by_chi, by_cusum, expected, expected / 2);
+  std::printf(
+      "  %g mode-hours at %g h between false alarms: %d alarms (%d chi-square, %d CUSUM), %g expected"
+      " (%g each)\n",
+      kTruth.size() * hours, interval, alarms, by_chi, by_cusum, expected, expected / 2);
   for (std::size_t i = 0; i < kTruth.size(); ++i) {
     const DetectionThresholds& th = a.detector.thresholds(static_cast<int>(i));
     std::printf("  memory %g s: h = %.2f, b = %.2f, k = %.4f; %d alarms, %g expected\n", memory[i], th.chi_square,
@@ -197,7 +207,10 @@ TEST(FaultStatistics, StepsOfTwiceTheRelativeThresholdAreFlaggedWithinHoldPlusTw
         r.step({changed});
         if (r.q(0, q).flagged) t_flag = now;
       }
-      std::printf("  %s %+g %%: flagged %.1f s after the step\n", q == Quantity::wn ? "wn" : q == Quantity::zeta ? "zeta" : "gain",
+      std::printf("  %s %+g %%: flagged %.1f s after the step\n",
+                  q == Quantity::wn     ? "wn"
+                  : q == Quantity::zeta ? "zeta"
+                                        : "gain",
                   sign * 200.0 * th.relative_threshold, t_flag - t_step);
       ASSERT_FALSE(std::isnan(t_flag));
       EXPECT_LE(t_flag - t_step, bound);

@@ -23,8 +23,8 @@
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/lcm_log.hpp"
-#include "modalwatch/io/records.hpp"
 #include "modalwatch/io/messages.hpp"
+#include "modalwatch/io/records.hpp"
 #include "modalwatch/simulator.hpp"
 
 namespace modalwatch {
@@ -202,7 +202,7 @@ TEST_F(LcmLog, CorruptLogsAreInputErrorsNamingTheByteOffset) {
   EXPECT_NE(error_of([&] { parse_lcm_log(b, "long.lcm"); }).find("byte offset 77: truncated event"), std::string::npos);
   // A corrupt sample packet inside a well-formed event is skipped and counted.
   b = good;
-  b[28 + 1 + 3] ^= 0xFF;  // fingerprint of the first sample
+  b[28 + 1 + 3] ^= 0xFF;                                   // fingerprint of the first sample
   EXPECT_EQ(parse_lcm_log(b, "fp.lcm").skipped_type, 2u);  // it and the heartbeat
   // Random bytes behind a sync word: an InputError or a record, never a crash.
   std::mt19937 rng(7);
@@ -270,7 +270,8 @@ TEST_F(LcmLog, SimulateReadsItsExcitationFromALogAsFromCsv) {
   write_log(path("run.lcm"), rec, "MODALWATCH_SAMPLES", 1);
   std::ifstream in(kConfig);
   std::string yaml(std::istreambuf_iterator<char>(in), {});
-  const std::string from = "    type: sum_of_sines\n    amplitudes: [3, 1, 1, 1]\n    frequencies_rad_s: [0.005, 2, 5, 17.5]\n";
+  const std::string from =
+      "    type: sum_of_sines\n    amplitudes: [3, 1, 1, 1]\n    frequencies_rad_s: [0.005, 2, 5, 17.5]\n";
   ASSERT_NE(yaml.find(from), std::string::npos);
   const auto config_with = [&](const std::string& name, const std::string& reference) {
     std::string text = yaml;
@@ -280,8 +281,8 @@ TEST_F(LcmLog, SimulateReadsItsExcitationFromALogAsFromCsv) {
     return path(name);
   };
   const std::string from_csv = config_with("csv.yaml", "    type: csv\n    path: run.csv\n    column: r\n");
-  const std::string from_log = config_with(
-      "log.yaml", "    type: csv\n    path: run.lcm\n    column: r\n    channel: MODALWATCH_SAMPLES\n");
+  const std::string from_log =
+      config_with("log.yaml", "    type: csv\n    path: run.lcm\n    column: r\n    channel: MODALWATCH_SAMPLES\n");
   const auto a = run_cli("simulate -c " + from_csv + " -o " + path("a.csv"));
   const auto b = run_cli("simulate -c " + from_log + " -o " + path("b.csv"));
   ASSERT_EQ(a.code, 0) << a.output;
@@ -303,8 +304,10 @@ TEST_F(LcmLog, SimulateReadsItsExcitationFromALogAsFromCsv) {
   EXPECT_EQ(ambiguous.code, 2);
   EXPECT_NE(ambiguous.output.find("key 'simulation.reference.path'"), std::string::npos) << ambiguous.output;
   EXPECT_NE(ambiguous.output.find("choose one"), std::string::npos) << ambiguous.output;
-  const auto no_column = run_cli("simulate -c " + config_with("q.yaml", "    type: csv\n    path: run.lcm\n"
-                                                                         "    column: q\n    channel: MODALWATCH_SAMPLES\n") +
+  const auto no_column = run_cli("simulate -c " +
+                                 config_with("q.yaml",
+                                             "    type: csv\n    path: run.lcm\n"
+                                             "    column: q\n    channel: MODALWATCH_SAMPLES\n") +
                                  " -o " + path("c.csv"));
   EXPECT_EQ(no_column.code, 2);
   EXPECT_NE(no_column.output.find("no such column"), std::string::npos) << no_column.output;

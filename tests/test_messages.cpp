@@ -39,8 +39,7 @@ void put_i32(Bytes& b, int off, std::int32_t v) { put_u(b, off, std::bit_cast<st
 void put_i64(Bytes& b, int off, std::int64_t v) { put_u(b, off, std::bit_cast<std::uint64_t>(v), 8); }
 void put_f64(Bytes& b, int off, double v) { put_u(b, off, std::bit_cast<std::uint64_t>(v), 8); }
 
-std::vector<StampedSample> make_samples(int n, std::int64_t utime0, std::int64_t seq0,
-                                       double period) {
+std::vector<StampedSample> make_samples(int n, std::int64_t utime0, std::int64_t seq0, double period) {
   std::vector<StampedSample> s(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) {
     auto& x = s[static_cast<std::size_t>(i)];
@@ -60,8 +59,7 @@ struct Decoded {
 
 enum class Kind { sample, batch, any };
 
-Decoded decode(const Bytes& b, Kind kind, int capacity = 256, bool closed_loop = true,
-               int size = -1) {
+Decoded decode(const Bytes& b, Kind kind, int capacity = 256, bool closed_loop = true, int size = -1) {
   Decoded d;
   d.samples.assign(static_cast<std::size_t>(capacity), StampedSample{});
   const int n = size < 0 ? static_cast<int>(b.size()) : size;
@@ -261,8 +259,7 @@ TEST(Messages, HeartbeatOnSampleChannelIsWrongFingerprint) {
   hb.uptime_us = 5;
   Bytes b(static_cast<std::size_t>(hb.getEncodedSize()));
   ASSERT_GT(hb.encode(b.data(), 0, static_cast<int>(b.size())), 0);
-  for (Kind k : {Kind::sample, Kind::batch, Kind::any})
-    EXPECT_EQ(decode(b, k).result, DecodeResult::wrong_fingerprint);
+  for (Kind k : {Kind::sample, Kind::batch, Kind::any}) EXPECT_EQ(decode(b, k).result, DecodeResult::wrong_fingerprint);
 }
 
 TEST(Messages, CountMustBeWithinCapacityAndMatchThePacket) {
@@ -287,8 +284,8 @@ TEST(Messages, CountMustBeWithinCapacityAndMatchThePacket) {
   put_i32(huge, kCount, std::numeric_limits<std::int32_t>::max());
   std::vector<StampedSample> out(1);
   int n_out = -1;
-  EXPECT_EQ(decode_batch(huge.data(), static_cast<int>(huge.size()), true, out.data(),
-                         std::numeric_limits<int>::max(), n_out),
+  EXPECT_EQ(decode_batch(huge.data(), static_cast<int>(huge.size()), true, out.data(), std::numeric_limits<int>::max(),
+                         n_out),
             DecodeResult::truncated);
   EXPECT_EQ(n_out, 0);
 }
@@ -339,8 +336,7 @@ TEST(Messages, RandomBytesNeverCrash) {
       }
     }
     int n_out = -1;
-    const DecodeResult r = decode_samples(b.data(), static_cast<int>(b.size()), true, out.data(),
-                                          capacity, n_out);
+    const DecodeResult r = decode_samples(b.data(), static_cast<int>(b.size()), true, out.data(), capacity, n_out);
     if (r != DecodeResult::ok) {
       ASSERT_EQ(n_out, 0);
       continue;
@@ -360,7 +356,9 @@ TEST(Messages, RandomBytesNeverCrash) {
       sample_t g{};
       ASSERT_EQ(g.decode(b.data(), 0, static_cast<int>(b.size())), kSampleWireSize);
       ASSERT_EQ(g.seq, out[0].seq);
-      ASSERT_TRUE(g.u == out[0].u || (std::isnan(g.u) && std::isnan(out[0].u))) << g.u << " " << out[0].u << " " << std::bit_cast<std::uint64_t>(g.u) << " " << std::bit_cast<std::uint64_t>(out[0].u);
+      ASSERT_TRUE(g.u == out[0].u || (std::isnan(g.u) && std::isnan(out[0].u)))
+          << g.u << " " << out[0].u << " " << std::bit_cast<std::uint64_t>(g.u) << " "
+          << std::bit_cast<std::uint64_t>(out[0].u);
     } else {
       sample_batch_t g{};
       ASSERT_EQ(g.decode(b.data(), 0, static_cast<int>(b.size())), static_cast<int>(b.size()));
@@ -397,8 +395,8 @@ struct Collector {
     EXPECT_EQ(channel, "MODALWATCH_SAMPLES");
     ++packets;
     int n_out = 0;
-    const DecodeResult r = decode_samples(rbuf->data, static_cast<int>(rbuf->data_size), true,
-                                          buffer.data(), static_cast<int>(buffer.size()), n_out);
+    const DecodeResult r = decode_samples(rbuf->data, static_cast<int>(rbuf->data_size), true, buffer.data(),
+                                          static_cast<int>(buffer.size()), n_out);
     if (r == DecodeResult::ok) {
       ++ok;
       samples.insert(samples.end(), buffer.begin(), buffer.begin() + n_out);

@@ -171,9 +171,9 @@ MetricsSnapshot example_snapshot() {
   s.counters.decode_errors = 2;
   s.counters.flag_changes = 1;
   s.counters.samples_lost = 7;
-  s.tick.record(3'000);        // le 5 us
-  s.tick.record(5'000);        // le 5 us (the bound is inclusive)
-  s.tick.record(700'000);      // le 1 ms
+  s.tick.record(3'000);          // le 5 us
+  s.tick.record(5'000);          // le 5 us (the bound is inclusive)
+  s.tick.record(700'000);        // le 1 ms
   s.tick.record(1'000'000'000);  // +Inf
   return s;
 }
@@ -204,7 +204,8 @@ TEST(Metrics, ExposesGaugesCountersAndHistogramWithTheirLabels) {
   const Labels flex{{"axis", "x"}, {"mode", "flex"}};
   const Labels rigid{{"axis", "x"}, {"mode", "rigid"}};
   EXPECT_TRUE(has_value(s, "modalwatch_mode_frequency_hertz", flex, 50.0));
-  EXPECT_TRUE(has_value(s, "modalwatch_mode_angular_frequency_radians_per_second", flex, 2.0 * std::numbers::pi * 50.0));
+  EXPECT_TRUE(
+      has_value(s, "modalwatch_mode_angular_frequency_radians_per_second", flex, 2.0 * std::numbers::pi * 50.0));
   EXPECT_TRUE(has_value(s, "modalwatch_mode_damping_ratio", flex, 0.02));
   EXPECT_TRUE(has_value(s, "modalwatch_mode_gain", flex, 1.5));
   EXPECT_TRUE(has_value(s, "modalwatch_mode_frequency_stddev_hertz", flex, 0.25));
@@ -271,7 +272,7 @@ TEST(Metrics, CountersAdvanceByTheDifferenceAndIgnoreARestart) {
   snap.counters.samples_received = 1500;
   snap.counters.flag_changes = 2;
   snap.modes[1].status.quantity[0].flagged = false;  // cleared
-  snap.tick.record(20'000);  // le 25 us
+  snap.tick.record(20'000);                          // le 25 us
   endpoint.update(snap);
 
   const Labels axis{{"axis", "y"}};

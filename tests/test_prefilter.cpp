@@ -173,10 +173,10 @@ TEST(Prefilter, SecondOrderClosedFormMatchesTheMatrixExponentialInEveryBranch) {
   struct Case {
     double d0, d1, d2;
   };
-  const Case cases[] = {{1.0, 2.0 * 0.1 / 7.0, 1.0 / 49.0},   // underdamped
-                        {1.0, 2.0 * 2.5 / 3.0, 1.0 / 9.0},    // overdamped
-                        {1.0, 2.0 / 5.0, 1.0 / 25.0},         // critically damped
-                        {2.5, 0.3, 0.7},                      // d0 != 1
+  const Case cases[] = {{1.0, 2.0 * 0.1 / 7.0, 1.0 / 49.0},       // underdamped
+                        {1.0, 2.0 * 2.5 / 3.0, 1.0 / 9.0},        // overdamped
+                        {1.0, 2.0 / 5.0, 1.0 / 25.0},             // critically damped
+                        {2.5, 0.3, 0.7},                          // d0 != 1
                         {1.0, 2.0 * 0.001 / 20.0, 1.0 / 400.0}};  // light damping
   int checked = 0;
   for (const Case& c : cases) {

@@ -7,9 +7,9 @@
 
 #include <gtest/gtest.h>
 
+#include "estimator/second_order_filter_bank.hpp"
 #include "modalwatch/model.hpp"
 #include "modalwatch/prefilter.hpp"
-#include "estimator/second_order_filter_bank.hpp"
 
 namespace modalwatch {
 namespace {
@@ -114,7 +114,8 @@ TEST(SecondOrderFilterBank, CompleteStateGivesTheStateAndKeepsTheFilterOnTrack) 
   for (int i = 0; i < SecondOrderFilterBank::kSignals; ++i) reference.emplace_back(denominator(0), T, Hold::zoh);
   SecondOrderFilterBank bank;
   const Eigen::VectorXd d_start = denominator(0);
-  bank.set_denominator(d_start(0), d_start(1), d_start(2), discretize_second_order(d_start(0), d_start(1), d_start(2), T));
+  bank.set_denominator(d_start(0), d_start(1), d_start(2),
+                       discretize_second_order(d_start(0), d_start(1), d_start(2), T));
   double worst = 0.0;
   for (int k = 0; k < n; ++k) {
     bank.advance_all();

@@ -65,8 +65,7 @@ DiscreteTransferFunction paper_controller() { return {{0.02329, -0.02058, 0.0045
 
 PlantSpec paper_plant() {
   PlantSpec p;
-  p.modes = {resonant("mode1", 2.0, 0.25, 3.0), resonant("mode2", 5.0, 0.025, 0.5),
-             resonant("mode3", 20.0, 0.1, 1.0)};
+  p.modes = {resonant("mode1", 2.0, 0.25, 3.0), resonant("mode2", 5.0, 0.025, 0.5), resonant("mode3", 20.0, 0.1, 1.0)};
   return p;
 }
 
@@ -140,7 +139,7 @@ double spectral_radius(const DiscreteTransferFunction& c, const ZohPlant& g) {
 
 // Loop robustness from L = C G on a log grid up to Nyquist.
 struct Margins {
-  double min_return = 1e300;      // min |1 + L| (1 / peak sensitivity)
+  double min_return = 1e300;        // min |1 + L| (1 / peak sensitivity)
   double min_phase_margin = 1e300;  // deg, over all gain crossovers
 };
 
@@ -194,7 +193,7 @@ void expect_mode_step(double wn, double zeta, double gain, double T, Eigen::Inde
 }
 
 TEST(SimulatorOpenLoop, ModeStepResponseIsExactAtSamples) {
-  expect_mode_step(20.0, 0.1, 1.0, 0.05, 400);                 // 1 rad per sample (paper's mode 3)
+  expect_mode_step(20.0, 0.1, 1.0, 0.05, 400);                    // 1 rad per sample (paper's mode 3)
   expect_mode_step(2.0 * kPi * 700.0, 0.01, 2.5e-9, 1e-4, 3000);  // 700 Hz mode at 10 kHz
 }
 

@@ -123,9 +123,9 @@ static_assert(std::is_trivially_copyable_v<Point>);
 // been published shows up as an inconsistent payload (and as a race under TSan).
 struct Payload {
   std::uint64_t seq;
-  std::uint64_t inverted;  // ~seq
-  double half;             // seq * 0.5
-  std::uint32_t words[10]; // seq + k
+  std::uint64_t inverted;   // ~seq
+  double half;              // seq * 0.5
+  std::uint32_t words[10];  // seq + k
 };
 static_assert(sizeof(Payload) >= 64);
 
@@ -467,8 +467,7 @@ TEST(SpscRingThreads, DroppingProducerCountsEveryLostItem) {
   std::thread consumer([&] {
     // Start only once the producer has hit a full ring, so drops are certain.
     Backoff backoff;
-    while (!first_drop.load(std::memory_order_acquire) &&
-           !producer_done.load(std::memory_order_acquire)) {
+    while (!first_drop.load(std::memory_order_acquire) && !producer_done.load(std::memory_order_acquire)) {
       backoff.wait();
     }
     bool have_last = false;
@@ -514,10 +513,8 @@ TEST(SpscRingThreads, DroppingProducerCountsEveryLostItem) {
   EXPECT_GE(received, 1u);
   EXPECT_LT(last_seq, n);
   EXPECT_TRUE(ring.empty());
-  std::printf("  %llu produced in %.3f s: %llu received, %llu dropped\n",
-              static_cast<unsigned long long>(n), seconds,
-              static_cast<unsigned long long>(received),
-              static_cast<unsigned long long>(dropped));
+  std::printf("  %llu produced in %.3f s: %llu received, %llu dropped\n", static_cast<unsigned long long>(n), seconds,
+              static_cast<unsigned long long>(received), static_cast<unsigned long long>(dropped));
   RecordProperty("items", std::to_string(n));
   RecordProperty("dropped", std::to_string(dropped));
   RecordProperty("seconds", std::to_string(seconds));

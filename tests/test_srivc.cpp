@@ -210,7 +210,8 @@ Stats monte_carlo(int runs, bool closed) {
   for (int run = 0; run < runs; ++run) {
     const auto e = closed ? paper_closed_loop(1000.0, 100 + run) : open_loop_prbs(0.05, 1000.0, 100 + run);
     const auto sim = simulate(plant, e);
-    const FitResult fit = fit_srivc(sim.record, perturbed(truth, 0.05), closed ? closed_loop_options() : SrivcOptions{});
+    const FitResult fit =
+        fit_srivc(sim.record, perturbed(truth, 0.05), closed ? closed_loop_options() : SrivcOptions{});
     for (int i = 0; i < K; ++i) {
       const auto p = modal_parameters(fit.model.submodels[i]);
       const auto s = modal_std(fit.model.submodels[i], fit.theta_covariance(i));
@@ -339,8 +340,7 @@ AdditiveModel rao_garnier_truth_additive() {
     sub.a = polynomial_from_roots(pr).tail(2);
     // Residue of G at s: N(s)/D'(s). The pair's part c/(p - s) + conj(c)/(p - conj s)
     // = (2 Re(c) p - 2 Re(c conj s)) / (p^2 - 2 Re(s) p + |s|^2), made anti-monic.
-    const std::complex<double> c =
-        (-6400.0 * s + 1600.0) / (4.0 * std::pow(s, 3) + 15.0 * s * s + 816.0 * s + 416.0);
+    const std::complex<double> c = (-6400.0 * s + 1600.0) / (4.0 * std::pow(s, 3) + 15.0 * s * s + 816.0 * s + 416.0);
     const double den0 = std::norm(s);
     sub.b.resize(2);
     sub.b << -2.0 * (c * std::conj(s)).real() / den0, 2.0 * c.real() / den0;

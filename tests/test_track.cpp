@@ -10,18 +10,18 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
-#include <random>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
 
-#include "support.hpp"
 #include "../src/cli/number_format.hpp"
+#include "support.hpp"
 
 #include "modalwatch/io/csv.hpp"
 
@@ -51,7 +51,8 @@ std::string paper_config() { return std::string(MODALWATCH_SOURCE_DIR) + "/confi
 std::string expected_header() {
   std::string h = "t";
   for (const char* mode : {"mode1", "mode2", "mode3"})
-    for (const char* q : {"_wn", "_zeta", "_gain", "_wn_std", "_zeta_std", "_gain_std"}) h += std::string(",") + mode + q;
+    for (const char* q : {"_wn", "_zeta", "_gain", "_wn_std", "_zeta_std", "_gain_std"})
+      h += std::string(",") + mode + q;
   return h + ",residual_rms,flags,resets";
 }
 
@@ -66,7 +67,6 @@ class Track : public test_support::ScratchDir {
     for (const auto& e : fs::directory_iterator(dir_)) names.push_back(e.path().filename().string());
     return names;
   }
-
 };
 
 std::string first_line(const std::string& file) {
@@ -201,8 +201,8 @@ TEST_F(Track, WrongSampleRateIsCaughtOnTheFirstBlockOfALongRecord) {
 
   std::ostringstream late;
   late << "t,r,u,y\n";
-  for (int k = 0; k < 5000; ++k) late << k * 0.05 << ",0,0,0\n";               // 20 Hz for 5000 rows
-  for (int k = 0; k < 20000; ++k) late << 250.0 + k * 0.1 << ",0,0,0\n";      // then 10 Hz
+  for (int k = 0; k < 5000; ++k) late << k * 0.05 << ",0,0,0\n";          // 20 Hz for 5000 rows
+  for (int k = 0; k < 20000; ++k) late << 250.0 + k * 0.1 << ",0,0,0\n";  // then 10 Hz
   const Outcome r2 = track(write("late.csv", late.str()));
   EXPECT_EQ(r2.code, 2) << r2.output;
   EXPECT_TRUE(contains(r2.output, "sample time 0.100000 s (median step)")) << r2.output;

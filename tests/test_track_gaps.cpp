@@ -25,7 +25,7 @@ Outcome run(const std::string& args) { return test_support::run_cli(args); }
 std::string beam_config() { return std::string(MODALWATCH_SOURCE_DIR) + "/config/flexible-beam.yaml"; }
 
 constexpr double kRate = 4096.0;
-constexpr double kDuration = 35.0;  // s: before the flexible mode's drift (t = 40 s)
+constexpr double kDuration = 35.0;     // s: before the flexible mode's drift (t = 40 s)
 constexpr double kFirstDamage = 12.0;  // s: well after the 5 s warm-up
 
 // The largest difference of the flexible mode's estimate from the reference run
@@ -48,8 +48,8 @@ Difference difference(const Table& ref, const Table& est) {
     if (est.data(i, t) < kFirstDamage) continue;
     d.wn = std::max(d.wn, std::abs(est.data(i, wn) / ref.data(j, wn) - 1.0));
     d.zeta = std::max(d.zeta, std::abs(est.data(i, zeta) - ref.data(j, zeta)));
-    d.std_ratio = std::max({d.std_ratio, est.data(i, wn_std) / ref.data(j, wn_std),
-                            est.data(i, zeta_std) / ref.data(j, zeta_std)});
+    d.std_ratio = std::max(
+        {d.std_ratio, est.data(i, wn_std) / ref.data(j, wn_std), est.data(i, zeta_std) / ref.data(j, zeta_std)});
     d.resets = std::max(d.resets, est.data(i, resets));
   }
   return d;
@@ -108,8 +108,8 @@ TEST_F(TrackMissingData, ClustersOfGapsLeaveTheFlexibleModeAsWithoutThem) {
   EXPECT_NE(r.output.find("gaps: 15"), std::string::npos) << r.output;
   const Difference d = difference(read_table(path("clean_est.csv")), read_table(path("gaps_est.csv")));
   EXPECT_EQ(d.resets, 0.0);
-  EXPECT_LT(d.wn, 0.005);     // 0.5 % of wn
-  EXPECT_LT(d.zeta, 0.005);   // half the true damping
+  EXPECT_LT(d.wn, 0.005);    // 0.5 % of wn
+  EXPECT_LT(d.zeta, 0.005);  // half the true damping
   EXPECT_LT(d.std_ratio, 2.0);
 }
 

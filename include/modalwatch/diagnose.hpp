@@ -81,7 +81,7 @@ struct Spectra {
   Eigen::VectorXd residual_to_input;  // |S_eu / S_uu|
   Eigen::VectorXd coherence;          // |S_eu|^2 / (S_ee S_uu)
   int segments = 0;
-  Eigen::VectorXcd cross;             // S_eu / S_uu (complex), for mode starts
+  Eigen::VectorXcd cross;  // S_eu / S_uu (complex), for mode starts
 };
 Spectra welch_spectra(const Eigen::VectorXd& e, const Eigen::VectorXd& u, double T, int segment_length);
 
@@ -103,16 +103,16 @@ struct ResidualAnalysis {
 ResidualAnalysis analyse_residual(const Eigen::VectorXd& e, const Eigen::VectorXd& u, double T, int max_lag);
 
 struct DiagnoseOptions {
-  int max_steps = 5;                // effects added at most
-  double min_improvement = 0.10;    // an effect is added when it lowers the validation RMS by this fraction
-  int max_delay = 10;               // samples
-  int max_lag = 25;                 // residual correlation lags
-  int oe_iterations = 40;           // Levenberg-Marquardt iterations of the output-error refinement
+  int max_steps = 5;              // effects added at most
+  double min_improvement = 0.10;  // an effect is added when it lowers the validation RMS by this fraction
+  int max_delay = 10;             // samples
+  int max_lag = 25;               // residual correlation lags
+  int oe_iterations = 40;         // Levenberg-Marquardt iterations of the output-error refinement
   int max_modes_added = 4;
   // Samples at the start of the validation record that only set the model's
   // state (the estimation part before a split): simulated, not scored.
   Eigen::Index validation_lead_in = 0;
-  Hold output_hold = Hold::zoh;     // SRIVC prefilters
+  Hold output_hold = Hold::zoh;  // SRIVC prefilters
   std::vector<EffectKind> library = all_effects();
 };
 
@@ -138,9 +138,9 @@ struct DiagnoseStep {
   double validation_rms = 0.0;
   double fit_percent = 0.0;
   double bic = 0.0;
-  ResidualAnalysis residual;         // on the validation part
-  Eigen::VectorXd validation_output; // simulated
-  std::vector<Candidate> ranking;    // candidates tried from this step, best first
+  ResidualAnalysis residual;          // on the validation part
+  Eigen::VectorXd validation_output;  // simulated
+  std::vector<Candidate> ranking;     // candidates tried from this step, best first
 };
 
 struct DiagnoseResult {

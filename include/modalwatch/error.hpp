@@ -12,8 +12,7 @@ namespace modalwatch {
 class InputError : public std::runtime_error {
  public:
   InputError(std::string location, const std::string& message)
-      : std::runtime_error(location.empty() ? message : location + ": " + message),
-        location_(std::move(location)) {}
+      : std::runtime_error(location.empty() ? message : location + ": " + message), location_(std::move(location)) {}
   const std::string& location() const { return location_; }
 
  private:

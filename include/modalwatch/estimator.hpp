@@ -31,8 +31,8 @@
 #include <Eigen/Core>
 
 #include "modalwatch/model.hpp"
-#include "modalwatch/record.hpp"
 #include "modalwatch/prefilter.hpp"
+#include "modalwatch/record.hpp"
 #include "modalwatch/transfer_function.hpp"
 
 namespace modalwatch {
@@ -43,9 +43,9 @@ struct EstimatorSettings {
   DiscreteTransferFunction controller;  // closed loop: u = C_d(q)(r - y)
   Hold output_hold = Hold::zoh;         // intersample behaviour of y in the prefilters
 
-  int block_iterations = 1;   // M_l
-  int refinements = 0;        // M_s
-  int update_divisor = 1;     // subsampling: update every n-th sample, filter every sample
+  int block_iterations = 1;        // M_l
+  int refinements = 0;             // M_s
+  int update_divisor = 1;          // subsampling: update every n-th sample, filter every sample
   std::vector<double> forgetting;  // lambda_i in (0, 1], one per submodel
 
   // Initialisation (section 4.7). With warmup_samples > 0 the filters run over
@@ -63,11 +63,11 @@ struct EstimatorSettings {
 
   // Guards against what a recursive update cannot recover from by itself:
   // covariance wind-up, divergence, gaps, outliers, unexciting input.
-  double random_walk = 0.0;        // Q = random_walk^2 diag(theta'^2) added to P at each update
+  double random_walk = 0.0;  // Q = random_walk^2 diag(theta'^2) added to P at each update
   // Per submodel (empty: random_walk for every one): like the forgetting factor,
   // the drift a mode may follow is a property of that mode.
   std::vector<double> random_walks;
-  double covariance_bound = 100.0; // diag(P_i) is held below this times diag(P_i(t0))
+  double covariance_bound = 100.0;  // diag(P_i) is held below this times diag(P_i(t0))
   // Stabilised forgetting (Kulhavy & Zarrop 1993). Where the data leave a
   // direction of theta_i open (a setpoint with few frequencies, a closed loop
   // that filters them), exponential forgetting winds P_i up there and theta_i
@@ -83,10 +83,10 @@ struct EstimatorSettings {
   double stabilisation = 0.2;
   // Per submodel (empty: stabilisation for every one), as random_walks.
   std::vector<double> stabilisations;
-  double divergence_ratio = 10.0;  // residual RMS this many times its last good value: reset
-  double gap_factor = 1.5;         // a time step above gap_factor T is a gap: filter states reset
-  double outlier_sigma = 10.0;     // |y - y_hat| above this many residual std: sample replaced
-  double residual_window = 0.0;    // s, residual RMS window (0: 1/(1 - min lambda) samples)
+  double divergence_ratio = 10.0;      // residual RMS this many times its last good value: reset
+  double gap_factor = 1.5;             // a time step above gap_factor T is a gap: filter states reset
+  double outlier_sigma = 10.0;         // |y - y_hat| above this many residual std: sample replaced
+  double residual_window = 0.0;        // s, residual RMS window (0: 1/(1 - min lambda) samples)
   double low_excitation_ratio = 0.05;  // input power below this fraction of its reference: no update
   double low_excitation_window = 0.0;  // s (0: one period of the slowest mode)
 
@@ -94,8 +94,8 @@ struct EstimatorSettings {
 };
 
 struct EstimatorStatus {
-  std::uint64_t samples = 0;        // accepted samples
-  std::uint64_t updates = 0;        // parameter updates
+  std::uint64_t samples = 0;  // accepted samples
+  std::uint64_t updates = 0;  // parameter updates
   std::uint64_t rejected_nonfinite = 0;
   std::uint64_t rejected_out_of_order = 0;
   std::uint64_t gaps = 0;
@@ -103,11 +103,11 @@ struct EstimatorStatus {
   std::uint64_t low_excitation_samples = 0;
   std::uint64_t projections = 0;
   std::uint64_t covariance_clamps = 0;
-  std::uint64_t resets = 0;         // returns to the last good state
+  std::uint64_t resets = 0;  // returns to the last good state
   const char* last_reset_reason = "";
   bool warming_up = true;
   bool low_excitation = false;
-  bool warmup_fit_used = false;     // theta(t0) from the offline fit on the warm-up window
+  bool warmup_fit_used = false;  // theta(t0) from the offline fit on the warm-up window
 };
 
 // What step() did with a sample (bit flags).
@@ -222,7 +222,7 @@ class EstimatorState {
   bool have_last_sample_ = false;
   double last_t_ = 0.0;
   double last_u_ = 0.0, last_r_ = 0.0;  // held in place of a non-finite sample
-  EstimatorStatus status_;  // last_reset_reason: one of the estimator's own, or ""
+  EstimatorStatus status_;              // last_reset_reason: one of the estimator's own, or ""
 };
 
 // The offline additive SRIVC on the warm-up window and the initial state it

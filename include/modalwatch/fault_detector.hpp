@@ -34,9 +34,9 @@ struct FaultThresholds {
   double sigma_threshold = 4.0;
   // The size of change that matters: |x - x0| / |x0| past this, or no flag.
   double relative_threshold = 0.05;
-  double hold_time = 2.0;      // s past the thresholds before the flag rises
-  double clear_fraction = 0.5; // hysteresis: falls below this fraction of either threshold
-  double clear_time = 2.0;     // s below before it falls
+  double hold_time = 2.0;       // s past the thresholds before the flag rises
+  double clear_fraction = 0.5;  // hysteresis: falls below this fraction of either threshold
+  double clear_time = 2.0;      // s below before it falls
   bool operator==(const FaultThresholds&) const = default;
 };
 
@@ -58,7 +58,7 @@ struct ModeBaseline {
   // Covariance of value, row-major over (wn, zeta, gain): plain numbers, so that
   // ModeStatus stays trivially copyable (the daemon passes it through a lock-free ring).
   std::array<double, 9> covariance{};
-  bool learned = false;   // from the learning window rather than the config
+  bool learned = false;  // from the learning window rather than the config
   Eigen::Matrix3d covariance_matrix() const {
     return Eigen::Map<const Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(covariance.data());
   }
@@ -99,11 +99,11 @@ struct FaultDetectorSettings {
 // The detector's view of one quantity of one mode.
 struct QuantityStatus {
   bool flagged = false;
-  double deviation_sigma = 0.0;    // (x - x0) / sqrt(S_qq)
-  double deviation_relative = 0.0; // (x - x0) / |x0|
-  double cusum = 0.0;              // the larger one-sided CUSUM, in units of its threshold b
-  double since = 0.0;              // time the flag rose (or the condition began, when pending)
-  bool pending = false;            // past the thresholds, hold time not yet elapsed
+  double deviation_sigma = 0.0;     // (x - x0) / sqrt(S_qq)
+  double deviation_relative = 0.0;  // (x - x0) / |x0|
+  double cusum = 0.0;               // the larger one-sided CUSUM, in units of its threshold b
+  double since = 0.0;               // time the flag rose (or the condition began, when pending)
+  bool pending = false;             // past the thresholds, hold time not yet elapsed
 };
 
 struct ModeStatus {
@@ -111,10 +111,10 @@ struct ModeStatus {
   ModeBaseline baseline;
   bool baseline_ready = false;  // state != learning
   BaselineState state = BaselineState::learning;
-  double learn_progress = 0.0;      // learning: fraction of the window filled
+  double learn_progress = 0.0;             // learning: fraction of the window filled
   LearnHold learn_hold = LearnHold::none;  // learning: why the last window restarted
-  int learn_restarts = 0;           // windows begun and restarted so far
-  double chi_square = 0.0;          // T2 of the last valid update
+  int learn_restarts = 0;                  // windows begun and restarted so far
+  double chi_square = 0.0;                 // T2 of the last valid update
 };
 
 static_assert(std::is_trivially_copyable_v<ModeStatus>);
@@ -185,10 +185,10 @@ class FaultDetector {
   std::vector<DetectionThresholds> thresholds_;
   std::vector<ModeStatus> modes_;
   std::vector<Learning> learning_;
-  std::vector<std::array<double, 2 * kQuantities>> cusum_;  // G+ and G- per quantity
-  std::vector<std::array<double, kQuantities>> previous_;    // z_q of the last valid update
+  std::vector<std::array<double, 2 * kQuantities>> cusum_;    // G+ and G- per quantity
+  std::vector<std::array<double, kQuantities>> previous_;     // z_q of the last valid update
   std::vector<std::array<double, kQuantities>> below_since_;  // hold / clear timers
-  std::vector<Eigen::Matrix3d> diagonal_;  // the std overload's covariances
+  std::vector<Eigen::Matrix3d> diagonal_;                     // the std overload's covariances
   // Invalid updates pause every timer: each mode runs on its own clock, which
   // advances only between consecutive updates that are valid for that mode.
   std::vector<double> clock_;

@@ -31,8 +31,7 @@ enum class Hold { zoh, foh };
 inline constexpr int kMaxFilterOrder = 8;
 
 using FilterVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxFilterOrder + 1, 1>;
-using FilterMatrix =
-    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxFilterOrder, kMaxFilterOrder>;
+using FilterMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxFilterOrder, kMaxFilterOrder>;
 
 // x(t_{k+1}) = phi x(t_k) + gamma0 w_k + gamma1 (w_{k+1} - w_k)
 // (gamma1 = 0 for ZOH).
@@ -129,7 +128,7 @@ SecondOrderDiscretization discretize_second_order_closed_form(double d0, double 
 // per-sample path once per instruction set (portable and AVX2+FMA) and needs
 // the body where it re-discretises.
 [[gnu::always_inline]] inline SecondOrderDiscretization discretize_second_order(double d0, double d1, double d2,
-                                                                               double T) noexcept {
+                                                                                double T) noexcept {
   const double bB = 1.0 / d2;
   const detail::M2 AT{0.0, T, -d0 / d2 * T, -d1 / d2 * T};
   const double norm = std::max(std::abs(AT.b), std::abs(AT.c) + std::abs(AT.d));
@@ -170,8 +169,8 @@ SecondOrderDiscretization discretize_second_order_closed_form(double d0, double 
     u2 = cb * u2 + AT.d * u1 + detail::kFactorial.inverse[k];      // u_{k-2}
     u1 = cb * u1 + AT.d * u2 + detail::kFactorial.inverse[k - 1];  // u_{k-3}
   }
-  const double v0 = AT.b * u2, v1 = u1;  // s1 = Psi1 e2
-  const double s0 = AT.b * v1, s1 = 1.0 + AT.c * v0 + AT.d * v1;  // Psi0 e2
+  const double v0 = AT.b * u2, v1 = u1;                             // s1 = Psi1 e2
+  const double s0 = AT.b * v1, s1 = 1.0 + AT.c * v0 + AT.d * v1;    // Psi0 e2
   const double p01 = AT.b * s1, p11 = 1.0 + AT.c * s0 + AT.d * s1;  // phi e2
   const double c1 = p01 / AT.b, c0 = p11 - c1 * AT.d;
   z.phi[0][0] = c0;
@@ -184,7 +183,6 @@ SecondOrderDiscretization discretize_second_order_closed_form(double d0, double 
   z.gamma1[1] = T * v1 * bB;
   return z;
 }
-
 
 class Prefilter {
  public:

@@ -18,10 +18,10 @@
 namespace modalwatch {
 
 struct SrivcOptions {
-  int max_iterations = 100;     // block-coordinate cycles over all submodels
-  int srivc_per_block = 1;      // SRIVC refinements of one submodel per cycle
-  double tolerance = 1e-10;     // on the relative change of beta per cycle
-  Hold output_hold = Hold::zoh; // intersample behaviour assumed for y in the prefilters
+  int max_iterations = 100;      // block-coordinate cycles over all submodels
+  int srivc_per_block = 1;       // SRIVC refinements of one submodel per cycle
+  double tolerance = 1e-10;      // on the relative change of beta per cycle
+  Hold output_hold = Hold::zoh;  // intersample behaviour assumed for y in the prefilters
   bool stability_projection = true;
   // Trust region: a block's natural frequency moves by at most this factor per
   // iteration (1 or less: no limit). Keeps blocks on their own modes from a rough start.
@@ -44,15 +44,15 @@ struct FitResult {
   // Covariance of beta (eq. 8), sigma^2 times the IV sandwich
   // J^{-1} (sum psi_hat psi_hat^T) J^{-T}; in open loop this is sigma^2 P.
   Eigen::MatrixXd covariance;
-  double noise_variance = 0.0;   // sigma^2 of the output error
-  double fit_percent = 0.0;      // 100 (1 - ||y - y_hat|| / ||y - mean(y)||)
+  double noise_variance = 0.0;  // sigma^2 of the output error
+  double fit_percent = 0.0;     // 100 (1 - ||y - y_hat|| / ||y - mean(y)||)
   int iterations = 0;
   bool converged = false;
-  int projections = 0;           // stability projections applied
-  int damped_steps = 0;          // iterations shortened by the frequency trust region
-  std::string start = "configured";  // which start won: "configured" or "unfactored"
+  int projections = 0;                 // stability projections applied
+  int damped_steps = 0;                // iterations shortened by the frequency trust region
+  std::string start = "configured";    // which start won: "configured" or "unfactored"
   std::vector<double> change_history;  // relative change of beta per cycle
-  Eigen::VectorXd simulated;     // y_hat: the model's output on the record
+  Eigen::VectorXd simulated;           // y_hat: the model's output on the record
   // Identifiability: the condition number of the instruments' correlation
   // matrix (sum psi_hat psi_hat^T with unit diagonal). A reference with too few
   // frequencies (n sinusoids give 2n real equations) leaves it singular, and the
@@ -76,8 +76,8 @@ FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const Sriv
 Eigen::VectorXd simulate_model(const AdditiveModel& model, const Eigen::VectorXd& u, double T);
 // Noise-free closed loop with the known controller: returns z = S_uo(q) r (the
 // instrument input, eq. 29) and the loop output.
-void simulate_loop(const AdditiveModel& model, const DiscreteTransferFunction& controller,
-                   const Eigen::VectorXd& r, double T, Eigen::VectorXd& z, Eigen::VectorXd& y);
+void simulate_loop(const AdditiveModel& model, const DiscreteTransferFunction& controller, const Eigen::VectorXd& r,
+                   double T, Eigen::VectorXd& z, Eigen::VectorXd& y);
 
 double fit_percent(const Eigen::VectorXd& y, const Eigen::VectorXd& y_hat);
 

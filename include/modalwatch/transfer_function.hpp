@@ -49,9 +49,7 @@ class DiscreteTransferFunction {
 
   std::complex<double> response(double w, double T) const;  // C_d(e^{j w T})
   // The same filter (coefficients); the states may differ.
-  bool operator==(const DiscreteTransferFunction& other) const {
-    return num_ == other.num_ && den_ == other.den_;
-  }
+  bool operator==(const DiscreteTransferFunction& other) const { return num_ == other.num_ && den_ == other.den_; }
 
   const std::vector<double>& numerator() const { return num_; }
   const std::vector<double>& denominator() const { return den_; }
@@ -69,9 +67,7 @@ class DiscreteTransferFunction {
 // Poles of the closed loop formed by a discrete controller and the ZOH
 // equivalent of a continuous-time plant given as a state-space model; returns
 // the largest pole magnitude. Used to check that a configured loop is stable.
-double closed_loop_spectral_radius(const DiscreteTransferFunction& controller,
-                                   const Eigen::MatrixXd& plant_phi,
-                                   const Eigen::MatrixXd& plant_gamma,
-                                   const Eigen::MatrixXd& plant_c, double plant_d);
+double closed_loop_spectral_radius(const DiscreteTransferFunction& controller, const Eigen::MatrixXd& plant_phi,
+                                   const Eigen::MatrixXd& plant_gamma, const Eigen::MatrixXd& plant_c, double plant_d);
 
 }  // namespace modalwatch

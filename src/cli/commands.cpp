@@ -10,31 +10,31 @@
 #include <numbers>
 #include <stdexcept>
 
-#include "modalwatch/io/config.hpp"
-#include "modalwatch/io/csv.hpp"
 #include "modalwatch/error.hpp"
 #include "modalwatch/io/atomic_file.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/io/csv.hpp"
 #include "modalwatch/simulator.hpp"
 #include "modalwatch/srivc.hpp"
 
 namespace modalwatch::cli {
 namespace {
 
-
 // --from/--to. The samples before --from stay in the record: they bring the
 // model's simulation and the prefilters up to the running plant (a model output
 // started from rest at --from would not match y for a few time constants).
 struct Window {
-  Record data;               // the record's start up to --to
-  Eigen::Index settle = 0;   // samples before --from: filters only, not in the estimate
+  Record data;              // the record's start up to --to
+  Eigen::Index settle = 0;  // samples before --from: filters only, not in the estimate
 };
 Window window(const Record& r, const FitArgs& args) {
   Eigen::Index begin = 0, end = r.size();
-  if (args.from) while (begin < end && r.t(begin) < *args.from) ++begin;
-  if (args.to) while (end > begin && r.t(end - 1) > *args.to) --end;
+  if (args.from)
+    while (begin < end && r.t(begin) < *args.from) ++begin;
+  if (args.to)
+    while (end > begin && r.t(end - 1) > *args.to) --end;
   return {r.segment(0, end), begin};
 }
-
 
 }  // namespace
 
@@ -73,11 +73,12 @@ namespace {
 void print_identifiability(const FitResult& result) {
   std::printf("information condition: %.3g\n", result.information_condition);
   if (!(result.information_condition > FitResult::kPoorlyDetermined)) return;
-  std::printf("WARNING: the record does not determine every parameter (condition above %.0e): the input\n"
-              "excites too few frequencies for this model (n sinusoids give 2n equations), or the model has\n"
-              "more modes than the data show. The +- above understate the combination it leaves open,\n"
-              "theta = [a_1..a_n, b_0..b_m] (components above 0.1):\n",
-              FitResult::kPoorlyDetermined);
+  std::printf(
+      "WARNING: the record does not determine every parameter (condition above %.0e): the input\n"
+      "excites too few frequencies for this model (n sinusoids give 2n equations), or the model has\n"
+      "more modes than the data show. The +- above understate the combination it leaves open,\n"
+      "theta = [a_1..a_n, b_0..b_m] (components above 0.1):\n",
+      FitResult::kPoorlyDetermined);
   const Eigen::VectorXd& v = result.weakest_direction;
   for (int i = 0, o = 0; i < static_cast<int>(result.model.submodels.size()); ++i) {
     const Submodel& s = result.model.submodels[i];

@@ -9,25 +9,25 @@ namespace modalwatch::cli {
 
 struct SimulateArgs {
   std::string config;
-  std::string out;                  // t,r,u,y CSV
-  std::string truth;                // parameter truth CSV (optional)
-  std::optional<double> duration;   // overrides simulation.duration
-  std::optional<unsigned> seed;     // overrides simulation.seed
+  std::string out;                 // t,r,u,y CSV
+  std::string truth;               // parameter truth CSV (optional)
+  std::optional<double> duration;  // overrides simulation.duration
+  std::optional<unsigned> seed;    // overrides simulation.seed
 };
 
 struct FitArgs {
   std::string config;
-  std::string data;     // CSV or LCM log
-  std::string channel;  // LCM log: the channel to read
-  std::string out;  // fitted model YAML (optional)
+  std::string data;                // CSV or LCM log
+  std::string channel;             // LCM log: the channel to read
+  std::string out;                 // fitted model YAML (optional)
   std::optional<double> from, to;  // time window of the record to use, s
   int max_iterations = 200;
 };
 
 struct TrackArgs {
   std::string config;
-  std::string data;     // CSV or LCM log
-  std::string channel;  // LCM log: the channel to read
+  std::string data;      // CSV or LCM log
+  std::string channel;   // LCM log: the channel to read
   std::string out;       // est.csv
   std::string faults;    // flags CSV (the daemon's fault detector over the record); empty: none
   bool progress = true;  // progress bar on stderr
@@ -37,28 +37,28 @@ struct TrackArgs {
 // sample_batch_t (batch N), paced at speed x real time (0: as fast as possible).
 struct ReplayArgs {
   std::string config;
-  std::string data;     // CSV or LCM log
-  std::string channel;  // LCM log: the channel to read
-  double speed = 1.0;   // 0: as fast as possible
-  int batch = 1;        // samples per packet
-  std::string url;      // overrides lcm.url
+  std::string data;                         // CSV or LCM log
+  std::string channel;                      // LCM log: the channel to read
+  double speed = 1.0;                       // 0: as fast as possible
+  int batch = 1;                            // samples per packet
+  std::string url;                          // overrides lcm.url
   std::optional<std::int64_t> start_utime;  // utime of the first sample, us (default: now)
 };
 
 struct DiagnoseArgs {
   std::string config;
-  std::string data;                    // CSV or LCM log
-  std::string channel;                 // LCM logs: the channel to read
-  std::string validate;                // validation record (optional)
-  std::optional<double> split;         // estimation fraction of --data (default 0.7)
-  std::string estimate_samples;        // "A:B" rows of --data
-  std::string validate_samples;        // "A:B" rows of the validation record
-  std::string report;                  // output directory
-  std::string effects;                 // comma-separated library (default: all)
-  std::string plot_script;             // scripts/plot/plot_diagnose.py, run when given
+  std::string data;                            // CSV or LCM log
+  std::string channel;                         // LCM logs: the channel to read
+  std::string validate;                        // validation record (optional)
+  std::optional<double> split;                 // estimation fraction of --data (default 0.7)
+  std::string estimate_samples;                // "A:B" rows of --data
+  std::string validate_samples;                // "A:B" rows of the validation record
+  std::string report;                          // output directory
+  std::string effects;                         // comma-separated library (default: all)
+  std::string plot_script;                     // scripts/plot/plot_diagnose.py, run when given
   std::string t_column = "t", y_column = "y";  // record columns (e.g. n, y2)
-  std::string input_hold = "zoh";     // zoh, or foh: held value (u_k + u_k+1)/2 (open loop)
-  int substeps = 1;                    // integration substeps per sample
+  std::string input_hold = "zoh";              // zoh, or foh: held value (u_k + u_k+1)/2 (open loop)
+  int substeps = 1;                            // integration substeps per sample
   int max_steps = 5;
   double min_improvement = 0.10;
   int max_delay = 10;
@@ -68,10 +68,10 @@ int simulate(const SimulateArgs& args);
 int replay(const ReplayArgs& args);
 int diagnose(const DiagnoseArgs& args);
 struct WatchArgs {
-  std::string config;     // lcm: section (URL, channels)
-  long long count = 0;    // stop after this many estimates messages (0: never)
-  double timeout = 0.0;   // s; stop after this long (0: never)
-  long long every = 1;    // print every n-th message of each kind
+  std::string config;    // lcm: section (URL, channels)
+  long long count = 0;   // stop after this many estimates messages (0: never)
+  double timeout = 0.0;  // s; stop after this long (0: never)
+  long long every = 1;   // print every n-th message of each kind
 };
 
 int watch(const WatchArgs& args);

@@ -5,12 +5,12 @@
 
 #include "commands.hpp"
 #include "diagnose_report.hpp"
-#include "modalwatch/io/records.hpp"
 #include "guarded.hpp"
+#include "modalwatch/io/records.hpp"
 
-#include "modalwatch/io/config.hpp"
 #include "modalwatch/diagnose.hpp"
 #include "modalwatch/error.hpp"
+#include "modalwatch/io/config.hpp"
 
 namespace modalwatch::cli {
 namespace {
@@ -69,8 +69,8 @@ int diagnose(const DiagnoseArgs& args) {
     Eigen::Index lead_in = 0;
     if (!args.validate.empty()) {
       est = samples(full, args.estimate_samples, "--estimate-samples", args.data);
-      val = samples(read_record(RecordSource(args.validate, columns, args.channel, config.closed_loop)), args.validate_samples,
-                    "--validate-samples", args.validate);
+      val = samples(read_record(RecordSource(args.validate, columns, args.channel, config.closed_loop)),
+                    args.validate_samples, "--validate-samples", args.validate);
     } else if (!args.estimate_samples.empty() || !args.validate_samples.empty()) {
       if (args.estimate_samples.empty() || args.validate_samples.empty())
         throw InputError("--estimate-samples", "give both --estimate-samples and --validate-samples");
@@ -90,7 +90,8 @@ int diagnose(const DiagnoseArgs& args) {
     check_record(val, args.validate.empty() ? args.data : args.validate, config.sample_time, config.closed_loop,
                  config.source);
     if (args.input_hold == "foh") {
-      if (config.closed_loop) throw InputError("--input-hold", "foh is for open-loop records (u is simulated in closed loop)");
+      if (config.closed_loop)
+        throw InputError("--input-hold", "foh is for open-loop records (u is simulated in closed loop)");
     }
     DiagnoseOptions options;
     options.max_steps = args.max_steps;

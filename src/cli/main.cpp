@@ -32,11 +32,13 @@ int main(int argc, char** argv) {
   fit_cmd->add_option("--out,-o", fit_args.out, "write the fitted model as a config YAML");
   fit_cmd->add_option("--from", fit_args.from, "use samples from this time on [s]");
   fit_cmd->add_option("--to", fit_args.to, "use samples up to this time [s]");
-  fit_cmd->add_option("--max-iterations", fit_args.max_iterations, "block-coordinate cycles")->check(CLI::PositiveNumber);
+  fit_cmd->add_option("--max-iterations", fit_args.max_iterations, "block-coordinate cycles")
+      ->check(CLI::PositiveNumber);
 
   TrackArgs track_args;
   bool no_progress = false;
-  auto* track_cmd = app.add_subcommand("track", "Recursive additive RSRIVC over a record: writes the estimates per sample");
+  auto* track_cmd =
+      app.add_subcommand("track", "Recursive additive RSRIVC over a record: writes the estimates per sample");
   track_cmd->add_option("--config,-c", track_args.config, "YAML with the model: (and estimator:) sections")->required();
   track_cmd->add_option("--data,-d", track_args.data, "record: CSV with columns t,u,y[,r], or an LCM log")->required();
   track_cmd->add_option("--channel", track_args.channel, "LCM log: channel with the samples (default: the only one)");
@@ -50,11 +52,13 @@ int main(int argc, char** argv) {
   std::string speed = "1";
   auto* replay_cmd = app.add_subcommand("replay", "Publish a record on LCM (lcm: section) at real time or faster");
   replay_cmd->add_option("--config,-c", replay_args.config, "YAML with the lcm: section (and model.loop)")->required();
-  replay_cmd->add_option("--data,-d", replay_args.data, "record: CSV with columns t,u,y[,r], or an LCM log")->required();
+  replay_cmd->add_option("--data,-d", replay_args.data, "record: CSV with columns t,u,y[,r], or an LCM log")
+      ->required();
   replay_cmd->add_option("--channel", replay_args.channel, "LCM log input: channel with the samples");
   replay_cmd->add_option("--speed", speed, "times real time; 0 or 'max': as fast as possible")->capture_default_str();
   replay_cmd->add_option("--batch", replay_args.batch, "samples per packet: 1 = sample_t, N > 1 = sample_batch_t")
-      ->check(CLI::Range(1, 100000))->capture_default_str();
+      ->check(CLI::Range(1, 100000))
+      ->capture_default_str();
   replay_cmd->add_option("--url", replay_args.url, "LCM URL (overrides lcm.url)");
   replay_cmd->add_option("--start-utime", replay_args.start_utime, "utime of the first sample [us] (default: now)");
   DiagnoseArgs diag;
@@ -82,10 +86,12 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   WatchArgs watch_args;
   auto* watch_cmd = app.add_subcommand("watch", "Print the daemon's estimates and fault status as they arrive (LCM)");
-  watch_cmd->add_option("--config,-c", watch_args.config, "YAML whose lcm: section names the URL and channels")->required();
+  watch_cmd->add_option("--config,-c", watch_args.config, "YAML whose lcm: section names the URL and channels")
+      ->required();
   watch_cmd->add_option("--count", watch_args.count, "stop after this many estimates messages");
   watch_cmd->add_option("--timeout", watch_args.timeout, "stop after this many seconds");
-  watch_cmd->add_option("--every", watch_args.every, "print every n-th message of each kind")->check(CLI::PositiveNumber);
+  watch_cmd->add_option("--every", watch_args.every, "print every n-th message of each kind")
+      ->check(CLI::PositiveNumber);
 
   try {
     app.parse(argc, argv);

@@ -42,7 +42,7 @@ inline char* write_6g(char* out, double v) {
   const auto power = [](int k) { return kPowersOfTen[static_cast<std::size_t>(k - kMinPower)]; };
   // a in [2^(b-1), 2^b) with b the biased exponent - 1022 (a is normal here).
   const int b = static_cast<int>((std::bit_cast<std::uint64_t>(a) >> 52) & 0x7ff) - 1022;
-  int e = ((b - 1) * 1233) >> 12;  // floor(log10(a)) within one (1233/4096 ~ log10 2)
+  int e = ((b - 1) * 1233) >> 12;    // floor(log10(a)) within one (1233/4096 ~ log10 2)
   double scaled = a * power(5 - e);  // a * 10^(5-e), to be in [10^5, 10^6)
   if (scaled >= 1e6) scaled = a * power(5 - ++e);
   if (scaled < 1e5) scaled = a * power(5 - --e);

@@ -14,8 +14,8 @@
 #include "guarded.hpp"
 #include "modalwatch/io/records.hpp"
 
-#include "modalwatch/io/config.hpp"
 #include "modalwatch/error.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/io/messages.hpp"
 
 namespace modalwatch::cli {
@@ -60,7 +60,8 @@ int replay(const ReplayArgs& args) {
     if (!(args.speed >= 0.0)) throw InputError("--speed", "must be >= 0");
     const std::string url = args.url.empty() ? config.lcm.url : args.url;
     std::unique_ptr<lcm_t, LcmDeleter> lcm(lcm_create(url.c_str()));
-    if (!lcm) throw InputError(args.url.empty() ? config.source + ": key 'lcm.url'" : "--url", "LCM cannot open '" + url + "'");
+    if (!lcm)
+      throw InputError(args.url.empty() ? config.source + ": key 'lcm.url'" : "--url", "LCM cannot open '" + url + "'");
 
     const bool batched = args.batch > 1;
     const std::string& channel = batched ? config.lcm.batches_channel : config.lcm.samples_channel;
@@ -78,8 +79,7 @@ int replay(const ReplayArgs& args) {
       // A batch is equidistant by definition: it ends early at a gap.
       Eigen::Index count = 1;
       if (batched)
-        while (count < args.batch && k + count < N &&
-               std::abs(rec.t(k + count) - rec.t(k + count - 1) - T) <= 0.01 * T)
+        while (count < args.batch && k + count < N && std::abs(rec.t(k + count) - rec.t(k + count - 1) - T) <= 0.01 * T)
           ++count;
       // A packet leaves when its last sample has been taken.
       if (args.speed > 0.0) sleep_until(t0, (rec.t(k + count - 1) - rec.t(0)) / args.speed);

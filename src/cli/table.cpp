@@ -8,8 +8,8 @@
 namespace modalwatch::cli {
 
 void print_modal_table(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>& covariances) {
-  std::printf("\n%-10s %11s %10s %12s %10s %9s %9s %12s %10s\n", "submodel", "f [Hz]", "+-", "wn [rad/s]", "+-",
-              "zeta", "+-", "gain", "+-");
+  std::printf("\n%-10s %11s %10s %12s %10s %9s %9s %12s %10s\n", "submodel", "f [Hz]", "+-", "wn [rad/s]", "+-", "zeta",
+              "+-", "gain", "+-");
   for (std::size_t i = 0; i < model.submodels.size(); ++i) {
     const Submodel& s = model.submodels[i];
     const Eigen::MatrixXd& c = covariances[i];

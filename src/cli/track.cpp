@@ -18,9 +18,9 @@
 #include <charconv>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdint>
 #include <cstdio>
-#include <condition_variable>
 #include <cstring>
 #include <deque>
 #include <exception>
@@ -35,22 +35,20 @@
 
 #include "commands.hpp"
 #include "guarded.hpp"
-#include "number_format.hpp"
-#include "modalwatch/io/records.hpp"
-#include "table.hpp"
-#include "modalwatch/io/config.hpp"
-#include "modalwatch/io/csv.hpp"
 #include "modalwatch/error.hpp"
-#include "modalwatch/io/atomic_file.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/fault_detector.hpp"
+#include "modalwatch/io/atomic_file.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/io/csv.hpp"
+#include "modalwatch/io/records.hpp"
+#include "number_format.hpp"
+#include "table.hpp"
 
 namespace modalwatch::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-
 
 // Reads the record on its own thread, a block of samples at a time handed to the
 // estimation loop through a bounded queue, so that reading overlaps estimation
@@ -390,14 +388,14 @@ std::vector<EstColumn> est_columns(const AdditiveModel& model) {
   std::vector<EstColumn> columns{{"t", ColumnFormat::kExact}};
   for (const auto& s : model.submodels) {
     for (const char* q : {"_wn", "_zeta", "_gain"}) columns.push_back({s.name + q, ColumnFormat::kExact});
-    for (const char* q : {"_wn_std", "_zeta_std", "_gain_std"}) columns.push_back({s.name + q, ColumnFormat::kSixDigits});
+    for (const char* q : {"_wn_std", "_zeta_std", "_gain_std"})
+      columns.push_back({s.name + q, ColumnFormat::kSixDigits});
   }
   columns.push_back({"residual_rms", ColumnFormat::kExact});
   columns.push_back({"flags", ColumnFormat::kInteger});
   columns.push_back({"resets", ColumnFormat::kInteger});
   return columns;
 }
-
 
 // The daemon's fault detector over the record, run as the daemon runs it: an
 // update at the first sample at or past each publish time, on the sample times
@@ -473,7 +471,9 @@ class FlagRecorder {
   int raised_ = 0, cleared_ = 0;
 };
 
-double seconds_between(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
+double seconds_between(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double>(b - a).count();
+}
 
 }  // namespace
 
@@ -600,7 +600,8 @@ int track(const TrackArgs& args) {
     std::fprintf(stderr, "  rejected out-of-order: %llu\n", static_cast<unsigned long long>(st.rejected_out_of_order));
     std::fprintf(stderr, "  gaps: %llu\n", static_cast<unsigned long long>(st.gaps));
     std::fprintf(stderr, "  outliers: %llu\n", static_cast<unsigned long long>(st.outliers));
-    std::fprintf(stderr, "  low-excitation samples: %llu\n", static_cast<unsigned long long>(st.low_excitation_samples));
+    std::fprintf(stderr, "  low-excitation samples: %llu\n",
+                 static_cast<unsigned long long>(st.low_excitation_samples));
     std::fprintf(stderr, "  projections: %llu\n", static_cast<unsigned long long>(st.projections));
     std::fprintf(stderr, "  covariance clamps: %llu\n", static_cast<unsigned long long>(st.covariance_clamps));
     if (settings.warmup_samples <= 0)

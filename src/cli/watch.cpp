@@ -14,8 +14,8 @@
 
 #include "commands.hpp"
 #include "guarded.hpp"
-#include "modalwatch/io/config.hpp"
 #include "modalwatch/error.hpp"
+#include "modalwatch/io/config.hpp"
 
 namespace modalwatch::cli {
 namespace {
@@ -66,7 +66,8 @@ std::string wall_clock_now() {
   std::tm local{};
   localtime_r(&secs, &local);
   char buf[32];
-  std::snprintf(buf, sizeof buf, "%02d:%02d:%02d.%03d", local.tm_hour, local.tm_min, local.tm_sec, static_cast<int>(ms));
+  std::snprintf(buf, sizeof buf, "%02d:%02d:%02d.%03d", local.tm_hour, local.tm_min, local.tm_sec,
+                static_cast<int>(ms));
   return buf;
 }
 
@@ -103,16 +104,17 @@ void on_fault_status(const lcm_recv_buf_t* rbuf, const char*, void* user) {
     else
       flags = (msg.health & Fault::HEALTH_LOW_EXCITATION) ? "none (suppressed: low excitation)" : "none";
   }
-  std::printf("faults    t = %9.3f s  %s  | %s | flags: %s | health: %s | received %lld, processed %lld, lost %lld, "
-              "dropped %lld, nonfinite %lld, dup %lld, ooo %lld, gaps %lld, decode errors %lld, overruns %lld, "
-              "restarts %lld\n",
-              msg.t, wall_clock_now().c_str(), msg.state.c_str(), flags.c_str(), msg.health_text.c_str(),
-              static_cast<long long>(msg.samples_received), static_cast<long long>(msg.samples_processed),
-              static_cast<long long>(msg.samples_lost), static_cast<long long>(msg.samples_dropped),
-              static_cast<long long>(msg.samples_nonfinite), static_cast<long long>(msg.samples_duplicate),
-              static_cast<long long>(msg.samples_out_of_order), static_cast<long long>(msg.gaps),
-              static_cast<long long>(msg.decode_errors), static_cast<long long>(msg.overruns),
-              static_cast<long long>(msg.sender_restarts));
+  std::printf(
+      "faults    t = %9.3f s  %s  | %s | flags: %s | health: %s | received %lld, processed %lld, lost %lld, "
+      "dropped %lld, nonfinite %lld, dup %lld, ooo %lld, gaps %lld, decode errors %lld, overruns %lld, "
+      "restarts %lld\n",
+      msg.t, wall_clock_now().c_str(), msg.state.c_str(), flags.c_str(), msg.health_text.c_str(),
+      static_cast<long long>(msg.samples_received), static_cast<long long>(msg.samples_processed),
+      static_cast<long long>(msg.samples_lost), static_cast<long long>(msg.samples_dropped),
+      static_cast<long long>(msg.samples_nonfinite), static_cast<long long>(msg.samples_duplicate),
+      static_cast<long long>(msg.samples_out_of_order), static_cast<long long>(msg.gaps),
+      static_cast<long long>(msg.decode_errors), static_cast<long long>(msg.overruns),
+      static_cast<long long>(msg.sender_restarts));
   std::fflush(stdout);
 }
 

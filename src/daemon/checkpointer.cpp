@@ -78,9 +78,10 @@ bool Checkpointer::write(const std::string& path, const Checkpoint& ck, bool fin
     bump(counters_.written);
     // The first periodic one, and the first after a failure, at info: the rest would flood the log.
     if (final_one || !periodic_ok_logged_)
-      spdlog::info("checkpoint written: {} (last seq {}){}", path, ck.last_seq,
-                   final_one ? "" : fmt::format("; every {} s from now on, logged at debug level",
-                                                config_.daemon.checkpoint_period));
+      spdlog::info(
+          "checkpoint written: {} (last seq {}){}", path, ck.last_seq,
+          final_one ? ""
+                    : fmt::format("; every {} s from now on, logged at debug level", config_.daemon.checkpoint_period));
     else
       spdlog::debug("checkpoint written: {} (last seq {})", path, ck.last_seq);
     periodic_ok_logged_ = true;
@@ -88,8 +89,7 @@ bool Checkpointer::write(const std::string& path, const Checkpoint& ck, bool fin
   } catch (const std::system_error& e) {
     bump(counters_.failures);
     periodic_ok_logged_ = false;
-    spdlog::error("checkpoint NOT written ({}): {}; the previous one is kept, the service continues", path,
-                  e.what());
+    spdlog::error("checkpoint NOT written ({}): {}; the previous one is kept, the service continues", path, e.what());
     return false;
   }
 }

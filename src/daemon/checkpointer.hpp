@@ -55,7 +55,7 @@ class Checkpointer {
   std::thread thread_;
   std::mutex wake_mutex_;
   std::condition_variable wake_;
-  bool stop_ = false;  // under wake_mutex_
+  bool stop_ = false;                // under wake_mutex_
   bool periodic_ok_logged_ = false;  // this thread's, or the control side's after stop()
 };
 

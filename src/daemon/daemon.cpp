@@ -36,9 +36,8 @@ namespace {
 const Config& checked(const Config& config) {
   const auto K = config.model.submodels.size();
   if (K > static_cast<std::size_t>(Daemon::kMaxModes))
-    throw InputError(config.source, "model.submodels: the daemon carries at most " +
-                                        std::to_string(Daemon::kMaxModes) + " submodels (this model has " +
-                                        std::to_string(K) + ")");
+    throw InputError(config.source, "model.submodels: the daemon carries at most " + std::to_string(Daemon::kMaxModes) +
+                                        " submodels (this model has " + std::to_string(K) + ")");
   check_realtime(config.daemon.realtime_priority, config.source);
   check_checkpoint_directory(config);
   return config;
@@ -95,10 +94,11 @@ struct Daemon::Impl {
         lcm(open_lcm(config, shared)),
         subscriber(lcm.get(), config, samples, counters.subscriber),
         publisher(config,
-                  Publisher::Wiring{lcm.get(), snapshots, snapshot_bell, counters, run_state,
-                                    loop.warming_up_flag(), start_ns},
+                  Publisher::Wiring{lcm.get(), snapshots, snapshot_bell, counters, run_state, loop.warming_up_flag(),
+                                    start_ns},
                   loop.restored()),
-        checkpointer(config, control, [this] { return capture_paused(); }, counters.checkpoints) {}
+        checkpointer(
+            config, control, [this] { return capture_paused(); }, counters.checkpoints) {}
 
   // Under `control`, while running: pause the loop, copy its state, resume.
   std::optional<Checkpoint> capture_paused() {
@@ -148,10 +148,9 @@ void Daemon::start() {
       "modalwatchd: {} ({}), {} submodels at {} Hz, {} loop; LCM {} in: {} / {}, out: {} / {} / {}; loop {} Hz, "
       "publish every {} s, heartbeat every {} s; rings {} samples / {} snapshots; checkpoint {}; {}{}",
       c.source, m.loop.restored() ? "resumed from checkpoint" : "fresh start", c.model.submodels.size(),
-      1.0 / c.sample_time, c.closed_loop ? "closed" : "open", c.lcm.url, c.lcm.samples_channel,
-      c.lcm.batches_channel, c.lcm.estimates_channel, c.lcm.fault_status_channel, c.lcm.heartbeat_channel,
-      c.daemon.loop_rate_hz, c.daemon.publish_period, c.daemon.heartbeat_period, c.daemon.sample_ring,
-      c.daemon.snapshot_ring,
+      1.0 / c.sample_time, c.closed_loop ? "closed" : "open", c.lcm.url, c.lcm.samples_channel, c.lcm.batches_channel,
+      c.lcm.estimates_channel, c.lcm.fault_status_channel, c.lcm.heartbeat_channel, c.daemon.loop_rate_hz,
+      c.daemon.publish_period, c.daemon.heartbeat_period, c.daemon.sample_ring, c.daemon.snapshot_ring,
       c.daemon.checkpoint_path.empty()
           ? std::string("off")
           : c.daemon.checkpoint_path + " every " + std::to_string(c.daemon.checkpoint_period) + " s",
@@ -186,7 +185,8 @@ void Daemon::stop() {
   m.running = false;
   const DaemonCounters c = m.counters.load();
   spdlog::info(
-      "stopped: {} samples received: {} processed, {} non-finite, {} dropped, {} duplicate, {} out of order; {} lost in "
+      "stopped: {} samples received: {} processed, {} non-finite, {} dropped, {} duplicate, {} out of order; {} lost "
+      "in "
       "transport, {} decode errors, {} sender restarts, {} flag changes",
       c.samples_received, c.samples_processed, c.samples_nonfinite, c.samples_dropped, c.samples_duplicate,
       c.samples_out_of_order, c.samples_lost, c.decode_errors, c.sender_restarts, c.flag_changes);

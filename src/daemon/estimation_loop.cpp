@@ -173,8 +173,10 @@ void EstimationLoop::drain(std::int64_t now) noexcept {
   while (n < limit) {
     const StampedSample* s = input_.front();
     if (!s) break;
-    if (fit_in_flight_ || backlog_size_ > 0) enqueue_held(*s);  // behind the backlog, in order
-    else process(*s);
+    if (fit_in_flight_ || backlog_size_ > 0)
+      enqueue_held(*s);  // behind the backlog, in order
+    else
+      process(*s);
     input_.pop();
     ++n;
   }
@@ -347,8 +349,10 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
   bump(counters_.snapshots);
   snap.counters = all_counters_.load();
   snap.tick = tick_histogram_;
-  if (output_.try_push(snap)) output_bell_.ring();
-  else bump(counters_.snapshots_dropped);
+  if (output_.try_push(snap))
+    output_bell_.ring();
+  else
+    bump(counters_.snapshots_dropped);
   last_snapshot_ns_ = now;
 }
 
@@ -384,14 +388,16 @@ void EstimationLoop::reconfigure_detector() {
     const std::string& name = config_.model.submodels[i].name;
     const bool now_configured = i < configured.size() && configured[i].has_value();
     if (s.baseline_ready && !baseline_configured_[i]) {
-      if (!now_configured) kept[i] = s.baseline;
+      if (!now_configured)
+        kept[i] = s.baseline;
       else if (!(*configured[i] == s.baseline.value))
         spdlog::warn("reload: mode '{}': the {} baseline (f = {:.6g} Hz) is replaced by the one in the file", name,
                      s.baseline.learned ? "learned" : "restored", s.baseline.value.wn / (2.0 * std::numbers::pi));
     } else if (s.baseline_ready && !now_configured) {
-      spdlog::warn("reload: mode '{}': its configured baseline is gone from the file: learned anew over {} s, no flags "
-                   "for this mode meanwhile",
-                   name, config_.faults.learn_window);
+      spdlog::warn(
+          "reload: mode '{}': its configured baseline is gone from the file: learned anew over {} s, no flags "
+          "for this mode meanwhile",
+          name, config_.faults.learn_window);
     } else if (!s.baseline_ready && !now_configured && estimating) {
       spdlog::warn("reload: mode '{}': the baseline being learned starts again ({} s)", name,
                    config_.faults.learn_window);
@@ -399,9 +405,13 @@ void EstimationLoop::reconfigure_detector() {
     for (int q = 0; q < kQuantities; ++q) {
       const QuantityStatus& qs = s.quantity[static_cast<std::size_t>(q)];
       if (qs.flagged || qs.pending)
-        spdlog::warn("reload: mode '{}': a {} flag on {} is cleared; it rises again after its hold time if the "
-                     "deviation persists",
-                     name, qs.flagged ? "raised" : "pending", q == 0 ? "wn" : q == 1 ? "zeta" : "gain");
+        spdlog::warn(
+            "reload: mode '{}': a {} flag on {} is cleared; it rises again after its hold time if the "
+            "deviation persists",
+            name, qs.flagged ? "raised" : "pending",
+            q == 0   ? "wn"
+            : q == 1 ? "zeta"
+                     : "gain");
     }
   }
   set_detector(kept);

@@ -64,9 +64,8 @@ class EstimationLoop {
  public:
   // `config` is the daemon's; the control side rewrites it only while the loop
   // is stopped. Resumes from `checkpoint` when the estimator accepts it.
-  EstimationLoop(const Config& config, const std::optional<Checkpoint>& checkpoint,
-                 SpscRing<StampedSample>& input, SpscRing<Snapshot>& output, Doorbell& output_bell,
-                 Counters& counters, std::int64_t start_ns);
+  EstimationLoop(const Config& config, const std::optional<Checkpoint>& checkpoint, SpscRing<StampedSample>& input,
+                 SpscRing<Snapshot>& output, Doorbell& output_bell, Counters& counters, std::int64_t start_ns);
   ~EstimationLoop();
   EstimationLoop(const EstimationLoop&) = delete;
   EstimationLoop& operator=(const EstimationLoop&) = delete;

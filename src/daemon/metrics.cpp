@@ -78,7 +78,9 @@ constexpr QuantitySeries kQuantitySeries[] = {
     {"modalwatch_mode_deviation_ratio", "Signed relative deviation from the baseline, (x - x0) / |x0|.",
      [](const QuantityStatus& q) { return q.deviation_relative; }},
     {"modalwatch_mode_flag", "Fault flag: 0 none, 1 pending (past the thresholds, hold time running), 2 raised.",
-     [](const QuantityStatus& q) { return q.flagged ? 2.0 : q.pending ? 1.0 : 0.0; }},
+     [](const QuantityStatus& q) { return q.flagged   ? 2.0
+                                          : q.pending ? 1.0
+                                                      : 0.0; }},
 };
 
 struct CounterSeries {
@@ -164,8 +166,7 @@ struct MetricsEndpoint::Impl {
   std::vector<double> tick_increments = std::vector<double>(kTickBucketBoundsNs.size() + 1);
 };
 
-MetricsEndpoint::MetricsEndpoint(const MetricsSettings& settings, std::string axis,
-                                 std::vector<std::string> mode_names)
+MetricsEndpoint::MetricsEndpoint(const MetricsSettings& settings, std::string axis, std::vector<std::string> mode_names)
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   if (!valid_listen_address(settings.listen))
@@ -187,14 +188,15 @@ MetricsEndpoint::MetricsEndpoint(const MetricsSettings& settings, std::string ax
     auto& family = gauge_family(series.name, series.help);
     auto& gauges = m.quantity_gauges.emplace_back();
     for (const std::string& mode : m.mode_names)
-      for (const char* quantity : kQuantityNames) gauges.push_back(&family.Add({{"mode", mode}, {"quantity", quantity}}));
+      for (const char* quantity : kQuantityNames)
+        gauges.push_back(&family.Add({{"mode", mode}, {"quantity", quantity}}));
   }
   auto& state = gauge_family("modalwatch_state",
                              "1 for the daemon's current state: warming_up (the estimator's warm-up window), learning "
                              "(a baseline is being learned), running (flagging); 0 for the others.");
   for (int s = 0; s < n_states; ++s) m.state[static_cast<std::size_t>(s)] = &state.Add({{"state", kStateNames[s]}});
-  m.stale = &gauge_family("modalwatch_input_stale", "1 when no sample arrived for longer than daemon.stale_time.")
-                 .Add({});
+  m.stale =
+      &gauge_family("modalwatch_input_stale", "1 when no sample arrived for longer than daemon.stale_time.").Add({});
   m.low_excitation =
       &gauge_family("modalwatch_low_excitation", "1 when the excitation is too low for flagging.").Add({});
   for (const CounterSeries& series : kCounterSeries)

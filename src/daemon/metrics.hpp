@@ -31,8 +31,8 @@ struct MetricsSettings {
 // every 0.5..1 ms, so the buckets resolve the work inside a tick and the
 // overruns past it. A tick longer than the last bound counts in +Inf.
 inline constexpr std::array<std::int64_t, 13> kTickBucketBoundsNs = {
-    5'000,     10'000,    25'000,     50'000,     100'000,    250'000,    500'000,
-    1'000'000, 2'500'000, 5'000'000,  10'000'000, 25'000'000, 100'000'000};
+    5'000,     10'000,    25'000,    50'000,     100'000,    250'000,    500'000,
+    1'000'000, 2'500'000, 5'000'000, 10'000'000, 25'000'000, 100'000'000};
 
 // Tick durations since start, counted by the estimation loop: record() is a
 // bounded search and two additions, with no allocation, lock or system call.

@@ -271,9 +271,15 @@ void Publisher::publish_heartbeat(std::int64_t now) {
   modalwatch::heartbeat_t msg;
   msg.utime = wall_us();
   switch (static_cast<RunState>(wiring_.run_state.load(std::memory_order_relaxed))) {
-    case RunState::starting: msg.state = "starting"; break;
-    case RunState::reloading: msg.state = "reloading"; break;
-    case RunState::stopping: msg.state = "stopping"; break;
+    case RunState::starting:
+      msg.state = "starting";
+      break;
+    case RunState::reloading:
+      msg.state = "reloading";
+      break;
+    case RunState::stopping:
+      msg.state = "stopping";
+      break;
     case RunState::running:
       msg.state = wiring_.warming_up.load(std::memory_order_relaxed) ? "warming_up" : "running";
       break;
@@ -290,11 +296,11 @@ void Publisher::log_snapshot(const Snapshot& s) {
     if (c.raised)
       spdlog::warn(
           "FLAG RAISED: mode '{}' {}: {:.6g} vs baseline {:.6g} ({:+.2f} %, {:+.1f} sigma) at t = {:.3f} s (utime {})",
-          name, quantity_name(c.quantity), c.value, c.baseline, 100.0 * c.deviation_relative, c.deviation_sigma,
-          c.time, utime_of(s, c.time));
+          name, quantity_name(c.quantity), c.value, c.baseline, 100.0 * c.deviation_relative, c.deviation_sigma, c.time,
+          utime_of(s, c.time));
     else
-      spdlog::info("flag cleared: mode '{}' {}: {:.6g} vs baseline {:.6g} ({:+.2f} %) at t = {:.3f} s (utime {})",
-                   name, quantity_name(c.quantity), c.value, c.baseline, 100.0 * c.deviation_relative, c.time,
+      spdlog::info("flag cleared: mode '{}' {}: {:.6g} vs baseline {:.6g} ({:+.2f} %) at t = {:.3f} s (utime {})", name,
+                   quantity_name(c.quantity), c.value, c.baseline, 100.0 * c.deviation_relative, c.time,
                    utime_of(s, c.time));
   }
   if (s.reset) last_reset_reason_ = s.reset_reason;
@@ -350,8 +356,8 @@ void Publisher::log_rates(std::int64_t now) {
         "gaps, {} resets, {} overruns, {} sender restarts",
         dt, rate(c.samples_received, rate_base_.samples_received),
         rate(c.samples_processed, rate_base_.samples_processed),
-        rate(c.estimates_published, rate_base_.estimates_published), c.samples_dropped, c.samples_lost,
-        c.decode_errors, c.samples_nonfinite, c.samples_duplicate, c.samples_out_of_order, c.gaps, c.resets, c.overruns,
+        rate(c.estimates_published, rate_base_.estimates_published), c.samples_dropped, c.samples_lost, c.decode_errors,
+        c.samples_nonfinite, c.samples_duplicate, c.samples_out_of_order, c.gaps, c.resets, c.overruns,
         c.sender_restarts);
   }
   rate_base_ = c;

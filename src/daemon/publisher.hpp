@@ -7,8 +7,8 @@
 // the latency path waits for it (a full snapshot ring drops snapshots).
 #include <array>
 #include <atomic>
-#include <optional>
 #include <cstdint>
+#include <optional>
 #include <thread>
 #include <vector>
 
@@ -33,9 +33,9 @@ class Publisher {
     SpscRing<Snapshot>& input;
     Doorbell& input_bell;
     Counters& counters;
-    const std::atomic<int>& run_state;     // RunState
-    const std::atomic<bool>& warming_up;   // the estimator's, for the heartbeat
-    std::int64_t start_ns;                 // for the heartbeat's uptime
+    const std::atomic<int>& run_state;    // RunState
+    const std::atomic<bool>& warming_up;  // the estimator's, for the heartbeat
+    std::int64_t start_ns;                // for the heartbeat's uptime
   };
   // `config` is the daemon's; the control side rewrites it only while this
   // thread is stopped. `restored`: the estimator resumed from a checkpoint.

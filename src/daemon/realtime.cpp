@@ -41,8 +41,8 @@ void check_realtime(int priority, const std::string& source) {
   if (priority <= 0) return;
   const std::string key = "key 'daemon.realtime_priority': ";
   if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0)
-    throw InputError(source, key + "mlockall failed (" + std::strerror(errno) +
-                                 "); under systemd set LimitMEMLOCK=infinity");
+    throw InputError(source,
+                     key + "mlockall failed (" + std::strerror(errno) + "); under systemd set LimitMEMLOCK=infinity");
   int policy = 0;
   sched_param old{};
   pthread_getschedparam(pthread_self(), &policy, &old);

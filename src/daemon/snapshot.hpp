@@ -7,10 +7,10 @@
 #include <cstdint>
 #include <type_traits>
 
+#include "metrics.hpp"
 #include "modalwatch/daemon/daemon.hpp"
 #include "modalwatch/fault_detector.hpp"
 #include "modalwatch/model.hpp"
-#include "metrics.hpp"
 
 namespace modalwatch::daemon_detail {
 
@@ -25,8 +25,8 @@ struct Snapshot {
   };
   int kind = estimate;
   int n_modes = 0;
-  std::int64_t utime = 0;   // us, newest sample included (0: none yet), on the loop's clock
-  std::int64_t utime0 = 0;  // us, the first sample's: detector times are seconds after it
+  std::int64_t utime = 0;         // us, newest sample included (0: none yet), on the loop's clock
+  std::int64_t utime0 = 0;        // us, the first sample's: detector times are seconds after it
   std::int64_t utime_offset = 0;  // us, loop clock - sender utime (changes at a sender restart)
   bool have_sample = false;       // a sample was taken since start
   std::int64_t last_seq = -1;
@@ -36,21 +36,21 @@ struct Snapshot {
   bool low_excitation = false;
   std::array<ModalParameters, kMaxModes> value{}, std_dev{};
   double residual_rms = 0.0;
-  const char* reset_reason = "";  // static string from the estimator
+  const char* reset_reason = "";    // static string from the estimator
   double warmup_fit_seconds = 0.0;  // how long the last warm-up fit took
   // The fault detector's state, and its flag changes in this publish period.
   std::array<ModeStatus, kMaxModes> modes{};
   int n_changes = 0;
   std::array<FlagChange, kMaxEntries> changes{};
   // Input and estimator events since the previous snapshot.
-  bool stale = false;          // no sample for daemon.stale_time
-  bool gap = false;            // the estimator reset its prefilters after a time gap
-  bool reset = false;          // the estimator returned to its last good state
-  bool input_dropped = false;  // the input ring or the warm-up backlog was full
-  bool decode_errors = false;  // undecodable packets arrived
-  bool overrun = false;        // loop ticks overran
-  bool samples_lost = false;   // sequence numbers never arrived
-  bool sender_restart = false; // the sender restarted
+  bool stale = false;           // no sample for daemon.stale_time
+  bool gap = false;             // the estimator reset its prefilters after a time gap
+  bool reset = false;           // the estimator returned to its last good state
+  bool input_dropped = false;   // the input ring or the warm-up backlog was full
+  bool decode_errors = false;   // undecodable packets arrived
+  bool overrun = false;         // loop ticks overran
+  bool samples_lost = false;    // sequence numbers never arrived
+  bool sender_restart = false;  // the sender restarted
   DaemonCounters counters;
   TickHistogram tick;  // the loop's tick durations since start (metrics)
 };

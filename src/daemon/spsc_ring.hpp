@@ -55,8 +55,7 @@ class SpscRing {
                 "SpscRing<T>: T must be trivially copyable (slots are overwritten "
                 "without destruction and read by copying)");
   static_assert(std::is_copy_constructible_v<T>, "SpscRing<T>: T must be copy constructible");
-  static_assert(std::atomic<std::size_t>::is_always_lock_free,
-                "SpscRing needs lock-free std::atomic<std::size_t>");
+  static_assert(std::atomic<std::size_t>::is_always_lock_free, "SpscRing needs lock-free std::atomic<std::size_t>");
 
  public:
   using value_type = T;
@@ -74,13 +73,13 @@ class SpscRing {
     }
     std::size_t bytes = slots_count_ * sizeof(T);
     bytes = (bytes + kStorageAlign - 1) / kStorageAlign * kStorageAlign;
-    slots_ = static_cast<T*>(::operator new(bytes, std::align_val_t{kStorageAlign}));
+    slots_ = static_cast<T*>(::operator new (bytes, std::align_val_t{kStorageAlign}));
   }
 
   ~SpscRing() {
     // T is trivially destructible (implied by trivially copyable): nothing to destroy.
     // Unsized: clang does not declare the sized aligned form without -fsized-deallocation.
-    ::operator delete(static_cast<void*>(slots_), std::align_val_t{kStorageAlign});
+    ::operator delete (static_cast<void*>(slots_), std::align_val_t{kStorageAlign});
   }
 
   SpscRing(const SpscRing&) = delete;
@@ -180,8 +179,7 @@ class SpscRing {
   [[nodiscard]] std::size_t capacity() const noexcept { return capacity_; }
 
  private:
-  static constexpr std::size_t kStorageAlign =
-      alignof(T) > kFalseSharingRange ? alignof(T) : kFalseSharingRange;
+  static constexpr std::size_t kStorageAlign = alignof(T) > kFalseSharingRange ? alignof(T) : kFalseSharingRange;
 
   [[nodiscard]] std::size_t increment(std::size_t i) const noexcept {
     ++i;

@@ -17,8 +17,7 @@ constexpr int kMaxBatch = 8192;
 
 }  // namespace
 
-Subscriber::Subscriber(lcm_t* lcm, const Config& config, SpscRing<StampedSample>& output,
-                       SubscriberCounters& counters)
+Subscriber::Subscriber(lcm_t* lcm, const Config& config, SpscRing<StampedSample>& output, SubscriberCounters& counters)
     : lcm_(lcm),
       output_(output),
       counters_(counters),

@@ -13,13 +13,13 @@
 #include <optional>
 #include <string>
 
-#include <CLI/CLI.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
+#include <CLI/CLI.hpp>
 
-#include "modalwatch/io/config.hpp"
 #include "modalwatch/daemon/daemon.hpp"
 #include "modalwatch/error.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch_version.hpp"
 
 namespace {

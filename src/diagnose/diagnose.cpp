@@ -180,8 +180,7 @@ bool srivc_start(const AdditiveModel& linear, const ModelEffects& e, const Recor
 }
 
 // The best of: the given model refined, and its SRIVC refit refined.
-Refined fit_structure(const AugmentedModel& start, const Problem& pb, const DiagnoseOptions& options,
-                      bool try_srivc) {
+Refined fit_structure(const AugmentedModel& start, const Problem& pb, const DiagnoseOptions& options, bool try_srivc) {
   Refined best = refine(start, pb, options.oe_iterations);
   AdditiveModel srivc;
   if (try_srivc && srivc_start(start.linear, start.effects, pb.data, pb.loop, options, srivc)) {
@@ -329,11 +328,21 @@ Candidate candidate_offset(const AugmentedModel& current, const Eigen::VectorXd&
   const Record& d = ctx.est.data;
   Refined out, in;
   if (!current.effects.output_offset_on)
-    out = scalar_effect(current, y0, 1e-3 * rms_or_one(d.y),
-                        [](ModelEffects& e, double v) { e.output_offset_on = true; e.output_offset = v; }, ctx);
+    out = scalar_effect(
+        current, y0, 1e-3 * rms_or_one(d.y),
+        [](ModelEffects& e, double v) {
+          e.output_offset_on = true;
+          e.output_offset = v;
+        },
+        ctx);
   if (!current.effects.input_offset_on)
-    in = scalar_effect(current, y0, 1e-3 * rms_or_one(d.u),
-                       [](ModelEffects& e, double v) { e.input_offset_on = true; e.input_offset = v; }, ctx);
+    in = scalar_effect(
+        current, y0, 1e-3 * rms_or_one(d.u),
+        [](ModelEffects& e, double v) {
+          e.input_offset_on = true;
+          e.input_offset = v;
+        },
+        ctx);
   if (!std::isfinite(out.cost) && !std::isfinite(in.cost)) return invalid(EffectKind::offset, "already in the model");
   // Output (sensor) or input (force) offset: the one with the lower estimation error.
   const bool input = in.cost < out.cost;
@@ -348,8 +357,13 @@ Candidate candidate_drift(const AugmentedModel& current, const Eigen::VectorXd& 
   if (current.effects.drift_on) return invalid(EffectKind::drift, "already in the model");
   const Record& d = ctx.est.data;
   const double D = std::max(d.t(d.size() - 1) - d.t(0), 1e-12);
-  const Refined r = scalar_effect(current, y0, 1e-3 * rms_or_one(d.y) / D,
-                                  [](ModelEffects& e, double v) { e.drift_on = true; e.drift = v; }, ctx);
+  const Refined r = scalar_effect(
+      current, y0, 1e-3 * rms_or_one(d.y) / D,
+      [](ModelEffects& e, double v) {
+        e.drift_on = true;
+        e.drift = v;
+      },
+      ctx);
   if (!std::isfinite(r.cost)) return invalid(EffectKind::drift, "no sensitivity");
   Candidate c = finish(EffectKind::drift, r, ctx);
   if (c.valid) c.params = {{"slope", c.model.effects.drift}};
@@ -358,8 +372,13 @@ Candidate candidate_drift(const AugmentedModel& current, const Eigen::VectorXd& 
 
 Candidate candidate_coulomb(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
   if (current.effects.coulomb_on) return invalid(EffectKind::coulomb, "already in the model");
-  const Refined r = scalar_effect(current, y0, 1e-3 * rms_or_one(ctx.est.data.u),
-                                  [](ModelEffects& e, double v) { e.coulomb_on = true; e.coulomb = v; }, ctx);
+  const Refined r = scalar_effect(
+      current, y0, 1e-3 * rms_or_one(ctx.est.data.u),
+      [](ModelEffects& e, double v) {
+        e.coulomb_on = true;
+        e.coulomb = v;
+      },
+      ctx);
   if (!std::isfinite(r.cost)) return invalid(EffectKind::coulomb, "no sensitivity");
   Candidate c = finish(EffectKind::coulomb, r, ctx);
   if (c.valid) c.params = {{"fc", c.model.effects.coulomb}};
@@ -374,8 +393,13 @@ Candidate candidate_cubic(const AugmentedModel& current, const Eigen::VectorXd& 
   if (current.effects.cubic_on) return invalid(EffectKind::cubic, "already in the model");
   const Record& d = ctx.est.data;
   const double sy = rms_or_one(d.y);
-  const Refined r = scalar_effect(current, y0, 1e-3 * rms_or_one(d.u) / (sy * sy * sy),
-                                  [](ModelEffects& e, double v) { e.cubic_on = true; e.cubic = v; }, ctx);
+  const Refined r = scalar_effect(
+      current, y0, 1e-3 * rms_or_one(d.u) / (sy * sy * sy),
+      [](ModelEffects& e, double v) {
+        e.cubic_on = true;
+        e.cubic = v;
+      },
+      ctx);
   if (!std::isfinite(r.cost)) return invalid(EffectKind::cubic, "no sensitivity");
   Candidate c = finish(EffectKind::cubic, r, ctx);
   if (c.valid) c.params = {{"c", c.model.effects.cubic}};

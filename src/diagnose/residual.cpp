@@ -58,8 +58,7 @@ ResidualTest band_test(const std::string& name, const Eigen::VectorXd& rho, doub
     t.statistic = std::max(t.statistic, std::abs(rho(i)));
     if (std::abs(rho(i)) > band) ++outside;
   }
-  t.pass = outside <= static_cast<int>(std::floor(0.05 * static_cast<double>(rho.size()))) &&
-           t.statistic <= 2.0 * band;
+  t.pass = outside <= static_cast<int>(std::floor(0.05 * static_cast<double>(rho.size()))) && t.statistic <= 2.0 * band;
   return t;
 }
 

@@ -11,13 +11,20 @@ namespace modalwatch {
 
 const char* effect_name(EffectKind kind) {
   switch (kind) {
-    case EffectKind::mode: return "mode";
-    case EffectKind::rigid_body: return "rigid_body";
-    case EffectKind::offset: return "offset";
-    case EffectKind::drift: return "drift";
-    case EffectKind::delay: return "delay";
-    case EffectKind::coulomb: return "coulomb";
-    case EffectKind::cubic: return "cubic";
+    case EffectKind::mode:
+      return "mode";
+    case EffectKind::rigid_body:
+      return "rigid_body";
+    case EffectKind::offset:
+      return "offset";
+    case EffectKind::drift:
+      return "drift";
+    case EffectKind::delay:
+      return "delay";
+    case EffectKind::coulomb:
+      return "coulomb";
+    case EffectKind::cubic:
+      return "cubic";
   }
   return "?";
 }

@@ -3,8 +3,8 @@
 // keeps it: theta-bar and P-bar in normalised time, and its four prefilters.
 #include <Eigen/Core>
 
-#include "modalwatch/prefilter.hpp"
 #include "hot_path.hpp"
+#include "modalwatch/prefilter.hpp"
 #include "second_order_filter_bank.hpp"
 
 namespace modalwatch::detail {
@@ -69,7 +69,9 @@ struct BlockFilters {
   MODALWATCH_HOT void advance_held(Channel c) {
     if (!shared) f[c].advance();
   }
-  MODALWATCH_HOT const double* complete(Channel c, double w) { return shared ? mode.complete(c, w) : f[c].complete(w).data(); }
+  MODALWATCH_HOT const double* complete(Channel c, double w) {
+    return shared ? mode.complete(c, w) : f[c].complete(w).data();
+  }
   // take() and complete() for the input channels kU and kZ, whose derivatives
   // the block uses up to p^m only (fill(), output()).
   MODALWATCH_HOT const double* take_input(Channel c, double w) {
@@ -78,7 +80,9 @@ struct BlockFilters {
   MODALWATCH_HOT const double* complete_input(Channel c, double w) {
     return input_top ? complete(c, w) : mode.complete_state(c, w);
   }
-  MODALWATCH_HOT const double* derivatives(Channel c) const { return shared ? mode.derivatives(c) : f[c].derivatives().data(); }
+  MODALWATCH_HOT const double* derivatives(Channel c) const {
+    return shared ? mode.derivatives(c) : f[c].derivatives().data();
+  }
 };
 
 struct Block {
@@ -86,15 +90,15 @@ struct Block {
   bool biproper = false;  // m = n + l: the output has a direct feedthrough
   double ws = 1.0, lambda = 1.0;
   double random_walk = 0.0;  // relative std of theta's drift per update (Q, CONTSID's Kalman-filter adaptation)
-  ThetaVec scale;  // theta' = scale .* theta (physical)
-  ThetaVec theta;  // theta-bar, normalised
-  ThetaMat P;      // P-bar, normalised
-  ThetaVec p_bound;  // per-direction bound on diag(P): covariance_bound x diag(P(t0))
+  ThetaVec scale;            // theta' = scale .* theta (physical)
+  ThetaVec theta;            // theta-bar, normalised
+  ThetaMat P;                // P-bar, normalised
+  ThetaVec p_bound;          // per-direction bound on diag(P): covariance_bound x diag(P(t0))
   // Stabilised forgetting: off, waiting for sigma^2 (P_ref needs it), or on.
   enum class Stabilisation : unsigned char { off, pending, on };
   Stabilisation stabilisation = Stabilisation::off;
   double stabilisation_ratio = 0.0;  // P_ref's relative std (EstimatorSettings::stabilisation)
-  ThetaVec theta_ref;  // normalised
+  ThetaVec theta_ref;                // normalised
   // P_ref_j / (K nt (1 - lambda)): the variance of the pseudo-measurement
   // theta_ref_j that gives theta_j back, once every K nt updates (K blocks), the
   // information K nt (1 - lambda) / P_ref_j forgotten over those updates.
@@ -144,9 +148,7 @@ struct Block {
       psi(n + j) = dz[j];
     }
   }
-  MODALWATCH_HOT double feedthrough() const {
-    return biproper ? theta(n + m) / (n > 0 ? theta(n - 1) : 1.0) : 0.0;
-  }
+  MODALWATCH_HOT double feedthrough() const { return biproper ? theta(n + m) / (n > 0 ? theta(n - 1) : 1.0) : 0.0; }
 };
 
 }  // namespace modalwatch::detail

@@ -11,8 +11,8 @@
 #include <stdexcept>
 #include <string>
 
-#include "modalwatch/record.hpp"
 #include "impl.hpp"
+#include "modalwatch/record.hpp"
 
 namespace modalwatch {
 namespace {
@@ -38,17 +38,15 @@ bool EstimatorSettings::operator==(const EstimatorSettings& o) const {
     return true;
   };
   return sample_time == o.sample_time && closed_loop == o.closed_loop && controller == o.controller &&
-         output_hold == o.output_hold && block_iterations == o.block_iterations &&
-         refinements == o.refinements && update_divisor == o.update_divisor && forgetting == o.forgetting &&
-         warmup_samples == o.warmup_samples && fit_on_warmup == o.fit_on_warmup &&
-         warmup_iterations == o.warmup_iterations && defer_warmup_fit == o.defer_warmup_fit &&
-         same_covariances() && initial_covariance_relative == o.initial_covariance_relative &&
-         random_walk == o.random_walk && random_walks == o.random_walks &&
-         covariance_bound == o.covariance_bound && stabilisation == o.stabilisation &&
-         stabilisations == o.stabilisations && divergence_ratio == o.divergence_ratio &&
-         gap_factor == o.gap_factor && outlier_sigma == o.outlier_sigma &&
-         residual_window == o.residual_window && low_excitation_ratio == o.low_excitation_ratio &&
-         low_excitation_window == o.low_excitation_window;
+         output_hold == o.output_hold && block_iterations == o.block_iterations && refinements == o.refinements &&
+         update_divisor == o.update_divisor && forgetting == o.forgetting && warmup_samples == o.warmup_samples &&
+         fit_on_warmup == o.fit_on_warmup && warmup_iterations == o.warmup_iterations &&
+         defer_warmup_fit == o.defer_warmup_fit && same_covariances() &&
+         initial_covariance_relative == o.initial_covariance_relative && random_walk == o.random_walk &&
+         random_walks == o.random_walks && covariance_bound == o.covariance_bound && stabilisation == o.stabilisation &&
+         stabilisations == o.stabilisations && divergence_ratio == o.divergence_ratio && gap_factor == o.gap_factor &&
+         outlier_sigma == o.outlier_sigma && residual_window == o.residual_window &&
+         low_excitation_ratio == o.low_excitation_ratio && low_excitation_window == o.low_excitation_window;
 }
 
 void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>* fit_cov,
@@ -117,8 +115,7 @@ void RecursiveEstimator::Impl::set_reference(Block& b, double stabilisation) con
 void RecursiveEstimator::Impl::set_reference_variance(Block& b) const {
   const double rho2 = b.stabilisation_ratio * b.stabilisation_ratio;
   for (int j = 0; j < b.nt; ++j) {
-    const double p_ref =
-        std::max(rho2 * b.theta_ref(j) * b.theta_ref(j) / e_var, b.p_bound(j) / cfg.covariance_bound);
+    const double p_ref = std::max(rho2 * b.theta_ref(j) * b.theta_ref(j) / e_var, b.p_bound(j) / cfg.covariance_bound);
     b.ref_var(j) = p_ref / (static_cast<double>(blocks.size()) * b.nt * (1.0 - b.lambda));
   }
   b.stabilisation = Block::Stabilisation::on;
@@ -161,7 +158,7 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
   const double lambda_min = *std::min_element(m.cfg.forgetting.begin(), m.cfg.forgetting.end());
   const double T = settings.sample_time;
   const double e_window = settings.residual_window > 0.0 ? settings.residual_window / T
-                                                          : (lambda_min < 1.0 ? 1.0 / (1.0 - lambda_min) : 1000.0);
+                                                         : (lambda_min < 1.0 ? 1.0 / (1.0 - lambda_min) : 1000.0);
   m.e_alpha = 1.0 - 1.0 / std::max(e_window, 2.0);
   m.e_short_alpha = 1.0 - 1.0 / std::max(0.05 * e_window, 2.0);
   double w_min = std::numeric_limits<double>::infinity();
@@ -223,8 +220,10 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
       // The prefilter states no longer describe the signals: restart them, keep theta and P.
       ++m.status.gaps;
       flags |= kGap;
-      if (m.status.warming_up) m.buffered = 0;
-      else m.restart_filters();
+      if (m.status.warming_up)
+        m.buffered = 0;
+      else
+        m.restart_filters();
     }
   }
   m.t_prev = s.t;

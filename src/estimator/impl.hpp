@@ -8,12 +8,12 @@
 
 #include <Eigen/Core>
 
+#include "block.hpp"
+#include "hot_path.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/model.hpp"
 #include "modalwatch/record.hpp"
 #include "modalwatch/transfer_function.hpp"
-#include "block.hpp"
-#include "hot_path.hpp"
 
 namespace modalwatch {
 
@@ -36,37 +36,37 @@ struct RecursiveEstimator::Impl {
   std::shared_ptr<const WarmupFit::Context> fit_context;  // immutable, shared with the jobs
   std::vector<detail::Block> blocks;
   std::vector<detail::BlockFilters> snapshot;  // filters at t_{k-1}, for refinements
-  DiscreteTransferFunction controller;  // C_d(q) of the instrument's loop (eqs. 9, 29)
+  DiscreteTransferFunction controller;         // C_d(q) of the instrument's loop (eqs. 9, 29)
   EstimatorStatus status;
 
   // Warm-up window, preallocated; a WarmupFit job holds it while it runs.
   Eigen::VectorXd wt, wu, wy, wr;
   int buffered = 0;
-  bool fit_pending = false;      // window full, its fit not applied yet (defer_warmup_fit)
-  bool fit_taken = false;        // ... and the window is out in a job
+  bool fit_pending = false;          // window full, its fit not applied yet (defer_warmup_fit)
+  bool fit_taken = false;            // ... and the window is out in a job
   std::uint64_t fit_generation = 0;  // tells a stale job (restore() since) from the pending one
 
   double t_prev = 0.0;
   bool have_prev = false;
-  bool just_restored = false;  // restore() ran and no sample has come since
+  bool just_restored = false;         // restore() ran and no sample has come since
   double last_u = 0.0, last_r = 0.0;  // the last finite inputs (r held in place of a non-finite one in open loop)
   std::uint64_t since_update = 0;
   std::uint64_t updates_since_good = 0;
 
-  double e_var = 0.0;        // output-error variance (EWMA over the residual window)
-  double e_alpha = 0.0;      // its forgetting
+  double e_var = 0.0;    // output-error variance (EWMA over the residual window)
+  double e_alpha = 0.0;  // its forgetting
   std::uint64_t e_count = 0;
-  double e_short = 0.0;      // the same over a few samples: divergence detector
+  double e_short = 0.0;  // the same over a few samples: divergence detector
   double e_short_alpha = 0.0;
-  double e_var_good = 0.0;   // e_var when the last good state was saved
-  std::uint64_t rearm = 0;   // samples until the divergence detector is armed again
-  std::uint64_t settling = 0;  // after a filter restart: samples left to catch up (no update meanwhile)
+  double e_var_good = 0.0;      // e_var when the last good state was saved
+  std::uint64_t rearm = 0;      // samples until the divergence detector is armed again
+  std::uint64_t settling = 0;   // after a filter restart: samples left to catch up (no update meanwhile)
   std::uint64_t transient = 0;  // ... of which the first ones, while the modes' free response dies out
   // Stabilised forgetting's turn (update.hpp): one block per update, and one of
   // its coordinates per round over the blocks; status.updates = K round + block.
   std::size_t stabilise_block = 0;
   std::uint64_t stabilise_round = 0;
-  bool inputs_lost = false;     // a non-finite u or r was skipped: the filters restart on the next sample
+  bool inputs_lost = false;  // a non-finite u or r was skipped: the filters restart on the next sample
   int outlier_run = 0;       // consecutive samples replaced as outliers
   double pow_short = 0.0, pow_ref = 0.0, pow_alpha = 0.0, pow_ref_alpha = 0.0;
   std::uint64_t pow_count = 0;

@@ -10,8 +10,8 @@
 
 #include <Eigen/Core>
 
-#include "modalwatch/estimator.hpp"
 #include "impl.hpp"
+#include "modalwatch/estimator.hpp"
 
 namespace modalwatch {
 namespace {
@@ -47,8 +47,8 @@ bool EstimatorState::operator==(const EstimatorState& o) const {
          same(P_bound_, o.P_bound_) && same(good_theta_, o.good_theta_) && same(good_P_, o.good_P_) &&
          same(reference_theta_, o.reference_theta_) && same(reference_variance_, o.reference_variance_) &&
          noise_variance_ == o.noise_variance_ && residual_short_ == o.residual_short_ &&
-         noise_variance_good_ == o.noise_variance_good_ && residual_count_ == o.residual_count_ &&
-         rearm_ == o.rearm_ && input_power_ == o.input_power_ && input_power_reference_ == o.input_power_reference_ &&
+         noise_variance_good_ == o.noise_variance_good_ && residual_count_ == o.residual_count_ && rearm_ == o.rearm_ &&
+         input_power_ == o.input_power_ && input_power_reference_ == o.input_power_reference_ &&
          input_power_count_ == o.input_power_count_ && since_update_ == o.since_update_ &&
          updates_since_good_ == o.updates_since_good_ && have_last_sample_ == o.have_last_sample_ &&
          last_t_ == o.last_t_ && last_u_ == o.last_u_ && last_r_ == o.last_r_ && same_status;
@@ -91,13 +91,14 @@ void EstimatorState::write(StateWriter& out) const {
   out.real(last_u_, "last u");
   out.real(last_r_, "last r");
   const EstimatorStatus& st = status_;
-  for (std::uint64_t v : {st.samples, st.updates, st.rejected_nonfinite, st.rejected_out_of_order, st.gaps,
-                          st.outliers, st.low_excitation_samples, st.projections, st.covariance_clamps, st.resets})
+  for (std::uint64_t v : {st.samples, st.updates, st.rejected_nonfinite, st.rejected_out_of_order, st.gaps, st.outliers,
+                          st.low_excitation_samples, st.projections, st.covariance_clamps, st.resets})
     out.counter(v, "status counter");
   std::int32_t reason = -1;  // none
   const auto& reasons = reset_reasons();
   for (std::size_t i = 0; i < reasons.size(); ++i)
-    if (st.last_reset_reason && std::strcmp(reasons[i], st.last_reset_reason) == 0) reason = static_cast<std::int32_t>(i);
+    if (st.last_reset_reason && std::strcmp(reasons[i], st.last_reset_reason) == 0)
+      reason = static_cast<std::int32_t>(i);
   out.integer(reason, "last reset reason");
   out.flag(st.warming_up, "warming_up");
   out.flag(st.low_excitation, "low_excitation");
@@ -149,9 +150,9 @@ EstimatorState EstimatorState::read(StateReader& in) {
   e.last_u_ = in.real("last u");
   e.last_r_ = in.real("last r");
   EstimatorStatus& st = e.status_;
-  for (std::uint64_t* v : {&st.samples, &st.updates, &st.rejected_nonfinite, &st.rejected_out_of_order, &st.gaps,
-                           &st.outliers, &st.low_excitation_samples, &st.projections, &st.covariance_clamps,
-                           &st.resets})
+  for (std::uint64_t* v :
+       {&st.samples, &st.updates, &st.rejected_nonfinite, &st.rejected_out_of_order, &st.gaps, &st.outliers,
+        &st.low_excitation_samples, &st.projections, &st.covariance_clamps, &st.resets})
     *v = in.counter("status counter");
   const std::int32_t reason = in.integer("last reset reason", std::numeric_limits<std::int32_t>::min(),
                                          std::numeric_limits<std::int32_t>::max());
@@ -219,8 +220,9 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
   if (st.warmed_up_) {
     if (st.P_.size() != K || st.time_scale_.size() != K || st.P_bound_.size() != K || st.good_theta_.size() != K ||
         st.good_P_.size() != K || st.reference_theta_.size() != K || st.reference_variance_.size() != K)
-      fail("per-submodel arrays (P, time_scale, P_bound, good_theta, good_P, reference theta and variance) do not "
-           "have one entry per submodel");
+      fail(
+          "per-submodel arrays (P, time_scale, P_bound, good_theta, good_P, reference theta and variance) do not "
+          "have one entry per submodel");
     for (std::size_t i = 0; i < K; ++i) {
       const Eigen::Index nt = m.initial.submodels[i].n_theta();
       const std::string where = "submodel " + std::to_string(i + 1) + ": ";
@@ -237,8 +239,8 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
       if ((st.P_bound_[i].array() <= 0.0).any()) fail(where + "P_bound must be > 0");
     }
   }
-  for (double v : {st.noise_variance_, st.residual_short_, st.noise_variance_good_, st.input_power_,
-                   st.input_power_reference_})
+  for (double v :
+       {st.noise_variance_, st.residual_short_, st.noise_variance_good_, st.input_power_, st.input_power_reference_})
     if (!finite(v) || v < 0.0) fail("noise, residual or input-power statistic is negative or non-finite");
   if (!finite(st.last_t_) || !finite(st.last_u_) || !finite(st.last_r_)) fail("non-finite last sample");
   const char* reason = "";

@@ -6,9 +6,9 @@
 
 #include <Eigen/Core>
 
+#include "impl.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/prefilter.hpp"
-#include "impl.hpp"
 #include "update.hpp"
 
 namespace modalwatch {
@@ -156,8 +156,10 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     update = false;
   } else {
     outlier_run = 0;
-    if (e_count == 0) e_var = e * e;
-    else if (settling == 0) e_var = e_alpha * e_var + (1.0 - e_alpha) * e * e;
+    if (e_count == 0)
+      e_var = e * e;
+    else if (settling == 0)
+      e_var = e_alpha * e_var + (1.0 - e_alpha) * e * e;
     e_short = e_count == 0 ? e * e : e_short_alpha * e_short + (1.0 - e_short_alpha) * e * e;
     ++e_count;
   }

@@ -6,8 +6,8 @@
 
 #include <Eigen/Core>
 
-#include "modalwatch/polynomial.hpp"
 #include "impl.hpp"
+#include "modalwatch/polynomial.hpp"
 
 namespace modalwatch {
 namespace {
@@ -58,8 +58,8 @@ bool project(double* a_part, int n) {
 // compile time so that the loops unroll (N = 3: a mode, the common case); N = 0
 // takes nt at run time.
 template <int N>
-MODALWATCH_HOT bool iv_update(int nt_runtime, double* P, double* theta, const double* phi, const double* psi, double lambda,
-               double y_f) {
+MODALWATCH_HOT bool iv_update(int nt_runtime, double* P, double* theta, const double* phi, const double* psi,
+                              double lambda, double y_f) {
   const int nt = N > 0 ? N : nt_runtime;
   double Ppsi[kMaxTheta], w[kMaxTheta];
   for (int i = 0; i < nt; ++i) Ppsi[i] = w[i] = 0.0;

@@ -12,10 +12,10 @@
 #include <Eigen/LU>
 #include <Eigen/QR>
 
+#include "impl.hpp"
 #include "modalwatch/polynomial.hpp"
 #include "modalwatch/record.hpp"
 #include "modalwatch/srivc.hpp"
-#include "impl.hpp"
 
 namespace modalwatch {
 
@@ -32,66 +32,67 @@ void WarmupFit::run() noexcept {
   const AdditiveModel& initial = context_->initial;
   const EstimatorSettings& cfg = context_->cfg;
   try {
-  const int N = n_;
-  Record window;
-  window.t = t_.head(N);
-  window.u = u_.head(N);
-  window.y = y_.head(N);
-  if (cfg.closed_loop) window.r = r_.head(N);
-  const double y_var = (window.y.array() - window.y.mean()).square().mean();
-  AdditiveModel model = initial;
-  std::vector<Eigen::MatrixXd> cov;
-  double sigma2 = 0.0;
-  bool fit_used = false;
-  if (cfg.fit_on_warmup) {
-    try {
-      SrivcOptions o;
-      o.closed_loop = cfg.closed_loop;
-      o.controller = cfg.controller;
-      o.output_hold = cfg.output_hold;
-      o.max_iterations = cfg.warmup_iterations;
-      const FitResult fit = fit_srivc(window, initial, o);
-      bool ok = fit.model.beta().allFinite() && fit.covariance.allFinite() && fit.noise_variance > 0.0;
-      for (const auto& s : fit.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
-      if (ok) {
-        // theta(t0), P(t0): the configured model as a prior (relative std rho per
-        // parameter) fused with the fit and its covariance C, per submodel:
-        //   C0 = (Cp^-1 + C^-1)^-1,  theta0 = C0 (Cp^-1 theta_cfg + C^-1 theta_fit).
-        // Where the window is informative the fit dominates; along directions it
-        // leaves undetermined (a setpoint with few frequencies) the prior holds.
-        sigma2 = fit.noise_variance;
-        const double rho = cfg.initial_covariance_relative;
-        for (std::size_t i = 0; i < model.submodels.size(); ++i) {
-          const Eigen::VectorXd th_cfg = initial.submodels[i].theta(), th_fit = fit.model.submodels[i].theta();
-          const Eigen::MatrixXd C = fit.theta_covariance(static_cast<int>(i));
-          Eigen::VectorXd prior_var(th_cfg.size());
-          for (Eigen::Index j = 0; j < th_cfg.size(); ++j) prior_var(j) = std::pow(rho * std::max(std::abs(th_cfg(j)), 1e-12), 2);
-          const Eigen::MatrixXd Cinv = C.completeOrthogonalDecomposition().pseudoInverse();
-          Eigen::MatrixXd info = Cinv;
-          info.diagonal() += prior_var.cwiseInverse();
-          const Eigen::MatrixXd C0 = info.inverse();
-          Eigen::VectorXd th0 = C0 * (prior_var.cwiseInverse().cwiseProduct(th_cfg) + Cinv * th_fit);
-          Submodel s = initial.submodels[i];
-          s.set_theta(th0);
-          if (s.n > 0) {
-            Eigen::VectorXd a = s.a;
-            project_stable(a);
-            s.a = a;
+    const int N = n_;
+    Record window;
+    window.t = t_.head(N);
+    window.u = u_.head(N);
+    window.y = y_.head(N);
+    if (cfg.closed_loop) window.r = r_.head(N);
+    const double y_var = (window.y.array() - window.y.mean()).square().mean();
+    AdditiveModel model = initial;
+    std::vector<Eigen::MatrixXd> cov;
+    double sigma2 = 0.0;
+    bool fit_used = false;
+    if (cfg.fit_on_warmup) {
+      try {
+        SrivcOptions o;
+        o.closed_loop = cfg.closed_loop;
+        o.controller = cfg.controller;
+        o.output_hold = cfg.output_hold;
+        o.max_iterations = cfg.warmup_iterations;
+        const FitResult fit = fit_srivc(window, initial, o);
+        bool ok = fit.model.beta().allFinite() && fit.covariance.allFinite() && fit.noise_variance > 0.0;
+        for (const auto& s : fit.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
+        if (ok) {
+          // theta(t0), P(t0): the configured model as a prior (relative std rho per
+          // parameter) fused with the fit and its covariance C, per submodel:
+          //   C0 = (Cp^-1 + C^-1)^-1,  theta0 = C0 (Cp^-1 theta_cfg + C^-1 theta_fit).
+          // Where the window is informative the fit dominates; along directions it
+          // leaves undetermined (a setpoint with few frequencies) the prior holds.
+          sigma2 = fit.noise_variance;
+          const double rho = cfg.initial_covariance_relative;
+          for (std::size_t i = 0; i < model.submodels.size(); ++i) {
+            const Eigen::VectorXd th_cfg = initial.submodels[i].theta(), th_fit = fit.model.submodels[i].theta();
+            const Eigen::MatrixXd C = fit.theta_covariance(static_cast<int>(i));
+            Eigen::VectorXd prior_var(th_cfg.size());
+            for (Eigen::Index j = 0; j < th_cfg.size(); ++j)
+              prior_var(j) = std::pow(rho * std::max(std::abs(th_cfg(j)), 1e-12), 2);
+            const Eigen::MatrixXd Cinv = C.completeOrthogonalDecomposition().pseudoInverse();
+            Eigen::MatrixXd info = Cinv;
+            info.diagonal() += prior_var.cwiseInverse();
+            const Eigen::MatrixXd C0 = info.inverse();
+            Eigen::VectorXd th0 = C0 * (prior_var.cwiseInverse().cwiseProduct(th_cfg) + Cinv * th_fit);
+            Submodel s = initial.submodels[i];
+            s.set_theta(th0);
+            if (s.n > 0) {
+              Eigen::VectorXd a = s.a;
+              project_stable(a);
+              s.a = a;
+            }
+            model.submodels[i] = s;
+            cov.push_back(0.5 * (C0 + C0.transpose()));
           }
-          model.submodels[i] = s;
-          cov.push_back(0.5 * (C0 + C0.transpose()));
+          fit_used = true;
         }
-        fit_used = true;
+      } catch (const std::exception&) {
+        // Fall back to the configured model: reported through warmup_fit_used.
       }
-    } catch (const std::exception&) {
-      // Fall back to the configured model: reported through warmup_fit_used.
     }
-  }
-  model_ = std::move(model);
-  covariance_ = std::move(cov);
-  sigma2_ = sigma2;
-  y_var_ = y_var;
-  fit_used_ = fit_used;
+    model_ = std::move(model);
+    covariance_ = std::move(cov);
+    sigma2_ = sigma2;
+    y_var_ = y_var;
+    fit_used_ = fit_used;
   } catch (...) {
     failed_ = true;  // allocation: apply_warmup_fit() restarts the warm-up
   }

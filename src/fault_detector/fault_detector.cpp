@@ -78,9 +78,7 @@ void set_covariance(ModeBaseline& b, const Eigen::Matrix3d& c) {
   Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>>(b.covariance.data()) = c;
 }
 
-bool finite(const ModalParameters& p) {
-  return std::isfinite(p.wn) && std::isfinite(p.zeta) && std::isfinite(p.gain);
-}
+bool finite(const ModalParameters& p) { return std::isfinite(p.wn) && std::isfinite(p.zeta) && std::isfinite(p.gain); }
 
 double normal_tail(double x) { return 0.5 * std::erfc(x / std::numbers::sqrt2); }
 double normal_pdf(double x) { return std::exp(-0.5 * x * x) / std::sqrt(2.0 * std::numbers::pi); }
@@ -105,8 +103,8 @@ double upcrossings_per_update(double h, double rho) {
   double sum = 0.0;
   for (int j = 0; j <= n; ++j) {
     const double r = lo + j * step;
-    const double f = std::sqrt(2.0 / std::numbers::pi) * r * r * std::exp(-0.5 * r * r) *
-                     noncentral_chi3_tail(u / s, rho * r / s);
+    const double f =
+        std::sqrt(2.0 / std::numbers::pi) * r * r * std::exp(-0.5 * r * r) * noncentral_chi3_tail(u / s, rho * r / s);
     sum += f * (j == 0 || j == n ? 1.0 : (j % 2 ? 4.0 : 2.0));
   }
   return sum * step / 3.0;
@@ -137,7 +135,8 @@ void check_thresholds(const FaultThresholds& th, int q) {
 }
 
 void check_positive(double v, const char* name) {
-  if (!(std::isfinite(v) && v > 0.0)) throw std::invalid_argument(std::string("FaultDetector: ") + name + " must be positive");
+  if (!(std::isfinite(v) && v > 0.0))
+    throw std::invalid_argument(std::string("FaultDetector: ") + name + " must be positive");
 }
 
 }  // namespace
@@ -181,11 +180,11 @@ DetectionThresholds detection_thresholds(const FaultDetectorSettings& s, double 
 FaultDetector::FaultDetector(FaultDetectorSettings settings) : settings_(std::move(settings)) {
   const std::size_t n = settings_.mode_names.size();
   if (n > kMaxModes)
-    throw std::invalid_argument("FaultDetector: " + std::to_string(n) + " modes, at most " +
-                                std::to_string(kMaxModes) + " fit in the flag bits");
+    throw std::invalid_argument("FaultDetector: " + std::to_string(n) + " modes, at most " + std::to_string(kMaxModes) +
+                                " fit in the flag bits");
   if (settings_.baselines.size() != n)
-    throw std::invalid_argument("FaultDetector: " + std::to_string(settings_.baselines.size()) +
-                                " baselines for " + std::to_string(n) + " modes");
+    throw std::invalid_argument("FaultDetector: " + std::to_string(settings_.baselines.size()) + " baselines for " +
+                                std::to_string(n) + " modes");
   if (!settings_.baseline_std.empty() && settings_.baseline_std.size() != n)
     throw std::invalid_argument("FaultDetector: " + std::to_string(settings_.baseline_std.size()) +
                                 " baseline standard deviations for " + std::to_string(n) + " modes");
@@ -323,7 +322,7 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
   for (std::size_t i = 0; i < n; ++i) {
     const bool mode_valid = valid && t_ok && finite(value[i]);
     if (!mode_valid) {
-      last_valid_[i] = 0;  // the interval up to the next valid update does not count
+      last_valid_[i] = 0;                 // the interval up to the next valid update does not count
       previous_[i] = {kNaN, kNaN, kNaN};  // nor does the innovation across it
       continue;
     }

@@ -48,7 +48,7 @@ SecondOrderDiscretization discretize_second_order_closed_form(double d0, double 
   SecondOrderDiscretization z;
   const double tr = AT.a + AT.d, det = AT.a * AT.d - AT.b * AT.c;
   const double sigma = 0.5 * tr, disc = sigma * sigma - det;  // eigenvalues sigma +- sqrt(disc)
-  double k0, k1;  // exp(AT) = k0 I + k1 AT
+  double k0, k1;                                              // exp(AT) = k0 I + k1 AT
   if (disc > 1e-14 * (1.0 + std::abs(det)) && disc > 1.0) {
     // Real eigenvalues at least 2 apart (a stiff, overdamped filter): from the
     // eigenvalues themselves, k1 = (e^l1 - e^l2)/(l1 - l2) and

@@ -26,9 +26,7 @@ Eigen::VectorXd sum_of_sines(const SignalSpec& s, const Eigen::VectorXd& t) {
 
 // Uniform in [0, 2 pi) from the top 53 bits, so that a seed gives the same
 // phases with any standard library (uniform_real_distribution is not portable).
-double random_phase(std::mt19937_64& rng) {
-  return kTwoPi * static_cast<double>(rng() >> 11) * 0x1.0p-53;
-}
+double random_phase(std::mt19937_64& rng) { return kTwoPi * static_cast<double>(rng() >> 11) * 0x1.0p-53; }
 
 Eigen::VectorXd multisine(const SignalSpec& s, const Eigen::VectorXd& t) {
   if (!(s.period_s > 0.0)) throw std::invalid_argument("multisine: period_s must be > 0");
@@ -54,14 +52,11 @@ Eigen::VectorXd multisine(const SignalSpec& s, const Eigen::VectorXd& t) {
 // Feedback taps of maximum-length Fibonacci LFSRs, register_bits 2..31
 // (Xilinx XAPP052 table; each is a primitive polynomial over GF(2)). Zero ends a list.
 constexpr std::array<std::array<int, 4>, 32> kPrbsTaps = {{
-    {0, 0, 0, 0},      {0, 0, 0, 0},      {2, 1, 0, 0},      {3, 2, 0, 0},
-    {4, 3, 0, 0},      {5, 3, 0, 0},      {6, 5, 0, 0},      {7, 6, 0, 0},
-    {8, 6, 5, 4},      {9, 5, 0, 0},      {10, 7, 0, 0},     {11, 9, 0, 0},
-    {12, 6, 4, 1},     {13, 4, 3, 1},     {14, 5, 3, 1},     {15, 14, 0, 0},
-    {16, 15, 13, 4},   {17, 14, 0, 0},    {18, 11, 0, 0},    {19, 6, 2, 1},
-    {20, 17, 0, 0},    {21, 19, 0, 0},    {22, 21, 0, 0},    {23, 18, 0, 0},
-    {24, 23, 22, 17},  {25, 22, 0, 0},    {26, 6, 2, 1},     {27, 5, 2, 1},
-    {28, 25, 0, 0},    {29, 27, 0, 0},    {30, 6, 4, 1},     {31, 28, 0, 0},
+    {0, 0, 0, 0},   {0, 0, 0, 0},   {2, 1, 0, 0},    {3, 2, 0, 0},     {4, 3, 0, 0},   {5, 3, 0, 0},  {6, 5, 0, 0},
+    {7, 6, 0, 0},   {8, 6, 5, 4},   {9, 5, 0, 0},    {10, 7, 0, 0},    {11, 9, 0, 0},  {12, 6, 4, 1}, {13, 4, 3, 1},
+    {14, 5, 3, 1},  {15, 14, 0, 0}, {16, 15, 13, 4}, {17, 14, 0, 0},   {18, 11, 0, 0}, {19, 6, 2, 1}, {20, 17, 0, 0},
+    {21, 19, 0, 0}, {22, 21, 0, 0}, {23, 18, 0, 0},  {24, 23, 22, 17}, {25, 22, 0, 0}, {26, 6, 2, 1}, {27, 5, 2, 1},
+    {28, 25, 0, 0}, {29, 27, 0, 0}, {30, 6, 4, 1},   {31, 28, 0, 0},
 }};
 
 // One LFSR bit per call: s_k = XOR over taps t of s_{k-t}. Bit (t-1) of the

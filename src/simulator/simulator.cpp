@@ -213,7 +213,8 @@ void check_specs(const PlantSpec& plant, const ExperimentSpec& ex) {
   if (plant.modes.empty()) throw std::invalid_argument("simulate: the plant has no modes");
   if (!(ex.sample_time > 0.0) || !std::isfinite(ex.sample_time))
     throw std::invalid_argument("simulate: sample_time must be > 0");
-  if (!(ex.duration > 0.0) || !std::isfinite(ex.duration)) throw std::invalid_argument("simulate: duration must be > 0");
+  if (!(ex.duration > 0.0) || !std::isfinite(ex.duration))
+    throw std::invalid_argument("simulate: duration must be > 0");
   if (ex.closed_loop && ex.controller.empty()) throw std::invalid_argument("simulate: closed loop needs a controller");
   if (!(plant.noise_variance >= 0.0) || !std::isfinite(plant.noise_variance))
     throw std::invalid_argument("simulate: noise_variance must be >= 0");
@@ -293,8 +294,7 @@ AdditiveModel plant_model_at(const PlantSpec& plant, double t) {
 bool ExperimentSpec::operator==(const ExperimentSpec& other) const {
   return sample_time == other.sample_time && duration == other.duration && seed == other.seed &&
          closed_loop == other.closed_loop && controller == other.controller && excitation == other.excitation &&
-         excitation_samples.size() == other.excitation_samples.size() &&
-         excitation_samples == other.excitation_samples;
+         excitation_samples.size() == other.excitation_samples.size() && excitation_samples == other.excitation_samples;
 }
 
 }  // namespace modalwatch

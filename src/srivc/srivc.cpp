@@ -210,8 +210,8 @@ Eigen::VectorXd simulate_model(const AdditiveModel& model, const Eigen::VectorXd
   return y;
 }
 
-void simulate_loop(const AdditiveModel& model, const DiscreteTransferFunction& controller,
-                   const Eigen::VectorXd& r, double T, Eigen::VectorXd& z, Eigen::VectorXd& y) {
+void simulate_loop(const AdditiveModel& model, const DiscreteTransferFunction& controller, const Eigen::VectorXd& r,
+                   double T, Eigen::VectorXd& z, Eigen::VectorXd& y) {
   simulate_loop_scaled(scale_model(model), controller, r, T, z, y);
 }
 
@@ -295,8 +295,8 @@ FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const Sriv
                                 std::to_string(N));
   if (N - options.settle_samples < 2 * initial.n_beta() + 2)
     throw std::invalid_argument("fit: " + std::to_string(N - options.settle_samples) + " samples for " +
-                                std::to_string(initial.n_beta()) +
-                                " parameters; need at least " + std::to_string(2 * initial.n_beta() + 2));
+                                std::to_string(initial.n_beta()) + " parameters; need at least " +
+                                std::to_string(2 * initial.n_beta() + 2));
   if (options.closed_loop && (!data.has_reference() || options.controller.empty()))
     throw std::invalid_argument("fit: closed loop needs the reference r in the data and a controller");
   FitResult best = fit_additive(data, initial, options);
@@ -332,7 +332,8 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
 
   auto beta_scaled = [&] {
     Eigen::VectorXd b(result.model.n_beta());
-    for (std::size_t i = 0, o = 0; i < K; o += model[i].theta.size(), ++i) b.segment(o, model[i].theta.size()) = model[i].theta;
+    for (std::size_t i = 0, o = 0; i < K; o += model[i].theta.size(), ++i)
+      b.segment(o, model[i].theta.size()) = model[i].theta;
     return b;
   };
 
@@ -347,8 +348,8 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
           if (j != i) y_tilde -= x_hat[j];
         if (options.closed_loop) simulate_loop_scaled(model, options.controller, data.r, T, z, y_loop);
         const Eigen::VectorXd x_hat_z = options.closed_loop ? simulate_scaled(model[i], z, T) : x_hat[i];
-        const Filtered f = filter_block(model[i], y_tilde, u, x_hat_z, options.closed_loop ? z : u, T,
-                                        options.output_hold);
+        const Filtered f =
+            filter_block(model[i], y_tilde, u, x_hat_z, options.closed_loop ? z : u, T, options.output_hold);
         Eigen::VectorXd theta = iv_solve(f, first);
         if (!theta.allFinite()) break;  // singular: keep the previous iterate
         if (damp_step(model[i], theta, options.max_frequency_step)) ++result.damped_steps;

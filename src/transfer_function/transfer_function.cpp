@@ -49,8 +49,7 @@ StateSpace df2t_state_space(const std::vector<double>& num, const std::vector<do
 
 }  // namespace
 
-DiscreteTransferFunction::DiscreteTransferFunction(std::vector<double> numerator,
-                                                   std::vector<double> denominator) {
+DiscreteTransferFunction::DiscreteTransferFunction(std::vector<double> numerator, std::vector<double> denominator) {
   if (denominator.empty() || denominator.front() == 0.0)
     throw std::invalid_argument("DiscreteTransferFunction: leading denominator coefficient must be != 0");
   if (numerator.empty()) throw std::invalid_argument("DiscreteTransferFunction: empty numerator");
@@ -80,10 +79,8 @@ void DiscreteTransferFunction::set_state(const std::vector<double>& z) {
   z_ = z;
 }
 
-double closed_loop_spectral_radius(const DiscreteTransferFunction& controller,
-                                   const Eigen::MatrixXd& plant_phi,
-                                   const Eigen::MatrixXd& plant_gamma,
-                                   const Eigen::MatrixXd& plant_c, double plant_d) {
+double closed_loop_spectral_radius(const DiscreteTransferFunction& controller, const Eigen::MatrixXd& plant_phi,
+                                   const Eigen::MatrixXd& plant_gamma, const Eigen::MatrixXd& plant_c, double plant_d) {
   if (controller.empty()) throw std::invalid_argument("closed_loop_spectral_radius: no controller");
   const Eigen::Index np = plant_phi.rows();
   if (plant_phi.cols() != np || plant_gamma.size() != np || plant_c.size() != np)

@@ -5,8 +5,8 @@
 #include <cstdint>
 #include <string>
 
-#include "modalwatch/io/config.hpp"
 #include "modalwatch/estimator.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/simulator.hpp"
 
 namespace modalwatch::bench {
@@ -37,7 +37,6 @@ inline Record simulate_paper(int K, bool closed_loop, double duration) {
   e.duration = duration;
   return simulate(*c.plant, e).record;
 }
-
 
 // Feeds a record to an estimator forever: after the last sample it continues
 // with sample `restart`, time shifted so that it keeps increasing by T.

@@ -49,10 +49,10 @@
 #include <modalwatch/estimates_t.hpp>
 #include <modalwatch/fault_status_t.hpp>
 
-#include "modalwatch/io/config.hpp"
-#include "modalwatch/io/records.hpp"
 #include "modalwatch/error.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/io/messages.hpp"
+#include "modalwatch/io/records.hpp"
 
 namespace {
 
@@ -67,9 +67,9 @@ std::int64_t realtime_us() {
 struct Listener {
   std::mutex mutex;
   struct Arrival {
-    std::int64_t utime;     // of the estimate: its newest sample
-    std::int64_t stamp;     // LCM's receive stamp (see the top of the file)
-    std::int64_t handled;   // when this handler ran
+    std::int64_t utime;    // of the estimate: its newest sample
+    std::int64_t stamp;    // LCM's receive stamp (see the top of the file)
+    std::int64_t handled;  // when this handler ran
   };
   std::vector<Arrival> arrivals;
   modalwatch::fault_status_t last_status;
@@ -101,7 +101,8 @@ void on_status(const lcm_recv_buf_t* rbuf, const char*, void* user) {
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return NAN;
   std::sort(v.begin(), v.end());
-  const auto i = static_cast<std::size_t>(std::min<double>(static_cast<double>(v.size() - 1), p * static_cast<double>(v.size())));
+  const auto i =
+      static_cast<std::size_t>(std::min<double>(static_cast<double>(v.size() - 1), p * static_cast<double>(v.size())));
   return v[i];
 }
 
@@ -181,10 +182,11 @@ int machine_floor(double seconds) {
   const auto over_1ms = std::count_if(all.begin(), all.end(), [](double x) { return x > 1000.0; });
   const double p_over = static_cast<double>(over_1ms) / static_cast<double>(all.size());
   std::printf("machine: %d CPUs, %.0f s per probe\n", cpus, half);
-  std::printf("  timer wake-up lateness (us), %zu wake-ups: p50 %.0f  p99 %.0f  p99.9 %.0f  max %.0f;"
-              " over 1 ms: %.3f %%\n",
-              all.size(), percentile(all, 0.5), percentile(all, 0.99), percentile(all, 0.999), percentile(all, 1.0),
-              100 * p_over);
+  std::printf(
+      "  timer wake-up lateness (us), %zu wake-ups: p50 %.0f  p99 %.0f  p99.9 %.0f  max %.0f;"
+      " over 1 ms: %.3f %%\n",
+      all.size(), percentile(all, 0.5), percentile(all, 0.99), percentile(all, 0.999), percentile(all, 1.0),
+      100 * p_over);
   std::printf("    a path of 4 such wake-ups is over 1 ms at least %.2f %% of the time (1 - (1 - p)^4)\n",
               100 * (1 - std::pow(1 - p_over, 4)));
 
@@ -220,10 +222,11 @@ int machine_floor(double seconds) {
   });
   for (int c = 0; c < cpus; ++c) {
     const Gaps& g = gaps[static_cast<std::size_t>(c)];
-    std::printf("  CPU %d taken from a spinning thread: %lld gaps over 50 us, %lld over 1 ms (%.2f per s), longest %.0f us,"
-                " %.2f %% of the time\n",
-                c, g.over_50us, g.over_1ms, static_cast<double>(g.over_1ms) / (g.spun_ns * 1e-9), g.max_us,
-                100 * g.lost_ns / g.spun_ns);
+    std::printf(
+        "  CPU %d taken from a spinning thread: %lld gaps over 50 us, %lld over 1 ms (%.2f per s), longest %.0f us,"
+        " %.2f %% of the time\n",
+        c, g.over_50us, g.over_1ms, static_cast<double>(g.over_1ms) / (g.spun_ns * 1e-9), g.max_us,
+        100 * g.lost_ns / g.spun_ns);
   }
   const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("  steal time (the host running something else on our CPUs): %.2f %% of CPU time\n",
@@ -278,8 +281,8 @@ int main(int argc, char** argv) {
     prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
     {
       const long long total = std::llround(rate * seconds);
-      const double period = 1.0 / rate;                                         // wall clock
-      const double grid = mode == "latency" ? period : config.sample_time;     // utime
+      const double period = 1.0 / rate;                                     // wall clock
+      const double grid = mode == "latency" ? period : config.sample_time;  // utime
       const int per_packet = mode == "latency" ? 1 : batch;
       const std::int64_t start_us = realtime_us() + 10'000;
       std::vector<StampedSample> buf(static_cast<std::size_t>(per_packet));
@@ -296,8 +299,9 @@ int main(int argc, char** argv) {
           s.y = rec.y(j);
           s.r = rec.has_reference() ? rec.r(j) : 0.0;
         }
-        const auto bytes = m == 1 && mode == "latency" ? encode_sample(buf[0])
-                                                       : encode_batch(std::span<const StampedSample>(buf.data(), m), grid);
+        const auto bytes = m == 1 && mode == "latency"
+                               ? encode_sample(buf[0])
+                               : encode_batch(std::span<const StampedSample>(buf.data(), m), grid);
         if (m == 1 && mode == "latency")
           lcm_publish(lcm, config.lcm.samples_channel.c_str(), bytes.data(), static_cast<unsigned>(bytes.size()));
         else
@@ -315,11 +319,12 @@ int main(int argc, char** argv) {
                   static_cast<double>(total) / sent_s, per_packet);
       if (listener.have_status) {
         const auto& s = listener.last_status;
-        std::printf("  daemon: sent %lld, received %lld, dropped %lld (ring full), processed %lld, duplicate %lld, out of "
-                    "order %lld, gaps %lld\n",
-                    total, static_cast<long long>(s.samples_received), static_cast<long long>(s.samples_dropped),
-                    listener.processed, static_cast<long long>(s.samples_duplicate),
-                    static_cast<long long>(s.samples_out_of_order), static_cast<long long>(s.gaps));
+        std::printf(
+            "  daemon: sent %lld, received %lld, dropped %lld (ring full), processed %lld, duplicate %lld, out of "
+            "order %lld, gaps %lld\n",
+            total, static_cast<long long>(s.samples_received), static_cast<long long>(s.samples_dropped),
+            listener.processed, static_cast<long long>(s.samples_duplicate),
+            static_cast<long long>(s.samples_out_of_order), static_cast<long long>(s.gaps));
       } else {
         std::printf("  daemon: no fault status received\n");
       }

@@ -108,7 +108,7 @@ int main(int argc, char** argv) {
     std::uint64_t packets = 0, sent_unique = 0, lost = 0, duplicated = 0, late = 0, nan_sent = 0, skipped = 0;
     std::size_t next_restart = 0;
     std::int64_t seq = 0;
-    double epoch_t = rec.t(0);  // record time of utime = start_utime
+    double epoch_t = rec.t(0);       // record time of utime = start_utime
     std::vector<std::uint8_t> held;  // a packet held back to be sent after the next
     std::uint64_t held_samples = 0;
     const auto publish = [&](const std::vector<std::uint8_t>& bytes) {
@@ -174,12 +174,13 @@ int main(int argc, char** argv) {
     }
     if (!held.empty()) publish(held);  // at the end it is merely the last
     lcm_destroy(lcm);
-    std::printf("packets=%llu\nsent_unique=%llu\nlost=%llu\nduplicated=%llu\nlate=%llu\nnan_sent=%llu\n"
-                "skipped=%llu\npauses=%zu\nnan_bursts=%zu\nrestarts=%zu\n",
-                static_cast<unsigned long long>(packets), static_cast<unsigned long long>(sent_unique),
-                static_cast<unsigned long long>(lost), static_cast<unsigned long long>(duplicated),
-                static_cast<unsigned long long>(late), static_cast<unsigned long long>(nan_sent),
-                static_cast<unsigned long long>(skipped), pauses.size(), nans.size(), restarts.size());
+    std::printf(
+        "packets=%llu\nsent_unique=%llu\nlost=%llu\nduplicated=%llu\nlate=%llu\nnan_sent=%llu\n"
+        "skipped=%llu\npauses=%zu\nnan_bursts=%zu\nrestarts=%zu\n",
+        static_cast<unsigned long long>(packets), static_cast<unsigned long long>(sent_unique),
+        static_cast<unsigned long long>(lost), static_cast<unsigned long long>(duplicated),
+        static_cast<unsigned long long>(late), static_cast<unsigned long long>(nan_sent),
+        static_cast<unsigned long long>(skipped), pauses.size(), nans.size(), restarts.size());
     return 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "modalwatch_network_weather: %s\n", e.what());

@@ -83,8 +83,7 @@ int main(int argc, char** argv) {
         const ModeEstimate m = estimator.mode(i);
         value[static_cast<std::size_t>(i)] = m.value;
         std_dev[static_cast<std::size_t>(i)] = m.std;
-        if (!std::isfinite(m.value.wn) || !std::isfinite(m.value.zeta) || !std::isfinite(m.value.gain))
-          nan_seen = true;
+        if (!std::isfinite(m.value.wn) || !std::isfinite(m.value.zeta) || !std::isfinite(m.value.gain)) nan_seen = true;
       }
       changes.clear();
       detector.update(static_cast<double>(k) * T, value, std_dev, !st.warming_up && !st.low_excitation, changes);
@@ -113,8 +112,8 @@ int main(int argc, char** argv) {
   if (flags_raised > 0) fail(std::to_string(flags_raised) + " fault flags on a plant that does not drift");
   if (estimator.status().resets > 0) fail(std::to_string(estimator.status().resets) + " estimator resets");
   // One page of slack per hour would still be a leak over days: allow none beyond 64 KiB.
-  if (rss_hour1 > 0 && rss_max > rss_hour1 + 64) fail("RSS grew from " + std::to_string(rss_hour1) + " to " +
-                                                     std::to_string(rss_max) + " KiB after the first hour");
+  if (rss_hour1 > 0 && rss_max > rss_hour1 + 64)
+    fail("RSS grew from " + std::to_string(rss_hour1) + " to " + std::to_string(rss_max) + " KiB after the first hour");
   for (int i = 0; i < K; ++i) {
     const ModalParameters t = modal_parameters(truth.submodels[static_cast<std::size_t>(i)]);
     const ModeEstimate m = estimator.mode(i);
@@ -123,7 +122,7 @@ int main(int argc, char** argv) {
     if (e_wn > 0.01) fail(fs.mode_names[i] + " frequency off the truth by more than 1 %");
     if (e_zeta > 0.2) fail(fs.mode_names[i] + " damping off the truth by more than 20 %");
   }
-  std::printf("%s: %lld samples (%.2f h at %.0f Hz), RSS %ld KiB after 1 h, max %ld KiB after\n",
-              ok ? "PASS" : "FAIL", total, hours, 1.0 / T, rss_hour1, rss_max);
+  std::printf("%s: %lld samples (%.2f h at %.0f Hz), RSS %ld KiB after 1 h, max %ld KiB after\n", ok ? "PASS" : "FAIL",
+              total, hours, 1.0 / T, rss_hour1, rss_max);
   return ok ? 0 : 1;
 }

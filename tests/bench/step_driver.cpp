@@ -34,7 +34,8 @@ int main(int argc, char** argv) {
   // A fixed record (the same work whatever N), fed in a loop.
   const Record r = simulate_paper(3, true, 1000.0);
   RecursiveEstimator est(config.model, s);
-  if (kernel && !est.set_step_kernel(std::strcmp(kernel, "portable") == 0 ? StepKernel::portable : StepKernel::avx2_fma)) {
+  if (kernel &&
+      !est.set_step_kernel(std::strcmp(kernel, "portable") == 0 ? StepKernel::portable : StepKernel::avx2_fma)) {
     std::fprintf(stderr, "step_driver: this CPU cannot run the %s kernel\n", kernel);
     return 1;
   }

@@ -45,8 +45,8 @@ int main() {
     const double zeta_error = std::abs(est.zeta - truth[i].zeta) / truth[i].zeta;
     const bool mode_ok = wn_error <= 0.01 && zeta_error <= 0.20;
     std::printf("%s: wn %.4f rad/s (truth %.4f, error %.3f %%), zeta %.4f (truth %.4f, error %.1f %%) %s\n",
-                fit.model.submodels[i].name.c_str(), est.wn, truth[i].wn, 100.0 * wn_error, est.zeta,
-                truth[i].zeta, 100.0 * zeta_error, mode_ok ? "ok" : "FAIL");
+                fit.model.submodels[i].name.c_str(), est.wn, truth[i].wn, 100.0 * wn_error, est.zeta, truth[i].zeta,
+                100.0 * zeta_error, mode_ok ? "ok" : "FAIL");
     ok = ok && mode_ok;
   }
   std::printf("fit %.2f %%, %d iterations, %s\n", fit.fit_percent, fit.iterations, ok ? "PASS" : "FAIL");

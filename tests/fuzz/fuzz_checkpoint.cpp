@@ -8,8 +8,8 @@
 #include <cstdlib>
 #include <span>
 
-#include "modalwatch/io/checkpoint.hpp"
 #include "modalwatch/error.hpp"
+#include "modalwatch/io/checkpoint.hpp"
 
 using namespace modalwatch;
 

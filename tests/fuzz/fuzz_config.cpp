@@ -5,8 +5,8 @@
 #include <cstdlib>
 #include <string>
 
-#include "modalwatch/io/config.hpp"
 #include "modalwatch/error.hpp"
+#include "modalwatch/io/config.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size > 1 << 16) return 0;

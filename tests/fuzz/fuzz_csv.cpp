@@ -4,9 +4,9 @@
 #include <cstdlib>
 #include <string_view>
 
+#include "modalwatch/error.hpp"
 #include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/records.hpp"
-#include "modalwatch/error.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size > 1 << 16) return 0;

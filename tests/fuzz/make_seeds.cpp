@@ -37,8 +37,8 @@ int main(int argc, char** argv) {
   Checkpoint c;
   c.estimator = est.state();
   // One learned baseline with its covariance, one mode still learning, one configured.
-  c.baselines = {ModeBaseline{{2.0, 0.25, 3.0}, {1e-4, 1e-6, 2e-5, 1e-6, 4e-6, 0.0, 2e-5, 0.0, 9e-4}, true}, std::nullopt,
-                 ModeBaseline{{20.0, 0.1, 1.0}, {}, false}};
+  c.baselines = {ModeBaseline{{2.0, 0.25, 3.0}, {1e-4, 1e-6, 2e-5, 1e-6, 4e-6, 0.0, 2e-5, 0.0, 9e-4}, true},
+                 std::nullopt, ModeBaseline{{20.0, 0.1, 1.0}, {}, false}};
   const auto bytes = encode_checkpoint(c);
   std::ofstream(dir / "checkpoint" / "warm.bin", std::ios::binary)
       .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));

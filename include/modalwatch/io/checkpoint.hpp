@@ -22,9 +22,9 @@
 #include <string>
 #include <vector>
 
-#include "modalwatch/io/config.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/fault_detector.hpp"
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/model.hpp"
 
 namespace modalwatch {

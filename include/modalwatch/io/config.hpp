@@ -18,8 +18,8 @@
 namespace modalwatch {
 
 struct SubmodelSettings {
-  double forgetting = 1.0;  // lambda in (0, 1], eq. (13)
-  std::optional<double> random_walk;  // this submodel's Q (else estimator.random_walk)
+  double forgetting = 1.0;              // lambda in (0, 1], eq. (13)
+  std::optional<double> random_walk;    // this submodel's Q (else estimator.random_walk)
   std::optional<double> stabilisation;  // this submodel's stabilised forgetting (else estimator.stabilisation)
   bool operator==(const SubmodelSettings&) const = default;
 };
@@ -28,8 +28,8 @@ struct SubmodelSettings {
 // publishes. Defaults stay on the host (ttl=0).
 struct LcmSettings {
   std::string url = "udpm://239.255.76.67:7667?ttl=0";
-  std::string samples_channel = "MODALWATCH_SAMPLES";   // sample_t in
-  std::string batches_channel = "MODALWATCH_BATCHES";   // sample_batch_t in
+  std::string samples_channel = "MODALWATCH_SAMPLES";            // sample_t in
+  std::string batches_channel = "MODALWATCH_BATCHES";            // sample_batch_t in
   std::string estimates_channel = "MODALWATCH_ESTIMATES";        // estimates_t out
   std::string fault_status_channel = "MODALWATCH_FAULT_STATUS";  // fault_status_t out
   std::string heartbeat_channel = "MODALWATCH_HEARTBEAT";        // heartbeat_t out
@@ -38,25 +38,25 @@ struct LcmSettings {
 
 // The `daemon:` section: rates, input policy, ring sizes, checkpoint, logging.
 struct DaemonSettings {
-  double loop_rate_hz = 1000.0;    // estimation loop tick (absolute-time sleep, CLOCK_MONOTONIC)
-  double publish_period = 0.1;     // s of sample time between estimates / fault status messages
-  double heartbeat_period = 1.0;   // s (wall clock) between heartbeats
-  double stale_time = 1.0;         // s (wall clock) without a sample: HEALTH_STALE_INPUT
-  int sample_ring = 65536;         // samples between the LCM thread and the estimation loop
-  int snapshot_ring = 256;         // snapshots between the estimation loop and the publisher
-  double warmup_backlog = 30.0;    // s of input held while the warm-up fit runs (off the loop)
-  int realtime_priority = 0;       // SCHED_FIFO priority of the latency-path threads, + mlockall; 0: off
-  std::string checkpoint_path;     // empty: no checkpoint (relative paths: to the config file)
-  double checkpoint_period = 60.0; // s (wall clock) between periodic checkpoints
-  std::string log_level = "info";  // spdlog level name
-  std::string metrics_listen;      // daemon.metrics.listen, "host:port"; empty: no metrics endpoint
+  double loop_rate_hz = 1000.0;     // estimation loop tick (absolute-time sleep, CLOCK_MONOTONIC)
+  double publish_period = 0.1;      // s of sample time between estimates / fault status messages
+  double heartbeat_period = 1.0;    // s (wall clock) between heartbeats
+  double stale_time = 1.0;          // s (wall clock) without a sample: HEALTH_STALE_INPUT
+  int sample_ring = 65536;          // samples between the LCM thread and the estimation loop
+  int snapshot_ring = 256;          // snapshots between the estimation loop and the publisher
+  double warmup_backlog = 30.0;     // s of input held while the warm-up fit runs (off the loop)
+  int realtime_priority = 0;        // SCHED_FIFO priority of the latency-path threads, + mlockall; 0: off
+  std::string checkpoint_path;      // empty: no checkpoint (relative paths: to the config file)
+  double checkpoint_period = 60.0;  // s (wall clock) between periodic checkpoints
+  std::string log_level = "info";   // spdlog level name
+  std::string metrics_listen;       // daemon.metrics.listen, "host:port"; empty: no metrics endpoint
   bool operator==(const DaemonSettings&) const = default;
 };
 
 // The `faults:` section: the fault detector (baselines, thresholds per quantity,
 // the false-alarm rate and learning). The defaults are FaultDetectorSettings'.
 struct FaultSettings {
-  double learn_window = FaultDetectorSettings{}.learn_window;  // s of sample time
+  double learn_window = FaultDetectorSettings{}.learn_window;                  // s of sample time
   double false_alarm_interval = FaultDetectorSettings{}.false_alarm_interval;  // h per mode
   double cusum_shift = FaultDetectorSettings{}.cusum_shift;
   double settle_std_fraction = FaultDetectorSettings{}.settle_std_fraction;
@@ -70,10 +70,10 @@ struct FaultSettings {
 };
 
 struct Config {
-  std::string source;          // file name, for messages
-  std::string axis;            // `axis:`, the axis this file describes (default: the file's stem)
-  double sample_time = 0.0;    // s (from sample_rate_hz)
-  AdditiveModel model;         // initial guesses / nominal model
+  std::string source;                               // file name, for messages
+  std::string axis;                                 // `axis:`, the axis this file describes (default: the file's stem)
+  double sample_time = 0.0;                         // s (from sample_rate_hz)
+  AdditiveModel model;                              // initial guesses / nominal model
   std::vector<SubmodelSettings> submodel_settings;  // one per submodel
   bool closed_loop = false;
   DiscreteTransferFunction controller;
@@ -84,7 +84,7 @@ struct Config {
   // sample_time, closed_loop, controller, output_hold, forgetting and the
   // per-submodel initial_covariance come from the sections above.
   EstimatorSettings estimator;
-  LcmSettings lcm;  // `lcm:` section (daemon, replay)
+  LcmSettings lcm;        // `lcm:` section (daemon, replay)
   DaemonSettings daemon;  // `daemon:` section (modalwatchd)
   // `faults:` section (modalwatchd). `daemon.gap_time`, when given, is written
   // into estimator.gap_factor (= gap_time / sample_time): one gap rule for

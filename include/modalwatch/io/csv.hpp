@@ -11,7 +11,7 @@ namespace modalwatch {
 
 struct Table {
   std::vector<std::string> columns;
-  Eigen::MatrixXd data;  // rows x columns
+  Eigen::MatrixXd data;                       // rows x columns
   int column(const std::string& name) const;  // -1 when absent
 };
 
@@ -22,7 +22,6 @@ Table read_table(const std::string& path);
 Table parse_table(std::string_view text, const std::string& source);
 
 // Writes atomically (temporary file, then rename), so a failure leaves nothing behind.
-void write_table(const std::string& path, const std::vector<std::string>& columns,
-                 const Eigen::MatrixXd& data);
+void write_table(const std::string& path, const std::vector<std::string>& columns, const Eigen::MatrixXd& data);
 
 }  // namespace modalwatch

@@ -27,14 +27,14 @@ struct LcmLogOptions {
 
 struct LcmLogRecord {
   Record record;
-  std::vector<std::uint64_t> offsets;   // byte offset of the event each sample came from
-  std::uint64_t events = 0;             // events in the file
-  std::uint64_t sample_events = 0;      // events that gave samples
-  std::uint64_t skipped_channel = 0;    // on another channel than options.channel
-  std::uint64_t skipped_type = 0;       // not a sample_t or sample_batch_t (fingerprint)
-  std::uint64_t skipped_invalid = 0;    // a sample type that failed to decode (size, count, period, ...)
-  std::uint64_t skipped_order = 0;      // samples whose utime or seq did not increase (duplicates, reordering)
-  std::vector<std::string> channels;    // channels that carried samples
+  std::vector<std::uint64_t> offsets;  // byte offset of the event each sample came from
+  std::uint64_t events = 0;            // events in the file
+  std::uint64_t sample_events = 0;     // events that gave samples
+  std::uint64_t skipped_channel = 0;   // on another channel than options.channel
+  std::uint64_t skipped_type = 0;      // not a sample_t or sample_batch_t (fingerprint)
+  std::uint64_t skipped_invalid = 0;   // a sample type that failed to decode (size, count, period, ...)
+  std::uint64_t skipped_order = 0;     // samples whose utime or seq did not increase (duplicates, reordering)
+  std::vector<std::string> channels;   // channels that carried samples
 };
 
 // True when the file starts with the LCM sync word (content, not the file name,

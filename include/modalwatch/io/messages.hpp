@@ -69,29 +69,24 @@ constexpr int kSampleWireSize = 8 + 8 + 8 + 3 * 8;
 constexpr int batch_wire_size(int count) { return 8 + 8 + 8 + 8 + 4 + 3 * 8 * count; }
 
 // A sample_t packet into out[0] (capacity >= 1 required, else bad_count).
-DecodeResult decode_sample(const void* data, int size, bool closed_loop, StampedSample* out,
-                           int capacity, int& n_out);
+DecodeResult decode_sample(const void* data, int size, bool closed_loop, StampedSample* out, int capacity, int& n_out);
 // A sample_batch_t packet into out[0..count). Sample i gets
 // utime = utime + llround(i * sample_period * 1e6), seq = first_seq + i.
-DecodeResult decode_batch(const void* data, int size, bool closed_loop, StampedSample* out,
-                          int capacity, int& n_out);
+DecodeResult decode_batch(const void* data, int size, bool closed_loop, StampedSample* out, int capacity, int& n_out);
 // Either of the two, chosen by fingerprint.
-DecodeResult decode_samples(const void* data, int size, bool closed_loop, StampedSample* out,
-                            int capacity, int& n_out);
+DecodeResult decode_samples(const void* data, int size, bool closed_loop, StampedSample* out, int capacity, int& n_out);
 
 // Encoders (allocate; not for the real-time path).
 std::vector<std::uint8_t> encode_sample(const StampedSample& s);
 // A batch from records: utime and first_seq from samples[0] (the other
 // records' utime and seq are implied by sample_period and not checked).
 // Requires a non-empty slice.
-std::vector<std::uint8_t> encode_batch(std::span<const StampedSample> samples,
-                                       double sample_period);
+std::vector<std::uint8_t> encode_batch(std::span<const StampedSample> samples, double sample_period);
 // Samples [begin, begin + count) of a Record as a batch:
 // utime = utime_offset + llround(rec.t(begin) * 1e6), sample_period =
 // rec.sample_time(), first_seq = first_seq_offset + begin, r = 0 when the
 // record has no reference.
 std::vector<std::uint8_t> encode_batch(const Record& rec, Eigen::Index begin, Eigen::Index count,
-                                       std::int64_t utime_offset = 0,
-                                       std::int64_t first_seq_offset = 0);
+                                       std::int64_t utime_offset = 0, std::int64_t first_seq_offset = 0);
 
 }  // namespace modalwatch

@@ -8,9 +8,9 @@
 #include <fstream>
 #include <stdexcept>
 
+#include "crc32.hpp"
 #include "modalwatch/error.hpp"
 #include "modalwatch/io/atomic_file.hpp"
-#include "crc32.hpp"
 
 namespace modalwatch {
 namespace {
@@ -164,8 +164,8 @@ class Reader {
     const std::int32_t v = i32(what);
     if (v < lo || v > hi) {
       pos_ = at;
-      fail(std::string(what) + " " + std::to_string(v) + " outside [" + std::to_string(lo) + ", " +
-           std::to_string(hi) + "]");
+      fail(std::string(what) + " " + std::to_string(v) + " outside [" + std::to_string(lo) + ", " + std::to_string(hi) +
+           "]");
     }
     return v;
   }
@@ -186,9 +186,7 @@ class StateFromBytes final : public StateReader {
   bool flag(const char* what) override { return r_.flag(what); }
   std::size_t count(const char* what) override { return r_.count(what, kMaxSubmodels); }
   std::string name(const char* what) override { return r_.str(what, kMaxName); }
-  std::int32_t integer(const char* what, std::int32_t lo, std::int32_t hi) override {
-    return r_.integer(what, lo, hi);
-  }
+  std::int32_t integer(const char* what, std::int32_t lo, std::int32_t hi) override { return r_.integer(what, lo, hi); }
   std::uint64_t counter(const char* what) override { return r_.u64(what); }
   double real(const char* what) override { return r_.f64(what); }
   Eigen::VectorXd reals(Eigen::Index size, const char* what) override { return r_.vec(size, what); }
@@ -288,17 +286,17 @@ std::vector<std::uint8_t> encode_checkpoint(const Checkpoint& c) {
 Checkpoint decode_checkpoint(std::span<const std::uint8_t> bytes, const std::string& source) {
   Reader h(bytes, 0, source);
   h.need(kMagic.size(), "magic");
-  if (!std::equal(kMagic.begin(), kMagic.end(), bytes.begin()))
-    h.fail("not a modalwatch checkpoint (wrong magic)");
+  if (!std::equal(kMagic.begin(), kMagic.end(), bytes.begin())) h.fail("not a modalwatch checkpoint (wrong magic)");
   h.raw(8, "magic");
   const std::uint32_t version = h.u32("version");
   // Version 1 lacks stabilised forgetting's reference (theta_ref, P_ref): a
   // run resumed from it would stabilise toward another point than the run that
   // wrote it. Refused, like any other version.
   if (version == 1)
-    throw InputError(source, "checkpoint: byte offset 8: format version 1 carries no stabilised-forgetting "
-                             "reference; this build reads version " + std::to_string(kCheckpointVersion) +
-                             " only (the estimator starts afresh)");
+    throw InputError(source,
+                     "checkpoint: byte offset 8: format version 1 carries no stabilised-forgetting "
+                     "reference; this build reads version " +
+                         std::to_string(kCheckpointVersion) + " only (the estimator starts afresh)");
   if (version != kCheckpointVersion)
     throw InputError(source, "checkpoint: byte offset 8: format version " + std::to_string(version) +
                                  ", this build reads version " + std::to_string(kCheckpointVersion));
@@ -318,8 +316,8 @@ Checkpoint decode_checkpoint(std::span<const std::uint8_t> bytes, const std::str
   for (int i = 0; i < 4; ++i) stored |= static_cast<std::uint32_t>(bytes[end + i]) << (8 * i);
 #ifndef FUZZING_BUILD_MODE_UNSAFE_FOR_PRODUCTION  // fuzzing: let mutations reach the payload parser
   if (crc32(bytes.first(end)) != stored)
-    throw InputError(source, "checkpoint: byte offset " + std::to_string(end) +
-                                 ": CRC-32 mismatch (the file is corrupt)");
+    throw InputError(source,
+                     "checkpoint: byte offset " + std::to_string(end) + ": CRC-32 mismatch (the file is corrupt)");
 #else
   (void)stored;
 #endif

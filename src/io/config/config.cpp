@@ -22,15 +22,14 @@ using namespace config_detail;
 // ---------------------------------------------------------------- document
 
 void parse_document(const Map& top, Config& config, const std::filesystem::path& dir) {
-  top.allow({"axis", "sample_rate_hz", "model", "controller", "plant", "simulation", "estimator", "lcm", "daemon",
-             "faults"},
-            "");
+  top.allow(
+      {"axis", "sample_rate_hz", "model", "controller", "plant", "simulation", "estimator", "lcm", "daemon", "faults"},
+      "");
   if (const auto a = top.get("axis")) config.axis = a->text();
   config.sample_time = 1.0 / top.require("sample_rate_hz").positive();
   parse_model(Map(top.require("model")), config);
   if (const auto c = top.get("controller")) config.controller = parse_controller(Map(*c));
-  if (config.closed_loop && !top.has("controller"))
-    top.missing("controller", "model.loop is closed");
+  if (config.closed_loop && !top.has("controller")) top.missing("controller", "model.loop is closed");
   if (const auto p = top.get("plant")) config.plant = parse_plant(Map(*p));
   if (const auto s = top.get("simulation")) config.experiment = parse_simulation(Map(*s), config, dir);
   if (const auto e = top.get("estimator")) parse_estimator(Map(*e), config.sample_time, config.estimator);
@@ -55,8 +54,7 @@ void complete_estimator(Config& config) {
   e.random_walks.clear();
   for (const auto& s : config.submodel_settings) e.random_walks.push_back(s.random_walk.value_or(e.random_walk));
   e.stabilisations.clear();
-  for (const auto& s : config.submodel_settings)
-    e.stabilisations.push_back(s.stabilisation.value_or(e.stabilisation));
+  for (const auto& s : config.submodel_settings) e.stabilisations.push_back(s.stabilisation.value_or(e.stabilisation));
 }
 
 YAML::Node load_yaml(const std::string& text, const std::string& source) {

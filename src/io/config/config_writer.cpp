@@ -57,8 +57,7 @@ class YamlWriter {
 };
 
 bool valid_modal(const ModalParameters& p) {
-  return std::isfinite(p.wn) && p.wn > 0 && std::isfinite(p.zeta) && p.zeta > 0 && std::isfinite(p.gain) &&
-         p.gain != 0;
+  return std::isfinite(p.wn) && p.wn > 0 && std::isfinite(p.zeta) && p.zeta > 0 && std::isfinite(p.gain) && p.gain != 0;
 }
 
 // The keys of a submodel after `- name:`; list items are written at `indent`.
@@ -322,8 +321,7 @@ void write_simulation(YamlWriter& w, const ExperimentSpec& e) {
 
 std::string config_to_yaml(const Config& config, const AdditiveModel& model) {
   YamlWriter w;
-  w.line(0, "# modalwatch configuration" +
-                (config.source.empty() ? std::string() : ", written from " + config.source) +
+  w.line(0, "# modalwatch configuration" + (config.source.empty() ? std::string() : ", written from " + config.source) +
                 " (keys: config/README.md)");
   if (!config.axis.empty()) w.key(0, "axis", quoted(config.axis));
   w.number(0, "sample_rate_hz", 1.0 / config.sample_time);
@@ -337,6 +335,5 @@ std::string config_to_yaml(const Config& config, const AdditiveModel& model) {
   write_faults(w, config.faults, config.model);
   return w.str();
 }
-
 
 }  // namespace modalwatch

@@ -26,9 +26,8 @@ Submodel parse_transfer_function(const Map& m, const std::string& name, int rigi
   const int n = static_cast<int>(a.size());
   const int mm = static_cast<int>(b.size()) - 1;
   if (mm > n + rigid_poles)
-    b_value.fail("m = " + std::to_string(mm) + " (length of b - 1) exceeds n + l = " +
-                 std::to_string(n) + " + " + std::to_string(rigid_poles) +
-                 " (n = length of a, l = rigid_poles): improper");
+    b_value.fail("m = " + std::to_string(mm) + " (length of b - 1) exceeds n + l = " + std::to_string(n) + " + " +
+                 std::to_string(rigid_poles) + " (n = length of a, l = rigid_poles): improper");
   Submodel s;
   s.name = name;
   s.n = n;
@@ -73,8 +72,7 @@ Keys submodel_keys(const std::string& kind, const Keys& extra) {
 }  // namespace
 
 SubmodelEntry parse_submodel(const Map& m, const Keys& extra) {
-  const std::string kind = m.get("kind") ? m.get("kind")->choice({"mode", "rigid_body", "transfer_function"})
-                                         : "mode";
+  const std::string kind = m.get("kind") ? m.get("kind")->choice({"mode", "rigid_body", "transfer_function"}) : "mode";
   if (kind != "mode")
     if (const auto t = m.get("trajectory"))
       t->fail_plain("a trajectory is only allowed for kind mode (this submodel is kind " + kind + ")");
@@ -105,8 +103,7 @@ void check_unique_names(const std::vector<Value>& items, const std::vector<Submo
   for (std::size_t i = 0; i < entries.size(); ++i) {
     const auto [it, fresh] = seen.emplace(entries[i].submodel.name, entries[i].line);
     if (!fresh)
-      Map(items[i]).require("name").fail("duplicate name (first used at line " +
-                                         std::to_string(it->second) + ")");
+      Map(items[i]).require("name").fail("duplicate name (first used at line " + std::to_string(it->second) + ")");
   }
 }
 
@@ -120,8 +117,8 @@ Eigen::VectorXd parse_initial_covariance(const Value& v, const Submodel& s) {
   const std::vector<Value> items = v.items();
   const int nt = s.n_theta();
   if (static_cast<int>(items.size()) != nt)
-    v.fail("must have n + m + 1 = " + std::to_string(s.n) + " + " + std::to_string(s.m) + " + 1 = " +
-           std::to_string(nt) + " entries, one per parameter of theta = [a_1 .. a_n, b_0 .. b_m]");
+    v.fail("must have n + m + 1 = " + std::to_string(s.n) + " + " + std::to_string(s.m) +
+           " + 1 = " + std::to_string(nt) + " entries, one per parameter of theta = [a_1 .. a_n, b_0 .. b_m]");
   Eigen::VectorXd out(nt);
   for (int j = 0; j < nt; ++j) out(j) = items[static_cast<std::size_t>(j)].positive();
   return out;
@@ -149,14 +146,13 @@ void parse_model(const Map& model, Config& config) {
     if (const auto q = m.get("random_walk")) settings.random_walk = q->at_least(0.0);
     if (const auto q = m.get("stabilisation")) settings.stabilisation = q->at_least(0.0);
     const auto cov = m.get("initial_covariance");
-    config.estimator.initial_covariance.push_back(
-        cov ? parse_initial_covariance(*cov, entries.back().submodel) : Eigen::VectorXd());
+    config.estimator.initial_covariance.push_back(cov ? parse_initial_covariance(*cov, entries.back().submodel)
+                                                      : Eigen::VectorXd());
     config.model.submodels.push_back(entries.back().submodel);
     config.submodel_settings.push_back(settings);
   }
   check_unique_names(items, entries);
 }
-
 
 DiscreteTransferFunction parse_controller(const Map& c) {
   c.allow({"numerator", "denominator"}, "controller");
@@ -174,7 +170,5 @@ DiscreteTransferFunction parse_controller(const Map& c) {
     c.self().fail_plain(e.what());
   }
 }
-
-
 
 }  // namespace modalwatch::config_detail

@@ -21,10 +21,9 @@ namespace {
 
 // The `estimator:` keys; every one is optional and defaults to EstimatorSettings'.
 void parse_estimator(const Map& est, double sample_time, EstimatorSettings& e) {
-  est.allow({"block_iterations", "refinements", "update_divisor", "warmup", "fit_on_warmup",
-             "warmup_iterations", "initial_covariance_relative", "random_walk", "covariance_bound",
-             "stabilisation", "divergence_ratio", "gap_factor", "outlier_sigma", "residual_window",
-             "low_excitation_ratio", "low_excitation_window"},
+  est.allow({"block_iterations", "refinements", "update_divisor", "warmup", "fit_on_warmup", "warmup_iterations",
+             "initial_covariance_relative", "random_walk", "covariance_bound", "stabilisation", "divergence_ratio",
+             "gap_factor", "outlier_sigma", "residual_window", "low_excitation_ratio", "low_excitation_window"},
             "estimator");
   constexpr long long kIntMax = std::numeric_limits<int>::max();
   const auto count = [&](std::string_view key, long long lo, int& out) {
@@ -57,7 +56,6 @@ void parse_estimator(const Map& est, double sample_time, EstimatorSettings& e) {
   if (const auto v = est.get("low_excitation_window")) e.low_excitation_window = v->at_least(0.0);
 }
 
-
 void parse_lcm(const Map& m, LcmSettings& lcm) {
   m.allow({"url", "channels"}, "lcm");
   if (const auto v = m.get("url")) {
@@ -68,10 +66,11 @@ void parse_lcm(const Map& m, LcmSettings& lcm) {
   if (const auto c = m.get("channels")) {
     const Map ch(*c);
     ch.allow({"samples", "batches", "estimates", "fault_status", "heartbeat"}, "lcm.channels");
-    const std::pair<const char*, std::string*> names[] = {
-        {"samples", &lcm.samples_channel},     {"batches", &lcm.batches_channel},
-        {"estimates", &lcm.estimates_channel}, {"fault_status", &lcm.fault_status_channel},
-        {"heartbeat", &lcm.heartbeat_channel}};
+    const std::pair<const char*, std::string*> names[] = {{"samples", &lcm.samples_channel},
+                                                          {"batches", &lcm.batches_channel},
+                                                          {"estimates", &lcm.estimates_channel},
+                                                          {"fault_status", &lcm.fault_status_channel},
+                                                          {"heartbeat", &lcm.heartbeat_channel}};
     for (const auto& [key, out] : names)
       if (const auto v = ch.get(key)) *out = v->text();
     // One channel for two purposes would feed the daemon its own output.
@@ -84,7 +83,6 @@ void parse_lcm(const Map& m, LcmSettings& lcm) {
 }
 
 namespace {
-
 
 // ---------------------------------------------------------------- daemon
 
@@ -107,7 +105,8 @@ void parse_daemon(const Map& d, Config& config, const std::filesystem::path& dir
   if (const auto v = d.get("gap_time")) {
     if (gap_factor_given) v->fail_plain("give daemon.gap_time or estimator.gap_factor, not both");
     const double gap = v->positive();
-    if (!(gap > config.sample_time)) v->fail("must exceed the sample period " + format_number(config.sample_time) + " s");
+    if (!(gap > config.sample_time))
+      v->fail("must exceed the sample period " + format_number(config.sample_time) + " s");
     config.estimator.gap_factor = gap / config.sample_time;
   }
   if (const auto v = d.get("stale_time")) s.stale_time = v->positive();
@@ -118,7 +117,8 @@ void parse_daemon(const Map& d, Config& config, const std::filesystem::path& dir
     s.warmup_backlog = v->positive();
     if (s.warmup_backlog / config.sample_time > static_cast<double>(kRingMax))
       v->fail("must hold at most " + std::to_string(kRingMax) + " samples (" +
-              format_number(std::floor(static_cast<double>(kRingMax) * config.sample_time)) + " s at this sample rate)");
+              format_number(std::floor(static_cast<double>(kRingMax) * config.sample_time)) +
+              " s at this sample rate)");
   }
   if (const auto v = d.get("realtime_priority")) s.realtime_priority = static_cast<int>(v->integer(0, 99));
   if (const auto c = d.get("checkpoint")) {
@@ -136,7 +136,9 @@ void parse_daemon(const Map& d, Config& config, const std::filesystem::path& dir
     m.allow({"listen"}, "daemon.metrics");
     if (const auto v = m.get("listen")) {
       // An empty string (listen: "") turns the endpoint off, as an absent key does.
-      const std::string listen = v->node().IsNull() ? std::string() : v->node().IsScalar() ? v->node().Scalar() : v->text();
+      const std::string listen = v->node().IsNull()     ? std::string()
+                                 : v->node().IsScalar() ? v->node().Scalar()
+                                                        : v->text();
       if (!listen.empty()) {
         const auto colon = listen.rfind(':');
         const std::string port = colon == std::string::npos ? std::string() : listen.substr(colon + 1);
@@ -183,8 +185,8 @@ ModalParameters parse_baseline_std(const Map& m) {
 }  // namespace
 
 void parse_faults(const Map& f, Config& config) {
-  f.allow({"learn_window", "false_alarm_interval", "cusum_shift", "settle_std_fraction", "settle_change_fraction",
-           "wn", "zeta", "gain", "baselines"},
+  f.allow({"learn_window", "false_alarm_interval", "cusum_shift", "settle_std_fraction", "settle_change_fraction", "wn",
+           "zeta", "gain", "baselines"},
           "faults");
   FaultSettings& s = config.faults;
   if (const auto v = f.get("learn_window")) s.learn_window = v->positive();
@@ -210,7 +212,5 @@ void parse_faults(const Map& f, Config& config) {
       }
   }
 }
-
-
 
 }  // namespace modalwatch::config_detail

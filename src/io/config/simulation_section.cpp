@@ -114,8 +114,7 @@ void parse_sum_of_sines(const Map& m, SignalSpec& s) {
   if (const auto phases = m.get("phases")) {
     s.phases = phases->numbers();
     if (s.phases.size() != s.amplitudes.size())
-      phases->fail("must have as many entries as amplitudes (" + std::to_string(s.amplitudes.size()) +
-                   ")");
+      phases->fail("must have as many entries as amplitudes (" + std::to_string(s.amplitudes.size()) + ")");
   }
 }
 
@@ -163,8 +162,8 @@ std::string available(const Table& table) {
 }
 
 // Linear interpolation of (t, x) onto k * T, k = 0..n-1; the file must cover the grid.
-Eigen::VectorXd interpolate(const Value& where, const Eigen::VectorXd& t, const Eigen::VectorXd& x,
-                            double T, Eigen::Index n) {
+Eigen::VectorXd interpolate(const Value& where, const Eigen::VectorXd& t, const Eigen::VectorXd& x, double T,
+                            Eigen::Index n) {
   const double end = static_cast<double>(n - 1) * T;
   const double slack = 1e-9 * T;
   if (t(0) > slack || t(t.size() - 1) < end - slack)
@@ -204,8 +203,7 @@ Eigen::VectorXd parse_csv_signal(const Map& m, SignalSpec& s, const SignalContex
   const Eigen::VectorXd t = table.data.col(tc);
   for (Eigen::Index k = 1; k < t.size(); ++k)
     if (!(t(k) > t(k - 1)))
-      path.fail_plain(s.csv_path + ": row " + std::to_string(k + 2) +
-                      ", column 't': time does not increase");
+      path.fail_plain(s.csv_path + ": row " + std::to_string(k + 2) + ", column 't': time does not increase");
   return interpolate(path, t, table.data.col(xc), ctx.sample_time, ctx.samples);
 }
 
@@ -259,13 +257,10 @@ ExperimentSpec parse_simulation(const Map& sim, const Config& config, const std:
   const std::string unused = e.closed_loop ? "input" : "reference";
   const std::string loop = e.closed_loop ? "closed" : "open";
   if (const auto extra = sim.get(unused))
-    extra->fail_plain("not used when model.loop is " + loop + " (the excitation is simulation." + used +
-                      ")");
+    extra->fail_plain("not used when model.loop is " + loop + " (the excitation is simulation." + used + ")");
   const SignalContext ctx{e.sample_time, static_cast<Eigen::Index>(samples), e.seed, dir};
   parse_signal(sim.require(used, "model.loop is " + loop), ctx, e);
   return e;
 }
-
-
 
 }  // namespace modalwatch::config_detail

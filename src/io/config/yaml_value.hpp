@@ -132,8 +132,7 @@ class Value {
   }
   std::string choice(const Keys& options) const {
     const std::string s = text();
-    if (std::find(options.begin(), options.end(), s) == options.end())
-      fail("must be one of " + join(options));
+    if (std::find(options.begin(), options.end(), s) == options.end()) fail("must be one of " + join(options));
     return s;
   }
 
@@ -179,8 +178,7 @@ class Map {
   void allow(const Keys& allowed, const std::string& what) const {
     for (const auto& [key, value] : entries_)
       if (std::find(allowed.begin(), allowed.end(), key) == allowed.end())
-        value.fail_plain("unknown key" + (what.empty() ? "" : " for " + what) + " (allowed: " +
-                         join(allowed) + ")");
+        value.fail_plain("unknown key" + (what.empty() ? "" : " for " + what) + " (allowed: " + join(allowed) + ")");
   }
 
   bool has(std::string_view key) const { return find(key) != nullptr; }
@@ -224,8 +222,7 @@ inline double optional_number(const Map& m, std::string_view key, double fallbac
 }
 
 // `a` or `b` but not both; `scale` converts b's unit to a's.
-inline std::optional<double> one_of(const Map& m, std::string_view a, std::string_view b, double scale,
-                             bool positive) {
+inline std::optional<double> one_of(const Map& m, std::string_view a, std::string_view b, double scale, bool positive) {
   const auto va = m.get(a);
   const auto vb = m.get(b);
   if (va && vb) vb->fail_plain("give " + std::string(a) + " or " + std::string(b) + ", not both");

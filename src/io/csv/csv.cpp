@@ -21,9 +21,7 @@ int Table::column(const std::string& name) const {
   return it == columns.end() ? -1 : static_cast<int>(it - columns.begin());
 }
 
-Table parse_table(std::string_view text, const std::string& source) {
-  return parse_text(text, source, false, "");
-}
+Table parse_table(std::string_view text, const std::string& source) { return parse_text(text, source, false, ""); }
 
 Table read_table(const std::string& path) { return parse_table(read_file(path), path); }
 
@@ -52,8 +50,7 @@ void write_rows(AtomicFile& f, const std::vector<std::string>& columns, const Ei
 }
 
 // The header has no quoting, so names that would split or shift columns are refused.
-void check_columns(const std::string& path, const std::vector<std::string>& columns,
-                   const Eigen::MatrixXd& data) {
+void check_columns(const std::string& path, const std::vector<std::string>& columns, const Eigen::MatrixXd& data) {
   if (static_cast<Eigen::Index>(columns.size()) != data.cols())
     throw InputError(path, "cannot write: " + std::to_string(columns.size()) + " column names for " +
                                std::to_string(data.cols()) + " columns");
@@ -64,8 +61,7 @@ void check_columns(const std::string& path, const std::vector<std::string>& colu
 
 }  // namespace
 
-void write_table(const std::string& path, const std::vector<std::string>& columns,
-                 const Eigen::MatrixXd& data) {
+void write_table(const std::string& path, const std::vector<std::string>& columns, const Eigen::MatrixXd& data) {
   check_columns(path, columns, data);
   try {
     AtomicFile file(path);

@@ -71,9 +71,7 @@ class LineReader {
   int number_ = 0;
 };
 
-inline std::string row_location(const std::string& path, int row) {
-  return path + ": row " + std::to_string(row);
-}
+inline std::string row_location(const std::string& path, int row) { return path + ": row " + std::to_string(row); }
 inline std::string cell_location(const std::string& path, int row, const std::string& column) {
   return row_location(path, row) + ", column '" + column + "'";
 }
@@ -150,20 +148,17 @@ class TableParser {
       throw InputError(cell_location(path_, row, columns_[c]),
                        s.empty() ? "empty field" : "not a number (got '" + std::string(s) + "')");
     if (!std::isfinite(value) && !nonfinite_ok_[c])
-      throw InputError(cell_location(path_, row, columns_[c]),
-                       "not a finite number (got '" + std::string(s) + "')");
+      throw InputError(cell_location(path_, row, columns_[c]), "not a finite number (got '" + std::string(s) + "')");
     return value;
   }
   [[noreturn]] void short_row(int row, std::size_t fields) const {
     throw InputError(cell_location(path_, row, columns_[fields]),
-                     "row has " + std::to_string(fields) + " fields, header has " +
-                         std::to_string(columns_.size()));
+                     "row has " + std::to_string(fields) + " fields, header has " + std::to_string(columns_.size()));
   }
   [[noreturn]] void long_row(std::string_view line, int row) const {
     const std::size_t fields = static_cast<std::size_t>(std::count(line.begin(), line.end(), ',')) + 1;
-    throw InputError(row_location(path_, row), "row has " + std::to_string(fields) +
-                                                   " fields, header has " +
-                                                   std::to_string(columns_.size()));
+    throw InputError(row_location(path_, row),
+                     "row has " + std::to_string(fields) + " fields, header has " + std::to_string(columns_.size()));
   }
 
   const std::string& path_;
@@ -178,8 +173,7 @@ inline void check_trailing_blank(const std::string& path, Lines& lines) {
   std::string_view line;
   const int first_blank = lines.number();
   while (lines.next(line))
-    if (!is_blank(line))
-      throw InputError(row_location(path, first_blank), "empty row before more data");
+    if (!is_blank(line)) throw InputError(row_location(path, first_blank), "empty row before more data");
 }
 
 inline constexpr std::string_view kBom = "\xEF\xBB\xBF";  // UTF-8 byte order mark
@@ -194,7 +188,7 @@ inline std::string_view strip_bom(std::string_view text) {
 // parse_table, with nan/inf accepted in every column except `finite_column`
 // when allow_nonfinite is set. `path` names the source in messages.
 inline Table parse_text(std::string_view text, const std::string& path, bool allow_nonfinite,
-                 const std::string& finite_column) {
+                        const std::string& finite_column) {
   LineReader lines(strip_bom(text));
   std::string_view line;
   if (text.find_first_not_of(kBlankOrBom) == std::string_view::npos || !lines.next(line))
@@ -224,8 +218,7 @@ inline Table parse_text(std::string_view text, const std::string& path, bool all
 
 inline int require_column(const std::string& path, const std::vector<std::string>& columns, const std::string& name) {
   const auto it = std::find(columns.begin(), columns.end(), name);
-  if (it == columns.end())
-    throw InputError(path, "missing column '" + name + "' (available: " + join(columns) + ")");
+  if (it == columns.end()) throw InputError(path, "missing column '" + name + "' (available: " + join(columns) + ")");
   return static_cast<int>(it - columns.begin());
 }
 

@@ -45,8 +45,8 @@ LcmLogRecord parse_lcm_log(std::span<const std::uint8_t> bytes, const std::strin
     const std::size_t at = pos;
     const std::size_t left = bytes.size() - pos;
     if (left < kEventHeader)
-      fail(source, at, "truncated event header (" + std::to_string(left) + " of " + std::to_string(kEventHeader) +
-                           " bytes)");
+      fail(source, at,
+           "truncated event header (" + std::to_string(left) + " of " + std::to_string(kEventHeader) + " bytes)");
     const std::uint8_t* p = bytes.data() + pos;
     const std::uint64_t sync = be(p, 4);
     if (sync != kLcmSyncWord) {
@@ -57,13 +57,14 @@ LcmLogRecord parse_lcm_log(std::span<const std::uint8_t> bytes, const std::strin
     const auto channel_len = static_cast<std::int32_t>(static_cast<std::uint32_t>(be(p + 20, 4)));
     const auto data_len = static_cast<std::int32_t>(static_cast<std::uint32_t>(be(p + 24, 4)));
     if (channel_len < 0 || channel_len > kMaxChannel)
-      fail(source, at + 20, "channel length " + std::to_string(channel_len) + " outside [0, " +
-                                std::to_string(kMaxChannel) + "]");
+      fail(source, at + 20,
+           "channel length " + std::to_string(channel_len) + " outside [0, " + std::to_string(kMaxChannel) + "]");
     if (data_len < 0) fail(source, at + 24, "negative data length " + std::to_string(data_len));
     const std::size_t body = static_cast<std::size_t>(channel_len) + static_cast<std::size_t>(data_len);
     if (left - kEventHeader < body)
-      fail(source, at, "truncated event (" + std::to_string(kEventHeader + body) + " bytes announced, " +
-                           std::to_string(left) + " left)");
+      fail(source, at,
+           "truncated event (" + std::to_string(kEventHeader + body) + " bytes announced, " + std::to_string(left) +
+               " left)");
     pos += kEventHeader + body;
     ++out.events;
     const std::string_view channel(reinterpret_cast<const char*>(p + kEventHeader),
@@ -110,9 +111,8 @@ LcmLogRecord parse_lcm_log(std::span<const std::uint8_t> bytes, const std::strin
   if (utime.empty())
     throw InputError(source, "LCM log: no sample_t or sample_batch_t events" +
                                  (options.channel.empty() ? std::string() : " on channel '" + options.channel + "'") +
-                                 " (" + std::to_string(out.events) + " events, " +
-                                 std::to_string(out.skipped_channel) + " on other channels, " +
-                                 std::to_string(out.skipped_type) + " of other types, " +
+                                 " (" + std::to_string(out.events) + " events, " + std::to_string(out.skipped_channel) +
+                                 " on other channels, " + std::to_string(out.skipped_type) + " of other types, " +
                                  std::to_string(out.skipped_invalid) + " invalid)");
   const auto N = static_cast<Eigen::Index>(utime.size());
   Record& rec = out.record;

@@ -28,9 +28,7 @@ std::uint64_t get_u64(const void* buf, int offset) {
   for (int i = 0; i < 8; ++i) v = (v << 8) | p[i];
   return v;
 }
-std::int64_t get_i64(const void* buf, int offset) {
-  return std::bit_cast<std::int64_t>(get_u64(buf, offset));
-}
+std::int64_t get_i64(const void* buf, int offset) { return std::bit_cast<std::int64_t>(get_u64(buf, offset)); }
 std::int32_t get_i32(const void* buf, int offset) {
   const auto* p = static_cast<const unsigned char*>(buf) + offset;
   std::uint32_t v = 0;
@@ -55,14 +53,22 @@ std::vector<std::uint8_t> encode_message(const auto& msg) {
 
 const char* to_string(DecodeResult r) {
   switch (r) {
-    case DecodeResult::ok: return "ok";
-    case DecodeResult::truncated: return "truncated";
-    case DecodeResult::trailing_bytes: return "trailing bytes";
-    case DecodeResult::wrong_fingerprint: return "wrong fingerprint";
-    case DecodeResult::bad_count: return "bad count";
-    case DecodeResult::bad_period: return "bad sample period";
-    case DecodeResult::bad_utime: return "bad utime";
-    case DecodeResult::bad_seq: return "bad sequence number";
+    case DecodeResult::ok:
+      return "ok";
+    case DecodeResult::truncated:
+      return "truncated";
+    case DecodeResult::trailing_bytes:
+      return "trailing bytes";
+    case DecodeResult::wrong_fingerprint:
+      return "wrong fingerprint";
+    case DecodeResult::bad_count:
+      return "bad count";
+    case DecodeResult::bad_period:
+      return "bad sample period";
+    case DecodeResult::bad_utime:
+      return "bad utime";
+    case DecodeResult::bad_seq:
+      return "bad sequence number";
   }
   return "unknown";
 }
@@ -70,8 +76,7 @@ const char* to_string(DecodeResult r) {
 std::int64_t sample_fingerprint() { return sample_t::getHash(); }
 std::int64_t batch_fingerprint() { return sample_batch_t::getHash(); }
 
-DecodeResult decode_sample(const void* data, int size, bool closed_loop, StampedSample* out,
-                           int capacity, int& n_out) {
+DecodeResult decode_sample(const void* data, int size, bool closed_loop, StampedSample* out, int capacity, int& n_out) {
   n_out = 0;
   if (data == nullptr || size < 8) return fail(DecodeResult::truncated, n_out);
   if (get_i64(data, 0) != sample_fingerprint()) return fail(DecodeResult::wrong_fingerprint, n_out);
@@ -90,8 +95,7 @@ DecodeResult decode_sample(const void* data, int size, bool closed_loop, Stamped
   return DecodeResult::ok;
 }
 
-DecodeResult decode_batch(const void* data, int size, bool closed_loop, StampedSample* out,
-                          int capacity, int& n_out) {
+DecodeResult decode_batch(const void* data, int size, bool closed_loop, StampedSample* out, int capacity, int& n_out) {
   n_out = 0;
   if (data == nullptr || size < 8) return fail(DecodeResult::truncated, n_out);
   if (get_i64(data, 0) != batch_fingerprint()) return fail(DecodeResult::wrong_fingerprint, n_out);
@@ -109,10 +113,8 @@ DecodeResult decode_batch(const void* data, int size, bool closed_loop, StampedS
   if (utime < 0) return fail(DecodeResult::bad_utime, n_out);
   // The last sample's utime must fit an int64 (with margin for rounding).
   const double span_us = static_cast<double>(count - 1) * period * 1e6;
-  if (!(span_us + static_cast<double>(utime) < 9.0e18))
-    return fail(DecodeResult::bad_period, n_out);
-  if (first_seq > std::numeric_limits<std::int64_t>::max() - (count - 1))
-    return fail(DecodeResult::bad_seq, n_out);
+  if (!(span_us + static_cast<double>(utime) < 9.0e18)) return fail(DecodeResult::bad_period, n_out);
+  if (first_seq > std::numeric_limits<std::int64_t>::max() - (count - 1)) return fail(DecodeResult::bad_seq, n_out);
 
   const int u0 = kBatchArrays;
   const int y0 = u0 + 8 * count;
@@ -129,8 +131,8 @@ DecodeResult decode_batch(const void* data, int size, bool closed_loop, StampedS
   return DecodeResult::ok;
 }
 
-DecodeResult decode_samples(const void* data, int size, bool closed_loop, StampedSample* out,
-                            int capacity, int& n_out) {
+DecodeResult decode_samples(const void* data, int size, bool closed_loop, StampedSample* out, int capacity,
+                            int& n_out) {
   n_out = 0;
   if (data == nullptr || size < 8) return fail(DecodeResult::truncated, n_out);
   const std::int64_t hash = get_i64(data, 0);
@@ -149,8 +151,7 @@ std::vector<std::uint8_t> encode_sample(const StampedSample& s) {
   return encode_message(msg);
 }
 
-std::vector<std::uint8_t> encode_batch(std::span<const StampedSample> samples,
-                                       double sample_period) {
+std::vector<std::uint8_t> encode_batch(std::span<const StampedSample> samples, double sample_period) {
   if (samples.empty()) throw std::invalid_argument("encode_batch: empty slice");
   if (samples.size() > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max() / 24))
     throw std::invalid_argument("encode_batch: slice too large");

@@ -15,23 +15,21 @@ using namespace csv_text;
 
 namespace {
 
-
 // Row k of the data is line k + 2 of the file (header on line 1).
 int file_row(Eigen::Index k) { return static_cast<int>(k) + 2; }
 
 // Time at file line `row` after `previous` on the line before.
 void check_increasing(const std::string& path, const std::string& name, int row, double t, double previous) {
   if (!(t > previous))
-    throw InputError(cell_location(path, row, name), "time does not increase (got " + format_number(t) + " after " +
-                                                         format_number(previous) + ")");
+    throw InputError(cell_location(path, row, name),
+                     "time does not increase (got " + format_number(t) + " after " + format_number(previous) + ")");
 }
 
 void check_increasing(const std::string& path, const std::string& name, const Eigen::VectorXd& t) {
   for (Eigen::Index k = 1; k < t.size(); ++k) check_increasing(path, name, file_row(k), t(k), t(k - 1));
 }
 
-[[noreturn]] void bad_step(const std::string& path, const std::string& name, Eigen::Index k,
-                           const std::string& what) {
+[[noreturn]] void bad_step(const std::string& path, const std::string& name, Eigen::Index k, const std::string& what) {
   throw InputError(cell_location(path, file_row(k), name), "uneven sampling: " + what);
 }
 
@@ -40,8 +38,8 @@ void check_increasing(const std::string& path, const std::string& name, const Ei
 void check_gap(const std::string& path, const std::string& name, int row, double step, double nominal) {
   if (step < 0.99 * nominal)
     throw InputError(cell_location(path, row, name), "uneven sampling: step " + format_number(step) +
-                                                         " is shorter than the nominal step " +
-                                                         format_number(nominal) + " by more than 1 %");
+                                                         " is shorter than the nominal step " + format_number(nominal) +
+                                                         " by more than 1 %");
 }
 
 // Every step within 1 % of the mean step.
@@ -52,9 +50,9 @@ void check_even(const std::string& path, const std::string& name, const Eigen::V
   for (Eigen::Index k = 1; k < n; ++k) {
     const double step = t(k) - t(k - 1);
     if (std::abs(step - mean) > 0.01 * mean)
-      bad_step(path, name, k,
-               "step " + format_number(step) + " differs from the mean step " + format_number(mean) +
-                   " by more than 1 %");
+      bad_step(
+          path, name, k,
+          "step " + format_number(step) + " differs from the mean step " + format_number(mean) + " by more than 1 %");
   }
 }
 

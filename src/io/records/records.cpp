@@ -59,8 +59,9 @@ Record read_lcm_record(const RecordSource& source, const RecordReadOptions& opti
                                           std::to_string(mean) + " s: the record is not equidistant (gap?)");
     }
   }
-  std::fprintf(stderr, "modalwatch: %lld samples from LCM log %s (channel %s; %llu events, skipped: %llu other channel, "
-                       "%llu other type, %llu invalid, %llu samples out of order or duplicate)\n",
+  std::fprintf(stderr,
+               "modalwatch: %lld samples from LCM log %s (channel %s; %llu events, skipped: %llu other channel, "
+               "%llu other type, %llu invalid, %llu samples out of order or duplicate)\n",
                static_cast<long long>(n), source.path.c_str(), log.channels.front().c_str(),
                static_cast<unsigned long long>(log.events), static_cast<unsigned long long>(log.skipped_channel),
                static_cast<unsigned long long>(log.skipped_type), static_cast<unsigned long long>(log.skipped_invalid),
@@ -113,8 +114,7 @@ bool RecordReader::has_reference() const {
 std::size_t RecordReader::read(Record& block, std::size_t max_samples) {
   auto* held = std::get_if<HeldRecord>(&impl_->reader);
   if (held == nullptr) return std::get<CsvRecordStream>(impl_->reader).read(block, max_samples);
-  const Eigen::Index count =
-      std::min(static_cast<Eigen::Index>(max_samples), held->record.size() - held->next);
+  const Eigen::Index count = std::min(static_cast<Eigen::Index>(max_samples), held->record.size() - held->next);
   const Record& rec = held->record;
   // Assigned member by member, so that a block of the last one's size keeps its storage.
   block.t = rec.t.segment(held->next, count);
@@ -141,8 +141,7 @@ RecordCheck::RecordCheck(std::string path, double sample_time, bool closed_loop,
 
 void RecordCheck::count(const Record& block) {
   if (!reference_checked_ && block.size() > 0) {
-    if (closed_loop_ && !block.has_reference())
-      throw InputError(path_, "closed loop (model.loop) needs a column 'r'");
+    if (closed_loop_ && !block.has_reference()) throw InputError(path_, "closed loop (model.loop) needs a column 'r'");
     reference_checked_ = true;
   }
   for (Eigen::Index k = 0; k < block.size(); ++k) {
@@ -160,8 +159,7 @@ void RecordCheck::add(const Record& block) {
   count(block);
   // A wrong sample_rate_hz shows in the first block already: say so now
   // rather than after estimating the whole record.
-  if (first && !passed())
-    fail(block.t, "median step of the first " + std::to_string(block.size()) + " rows");
+  if (first && !passed()) fail(block.t, "median step of the first " + std::to_string(block.size()) + " rows");
 }
 
 void RecordCheck::finish(const RecordSource& source, const RecordReadOptions& options) const {
@@ -213,8 +211,7 @@ Table read_signal_file(const std::string& path, const std::string& channel) {
 void write_record(const std::string& path, const Record& record) {
   const bool with_r = record.has_reference();
   const Eigen::Index n = record.size();
-  if (record.u.size() != n || record.y.size() != n)
-    throw InputError(path, "cannot write: t, u and y differ in length");
+  if (record.u.size() != n || record.y.size() != n) throw InputError(path, "cannot write: t, u and y differ in length");
   std::vector<std::string> columns{"t"};
   Eigen::MatrixXd data(n, with_r ? 4 : 3);
   data.col(0) = record.t;
