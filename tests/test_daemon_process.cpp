@@ -342,7 +342,9 @@ std::vector<ThreadSched> thread_scheduling(pid_t pid) {
     std::getline(comm, t.name);
     std::string line;
     std::getline(stat, line);
-    std::istringstream rest(line.substr(line.rfind(')') + 2));
+    const auto comm_end = line.rfind(')');
+    if (comm_end == std::string::npos || comm_end + 2 > line.size()) continue;  // the thread exited while being read
+    std::istringstream rest(line.substr(comm_end + 2));
     std::vector<std::string> f{std::istream_iterator<std::string>(rest), std::istream_iterator<std::string>()};
     if (f.size() < 39) continue;  // the thread exited while being read
     t.priority = std::stoi(f[37]);
