@@ -505,6 +505,11 @@ def default_binary():
     return local if os.path.exists(local) else (shutil.which("modalwatch") or local)
 
 
+def binary_path(name):
+    """A path given with a folder is made absolute (the scenarios run in their own folders)."""
+    return os.path.abspath(name) if os.sep in name else name
+
+
 def generate(args):
     os.makedirs(args.out, exist_ok=True)
     rng = np.random.default_rng(args.seed)
@@ -551,7 +556,7 @@ def main():
     only = g.add_mutually_exclusive_group()
     only.add_argument("--healthy-only", action="store_true")
     only.add_argument("--faults-only", action="store_true")
-    g.add_argument("--modalwatch", default=default_binary())
+    g.add_argument("--modalwatch", default=default_binary(), type=binary_path)
     g.add_argument("--no-simulate", action="store_true", help="write config.yaml and meta.json only")
     args = p.parse_args()
     generate(args)

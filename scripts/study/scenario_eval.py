@@ -55,6 +55,11 @@ def default_binary():
     return local if os.path.exists(local) else (shutil.which("modalwatch") or local)
 
 
+def binary_path(name):
+    """A path given with a folder is made absolute (the scenarios run in their own folders)."""
+    return os.path.abspath(name) if os.sep in name else name
+
+
 def run_track(binary, d, retrack):
     est, flags = os.path.join(d, "est.csv"), os.path.join(d, "flags.csv")
     if os.path.exists(est) and os.path.exists(flags) and not retrack:
@@ -234,7 +239,7 @@ def print_table(title, groups):
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("dir")
-    p.add_argument("--modalwatch", default=default_binary())
+    p.add_argument("--modalwatch", default=default_binary(), type=binary_path)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--json", help="write every scenario's figures and the tables to this file")
     p.add_argument("--retrack", action="store_true", help="run track even where est.csv exists")
