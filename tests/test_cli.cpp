@@ -1,5 +1,6 @@
 // The modalwatch command line as a user meets it: real files, the real binary,
 // exit codes, and messages that say where the problem is.
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -9,6 +10,7 @@
 
 #include "support.hpp"
 
+#include "modalwatch/fault_detector.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/records.hpp"
@@ -49,6 +51,47 @@ TEST_F(Cli, SimulateThenFitPrintsTheModalTableAndWritesAReusableModel) {
   EXPECT_NEAR(modal_parameters(fitted.model.submodels[1]).wn, 5.0, 0.05);
   const Outcome again = run("fit --config " + path("fitted.yaml") + " --data " + path("d.csv") + " --to 90");
   EXPECT_EQ(again.code, 0) << again.output;
+}
+
+// Commissioning: `fit --baselines` writes the fitted modes with their standard
+// deviations as the fault detector's baselines, so the daemon and `track
+// --faults` test against them from the first update instead of learning.
+TEST_F(Cli, FitWithBaselinesWritesTheFittedModesAsTheDetectorsConfiguredBaselines) {
+  ASSERT_EQ(run("simulate --config " + config("paper-sim.yaml") + " --out " + path("d.csv") + " --duration 100").code,
+            0);
+  const Outcome fit = run("fit --config " + config("paper-sim.yaml") + " --data " + path("d.csv") + " --to 90 --out " +
+                          path("fitted.yaml") + " --baselines");
+  ASSERT_EQ(fit.code, 0) << fit.output;
+  EXPECT_TRUE(contains(fit.output, "baselines: 3 modes")) << fit.output;
+  const Config fitted = load_config(path("fitted.yaml"));
+  ASSERT_EQ(fitted.faults.baselines.size(), 3u);
+  const double truth_wn[3] = {2.0, 5.0, 20.0};  // rad/s: the plant over the first 90 s
+  for (std::size_t i = 0; i < 3; ++i) {
+    ASSERT_TRUE(fitted.faults.baselines[i].has_value()) << "mode " << i + 1;
+    ASSERT_TRUE(fitted.faults.baseline_std[i].has_value()) << "mode " << i + 1;
+    const ModalParameters fitted_mode = modal_parameters(fitted.model.submodels[i]);
+    // The baseline is the fitted model's mode, its std the fit's.
+    EXPECT_DOUBLE_EQ(fitted.faults.baselines[i]->wn, fitted_mode.wn);
+    EXPECT_DOUBLE_EQ(fitted.faults.baselines[i]->gain, fitted_mode.gain);
+    const ModalParameters& sd = *fitted.faults.baseline_std[i];
+    for (double s : {sd.wn, sd.zeta, sd.gain}) {
+      EXPECT_GT(s, 0.0) << "mode " << i + 1;
+      EXPECT_TRUE(std::isfinite(s)) << "mode " << i + 1;
+    }
+    // The std says how far the baseline may be from the truth: mode 3, at one
+    // radian per sample, is the least certain (about 1 %).
+    EXPECT_LT(std::abs(fitted.faults.baselines[i]->wn - truth_wn[i]), 5.0 * sd.wn) << "mode " << i + 1;
+    EXPECT_LT(sd.wn, 0.02 * fitted_mode.wn) << "mode " << i + 1;
+  }
+  FaultDetector detector(fault_detector_settings(fitted));
+  for (const ModeStatus& m : detector.status()) {
+    EXPECT_EQ(m.state, BaselineState::configured);
+    EXPECT_TRUE(m.baseline_ready);
+  }
+  // Without --out there is nothing to write them to.
+  const Outcome alone = run("fit --config " + config("paper-sim.yaml") + " --data " + path("d.csv") + " --baselines");
+  EXPECT_NE(alone.code, 0);
+  EXPECT_TRUE(contains(alone.output, "--baselines requires --out")) << alone.output;
 }
 
 // --from keeps the samples before it for the filters, and the seed's four-sine

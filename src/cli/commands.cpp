@@ -90,6 +90,22 @@ void print_identifiability(const FitResult& result) {
   }
 }
 
+// A commissioning fit as the fault detector's baselines: every mode's (wn,
+// zeta, gain) with its standard deviations from the fit's covariance, which the
+// detector takes as the baseline's covariance C0. Other submodels keep what the
+// config gave them (a rigid body has no baseline).
+void set_baselines(Config& config, const AdditiveModel& fitted, const std::vector<Eigen::MatrixXd>& covariances) {
+  const std::size_t K = fitted.submodels.size();
+  config.faults.baselines.resize(K);
+  config.faults.baseline_std.resize(K);
+  for (std::size_t i = 0; i < K; ++i) {
+    const Submodel& s = fitted.submodels[i];
+    if (!s.is_mode()) continue;
+    config.faults.baselines[i] = modal_parameters(s);
+    config.faults.baseline_std[i] = modal_std(s, covariances[i]);
+  }
+}
+
 }  // namespace
 
 int fit(const FitArgs& args) {
@@ -128,7 +144,17 @@ int fit(const FitArgs& args) {
     std::printf("\nfit on the data: %.2f %%   output-error std: %.4g\n", result.fit_percent,
                 std::sqrt(result.noise_variance));
     print_identifiability(result);
-    if (!args.out.empty()) write_file_atomically(args.out, config_to_yaml(config, result.model));
+    if (!args.out.empty()) {
+      Config written = config;
+      if (args.baselines) {
+        set_baselines(written, result.model, covariances);
+        int modes = 0;
+        for (const auto& b : written.faults.baselines) modes += b.has_value();
+        std::printf("baselines: %d modes, with their standard deviations, as faults.baselines in %s\n", modes,
+                    args.out.c_str());
+      }
+      write_file_atomically(args.out, config_to_yaml(written, result.model));
+    }
     return 0;
   });
 }

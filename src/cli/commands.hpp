@@ -20,6 +20,7 @@ struct FitArgs {
   std::string data;                // CSV or LCM log
   std::string channel;             // LCM log: the channel to read
   std::string out;                 // fitted model YAML (optional)
+  bool baselines = false;          // --out also carries the fitted modes as the fault detector's baselines
   std::optional<double> from, to;  // time window of the record to use, s
   int max_iterations = 200;
 };

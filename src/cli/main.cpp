@@ -30,6 +30,11 @@ int main(int argc, char** argv) {
   fit_cmd->add_option("--data,-d", fit_args.data, "record: CSV with columns t,u,y[,r], or an LCM log")->required();
   fit_cmd->add_option("--channel", fit_args.channel, "LCM log: channel with the samples (default: the only one)");
   fit_cmd->add_option("--out,-o", fit_args.out, "write the fitted model as a config YAML");
+  fit_cmd
+      ->add_flag("--baselines", fit_args.baselines,
+                 "with --out: the fitted modes (with their standard deviations) become the fault detector's "
+                 "baselines (faults.baselines), a commissioning fit instead of a learned baseline")
+      ->needs("--out");
   fit_cmd->add_option("--from", fit_args.from, "use samples from this time on [s]");
   fit_cmd->add_option("--to", fit_args.to, "use samples up to this time [s]");
   fit_cmd->add_option("--max-iterations", fit_args.max_iterations, "block-coordinate cycles")
