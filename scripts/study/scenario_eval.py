@@ -31,6 +31,12 @@ How to run it
         [--jobs 2] [--json figures.json] [--retrack] [--drop-est]
 --json writes every scenario's figures (per mode errors, CRBs, flag events,
 detection outcome and delay) for ROC plots. Needs numpy.
+
+A bank too large for the disk is evaluated in parts (scripts/study/full_bank.sh
+does it): each part with --json part.json --keep-errors --drop-est, its records
+deleted after, then
+    /usr/bin/python3 scripts/study/scenario_eval.py --combine part*.json
+prints the tables of all parts together.
 """
 import argparse
 import concurrent.futures
@@ -238,14 +244,31 @@ def print_table(title, groups):
 
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("dir")
+    p.add_argument("dir", nargs="?")
     p.add_argument("--modalwatch", default=default_binary(), type=binary_path)
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--json", help="write every scenario's figures and the tables to this file")
     p.add_argument("--retrack", action="store_true", help="run track even where est.csv exists")
     p.add_argument("--drop-est", action="store_true", help="delete est.csv once evaluated (large banks)")
     p.add_argument("--max-points", type=int, default=MAX_POINTS)
+    p.add_argument("--keep-errors", action="store_true",
+                   help="keep each mode's (decimated) error series in --json, for --combine")
+    p.add_argument("--combine", nargs="+", metavar="JSON",
+                   help="print the tables of banks evaluated in parts (--json --keep-errors), taken together; "
+                        "dir is then ignored")
     args = p.parse_args()
+    if args.combine:
+        results = []
+        for path in args.combine:
+            for r in json.load(open(path))["scenarios"]:
+                for m in r["modes"]:
+                    for q in ("wn", "zeta"):
+                        m[f"{q}_abs_rel_err"] = np.asarray(m[f"{q}_abs_rel_err"])
+                results.append(r)
+        print_tables(results)
+        return 0
+    if not args.dir:
+        p.error("a bank directory (or --combine)")
     dirs = sorted(os.path.join(args.dir, x) for x in os.listdir(args.dir)
                   if os.path.exists(os.path.join(args.dir, x, "meta.json")))
 
@@ -271,7 +294,24 @@ def main():
               f"std/crb {worst['wn_std_over_crb']:.1f}) zeta p95 {100 * max(m['zeta_p95'] for m in r['modes']):7.2f} % "
               f"resets {r['resets']} low-exc {100 * r['low_excitation_share']:.0f} %{extra}{track}")
     print()
+    tables = print_tables(results)
+    if args.json:
+        for r in results:
+            for m in r["modes"]:
+                for q in ("wn", "zeta"):
+                    if args.keep_errors:
+                        m[f"{q}_abs_rel_err"] = [float(x) for x in m[f"{q}_abs_rel_err"]]
+                    else:
+                        del m[f"{q}_abs_rel_err"]
+        with open(args.json, "w") as f:
+            json.dump({"scenarios": results, "tables": tables}, f, indent=1)
+
+
+def print_tables(results):
+    """The tables by class, loop and excitation and over all records; returns them."""
     tables = {}
+    healthy_h = sum(r["flags"]["monitored_h"] for r in results if "flags" in r and r["class"] == "healthy")
+    print(f"{len(results)} records, {healthy_h:.1f} h of monitored healthy sample time\n")
     for title, key, values in (("class", "class", ("healthy", "stiffness", "damping", "gain")),
                                ("loop", "loop", ("open", "closed")),
                                ("excitation", "excitation", ("rich", "poor"))):
@@ -281,13 +321,7 @@ def main():
         print_table(title, groups)
     tables["all"] = group_figures(results)
     print_table("all", [("all", tables["all"])])
-    if args.json:
-        for r in results:
-            for m in r["modes"]:
-                for q in ("wn", "zeta"):
-                    del m[f"{q}_abs_rel_err"]
-        with open(args.json, "w") as f:
-            json.dump({"scenarios": results, "tables": tables}, f, indent=1)
+    return tables
 
 
 if __name__ == "__main__":
