@@ -14,7 +14,7 @@ packages=(
   liblcm-dev liblcm-bin libglib2.0-dev libsystemd-dev
   prometheus-cpp-dev  # the daemon's metrics endpoint
   prometheus          # the server and promtool, for scripts/check/prometheus.sh
-  python3 python3-numpy python3-matplotlib
+  python3 python3-numpy python3-scipy python3-matplotlib  # scipy: the scenario bank
   help2man pandoc  # the man pages (built only when both are found)
 )
 # Only for scripts/lcm-spy.sh (the types jar and lcm-spy itself): optional.

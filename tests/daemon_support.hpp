@@ -5,10 +5,14 @@
 #include <lcm/lcm.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <mutex>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -153,10 +157,9 @@ inline Eigen::Index samples_at(double t) { return static_cast<Eigen::Index>(std:
 // Publishes [begin, end) and keeps at most `backlog` samples ahead of the
 // daemon; `published` counts the samples sent so far (memq queues without bound,
 // so the daemon's received counter lags what was sent).
-inline void publish_paced(lcm_t* lcm, const Config& c, Daemon& d, Eigen::Index begin, Eigen::Index end,
-                          std::uint64_t& published, std::int64_t utime_shift = 0, std::int64_t seq_shift = 0,
-                          std::uint64_t backlog = 2048) {
-  const Record& rec = drift_data().record;
+inline void publish_paced(lcm_t* lcm, const Config& c, Daemon& d, const Record& rec, Eigen::Index begin,
+                          Eigen::Index end, std::uint64_t& published, std::int64_t utime_shift = 0,
+                          std::int64_t seq_shift = 0, std::uint64_t backlog = 2048) {
   Eigen::Index done = begin;
   publish_range(lcm, c.lcm.batches_channel, rec, begin, end, 64, utime_shift, seq_shift, [&](Eigen::Index next) {
     published += static_cast<std::uint64_t>(next - done);
@@ -172,6 +175,13 @@ inline void publish_paced(lcm_t* lcm, const Config& c, Daemon& d, Eigen::Index b
   });
 }
 
+// The same for the drift record.
+inline void publish_paced(lcm_t* lcm, const Config& c, Daemon& d, Eigen::Index begin, Eigen::Index end,
+                          std::uint64_t& published, std::int64_t utime_shift = 0, std::int64_t seq_shift = 0,
+                          std::uint64_t backlog = 2048) {
+  publish_paced(lcm, c, d, drift_data().record, begin, end, published, utime_shift, seq_shift, backlog);
+}
+
 inline bool all_handled(Daemon& d) {
   const DaemonCounters k = d.counters();
   return k.samples_received ==
@@ -181,6 +191,73 @@ inline bool all_handled(Daemon& d) {
 inline void dispatch_rest(lcm_t* lcm) {
   while (lcm_handle_timeout(lcm, 50) > 0) {
   }
+}
+
+// `rec` as a CSV with the sample times the daemon sees after publish_paced:
+// utime has 1 us resolution and a batch of 64 carries its first sample's utime
+// with the period added per sample, so the daemon's t differs from the record's
+// by up to 0.5 us (and so would its estimates and flags, slightly). `track` on
+// this CSV sees exactly the daemon's times. t starts at 0.
+inline void write_wire_times_csv(const Record& rec, const std::string& path) {
+  FILE* f = std::fopen(path.c_str(), "w");
+  ASSERT_NE(f, nullptr) << path;
+  std::fprintf(f, rec.has_reference() ? "t,u,y,r\n" : "t,u,y\n");
+  const std::int64_t first = std::llround(rec.t(0) * 1e6);
+  for (Eigen::Index k = 0; k < rec.size(); ++k) {
+    const Eigen::Index b = k / 64 * 64;  // publish_paced's batches
+    const std::int64_t utime =
+        std::llround(rec.t(b) * 1e6) + std::llround(static_cast<double>(k - b) * rec.sample_time() * 1e6);
+    const double t = static_cast<double>(utime - first) * 1e-6;
+    if (rec.has_reference())
+      std::fprintf(f, "%.17g,%.17g,%.17g,%.17g\n", t, rec.u(k), rec.y(k), rec.r(k));
+    else
+      std::fprintf(f, "%.17g,%.17g,%.17g\n", t, rec.u(k), rec.y(k));
+  }
+  std::fclose(f);
+}
+
+// The daemon's flag changes read off its fault status messages, as
+// "us since the first sample,mode,quantity,event": a flag's RAISED state turning
+// on (at its `since`) or off (at the message's utime). `first_us` is the
+// record's first t in us (the wire's utime is kUtime0 + t).
+inline std::vector<std::string> daemon_flag_changes(const std::vector<modalwatch::fault_status_t>& status,
+                                                    std::int64_t first_us) {
+  const char* kQuantity[3] = {"wn", "zeta", "gain"};
+  std::vector<std::string> changes;
+  std::vector<bool> up;
+  for (const auto& s : status) {
+    up.resize(static_cast<std::size_t>(3 * s.n_modes), false);
+    for (int e = 0; e < 3 * s.n_modes; ++e) {
+      const modalwatch::mode_status_t& m = s.modes[static_cast<std::size_t>(e / 3)];
+      const bool now = quantity(m, e % 3).state == "raised";
+      if (now == up[static_cast<std::size_t>(e)]) continue;
+      up[static_cast<std::size_t>(e)] = now;
+      const std::int64_t at = (now ? quantity(m, e % 3).since : s.utime) - kUtime0 - first_us;
+      changes.push_back(std::to_string(at) + "," + m.name + "," + kQuantity[e % 3] + "," +
+                        (now ? "raised" : "cleared"));
+    }
+  }
+  return changes;
+}
+
+// `track --faults`'s flag changes (its CSV) in the same form.
+inline std::vector<std::string> track_flag_changes(const std::string& flags_csv) {
+  std::vector<std::string> changes;
+  std::ifstream in(flags_csv);
+  std::string line;
+  std::getline(in, line);
+  EXPECT_EQ(line, "t,mode,quantity,event,value,baseline,relative,sigma") << flags_csv;
+  while (std::getline(in, line)) {
+    std::stringstream row(line);
+    std::string t, mode, quantity_name, event;
+    std::getline(row, t, ',');
+    std::getline(row, mode, ',');
+    std::getline(row, quantity_name, ',');
+    std::getline(row, event, ',');
+    changes.push_back(std::to_string(std::llround(std::stod(t) * 1e6)) + "," + mode + "," + quantity_name + "," +
+                      event);
+  }
+  return changes;
 }
 
 }  // namespace modalwatch::test_support

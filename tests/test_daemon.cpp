@@ -111,65 +111,18 @@ TEST_F(DaemonInProcess, FlagsTheDriftingModeOnlyAndMatchesTrack) {
   // times). Track is therefore run on the record with exactly the daemon's
   // times (same batching, same rounding): then the two must agree to rounding.
   ASSERT_GE(rx.estimates.size(), 590u);
-  const std::string us_csv = path("record_us.csv"), us_est = path("est_us.csv");
-  {
-    const Record& rec = data.record;
-    FILE* f = std::fopen(us_csv.c_str(), "w");
-    ASSERT_NE(f, nullptr);
-    std::fprintf(f, "t,u,y,r\n");
-    const std::int64_t first = std::llround(rec.t(0) * 1e6);
-    for (Eigen::Index k = 0; k < rec.size(); ++k) {
-      const Eigen::Index b = k / 64 * 64;  // publish_paced's batches
-      const std::int64_t utime =
-          std::llround(rec.t(b) * 1e6) + std::llround(static_cast<double>(k - b) * rec.sample_time() * 1e6);
-      std::fprintf(f, "%.17g,%.17g,%.17g,%.17g\n", static_cast<double>(utime - first) * 1e-6, rec.u(k), rec.y(k),
-                   rec.r(k));
-    }
-    std::fclose(f);
-  }
-  const std::string us_flags = path("flags_us.csv");
+  const std::string us_csv = path("record_us.csv"), us_est = path("est_us.csv"), us_flags = path("flags_us.csv");
+  write_wire_times_csv(data.record, us_csv);
   const Outcome tr_us = run_cli("track --no-progress --config " + kDriftConfig + " --data " + us_csv + " --out " +
                                 us_est + " --faults " + us_flags);
   ASSERT_EQ(tr_us.code, 0) << tr_us.output;
 
   // Flags: `track --faults` on the same samples changes exactly the daemon's
-  // flags (time to the microsecond, mode, quantity, event). The daemon's
-  // changes are read off its fault status: a flag's RAISED bit turning on (at
-  // `since`) or off (at the message's utime).
-  {
-    const std::int64_t first = std::llround(data.record.t(0) * 1e6);
-    const char* kQuantity[3] = {"wn", "zeta", "gain"};
-    std::vector<std::string> daemon_changes, track_changes;
-    std::array<bool, 6> up{};
-    for (const auto& s : rx.status) {
-      for (int e = 0; e < 6; ++e) {
-        const modalwatch::mode_status_t& m = s.modes[static_cast<std::size_t>(e / 3)];
-        const modalwatch::quantity_status_t& q = e % 3 == 0 ? m.wn : e % 3 == 1 ? m.zeta : m.gain;
-        const bool now = q.state == "raised";
-        if (now == up[e]) continue;
-        up[e] = now;
-        const std::int64_t at = (now ? q.since : s.utime) - kUtime0 - first;
-        daemon_changes.push_back(std::to_string(at) + "," + m.name + "," + kQuantity[e % 3] + "," +
-                                 (now ? "raised" : "cleared"));
-      }
-    }
-    std::ifstream in(us_flags);
-    std::string line;
-    std::getline(in, line);
-    ASSERT_EQ(line, "t,mode,quantity,event,value,baseline,relative,sigma");
-    while (std::getline(in, line)) {
-      std::stringstream row(line);
-      std::string t, mode, quantity, event;
-      std::getline(row, t, ',');
-      std::getline(row, mode, ',');
-      std::getline(row, quantity, ',');
-      std::getline(row, event, ',');
-      track_changes.push_back(std::to_string(std::llround(std::stod(t) * 1e6)) + "," + mode + "," + quantity + "," +
-                              event);
-    }
-    EXPECT_FALSE(daemon_changes.empty());
-    EXPECT_EQ(track_changes, daemon_changes) << "track --faults and the daemon flag differently";
-  }
+  // flags (time to the microsecond, mode, quantity, event).
+  const std::vector<std::string> daemon_changes =
+      daemon_flag_changes(rx.status, std::llround(data.record.t(0) * 1e6));
+  EXPECT_FALSE(daemon_changes.empty());
+  EXPECT_EQ(track_flag_changes(us_flags), daemon_changes) << "track --faults and the daemon flag differently";
   const Table tr = read_table(us_est);
   const int c_wn[2] = {tr.column("suspension_wn"), tr.column("flex_wn")};
   const int c_zeta[2] = {tr.column("suspension_zeta"), tr.column("flex_zeta")};
