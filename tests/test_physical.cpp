@@ -73,18 +73,28 @@ TEST(CheckPhysical, ModeAboveNyquistBecomesFeedthroughWithTheSameResponseOnTheBa
 }
 
 TEST(CheckPhysical, ModeWhoseResponseIsConstantWithinItsUncertaintyBecomesFeedthrough) {
-  // Below Nyquist (0.4 Hz at fs = 1 Hz) but heavily damped with a tiny gain:
-  // |G - b0| over the band stays below 2 std of b0.
+  // Below Nyquist (0.45 Hz at fs = 1 Hz), heavily damped, with a_1 and a_2
+  // known to a std of twice their values: its departure from b0 is within
+  // 2 std (1.0 at most) everywhere on the band.
   AdditiveModel m;
-  m.submodels = {make_mode("mode1", {2 * kPi * 0.05, 0.03, 1.0}), make_mode("ghost", {2 * kPi * 0.4, 0.9, 1e-4})};
+  m.submodels = {make_mode("mode1", {2 * kPi * 0.05, 0.03, 1.0}), make_mode("ghost", {2 * kPi * 0.45, 0.9, 0.2})};
+  const Submodel& g = m.submodels[1];
   Eigen::MatrixXd cov = Eigen::MatrixXd::Zero(6, 6);
-  cov(5, 5) = 1e-6;  // std of ghost's b0: 1e-3, ten times its gain
+  cov(3, 3) = 4.0 * g.a(0) * g.a(0);
+  cov(4, 4) = 4.0 * g.a(1) * g.a(1);
+  cov(5, 5) = 1e-6;
   const PhysicalCheck c = check_physical(m, cov, 1.0);
+  EXPECT_EQ(c.findings[0].verdict, ModeVerdict::physical);
   EXPECT_EQ(c.findings[1].verdict, ModeVerdict::feedthrough) << c.findings[1].reason;
-  EXPECT_NEAR(c.findings[1].fitted_std.gain, 1e-3, 1e-12);
   EXPECT_TRUE(c.model.submodels[1].is_feedthrough());
-  // Without that uncertainty the same mode is a resonance the data can show.
-  EXPECT_EQ(check_physical(m, Eigen::MatrixXd(), 1.0).findings[1].verdict, ModeVerdict::physical);
+  EXPECT_EQ(c.model.submodels[1].b(0), 0.2);
+  // Known to 1 %, the same mode is a resonance the data show; and so it is
+  // when only its gain is uncertain (a gain the record leaves open).
+  cov(3, 3) = 1e-4 * g.a(0) * g.a(0);
+  cov(4, 4) = 1e-4 * g.a(1) * g.a(1);
+  EXPECT_EQ(check_physical(m, cov, 1.0).findings[1].verdict, ModeVerdict::physical);
+  cov(5, 5) = 100.0;
+  EXPECT_EQ(check_physical(m, cov, 1.0).findings[1].verdict, ModeVerdict::physical);
 }
 
 TEST(CheckPhysical, UnstableModeIsProjectedAndNamed) {

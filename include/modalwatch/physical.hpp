@@ -46,8 +46,9 @@ struct ModeFinding {
 };
 
 struct PhysicalOptions {
-  // A mode is a constant on the band when |G_i(jw) - b0| stays below this many
-  // standard deviations of b0 for every w in [0, pi/T].
+  // A mode is a constant on the band when its departure from b0, relative to
+  // b0 (1/A(jw) - 1), stays below this many of its standard deviations (from
+  // the covariance of a_1, a_2) at every w in (0, pi/T].
   double band_sigmas = 2.0;
   // Two modes merge when |wn_i - wn_j| is below this many joint standard
   // deviations sqrt(var wn_i + var wn_j).

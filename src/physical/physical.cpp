@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <complex>
 #include <cstdio>
+#include <limits>
 #include <numbers>
 
 #include "modalwatch/polynomial.hpp"
@@ -16,16 +18,30 @@ std::string format(const char* fmt, double a, double b = 0.0, double c = 0.0) {
   return buf;
 }
 
-// Largest |G(jw) - b0| over the band [0, w_max] on a grid fine enough for the
-// resonance peak (its half-power width is 2 zeta wn).
-double band_deviation(const Submodel& s, double w_max) {
-  const int points = 2000;
-  double worst = 0.0;
-  for (int k = 0; k <= points; ++k) {
+// Whether a mode's shape D(jw) = 1/A(jw) - 1, its departure from the constant
+// b0 relative to b0, stays within `sigmas` standard deviations of itself at
+// every w of the band [0, w_max], with the covariance of (a_1, a_2) by
+// first-order propagation (dD/da_k = -(jw)^k / A^2). Relative to b0, so that a
+// gain the record leaves open (a direction shared with another submodel) does
+// not make a resolved resonance look like a constant. `worst` gets the largest
+// |D| / std(D).
+bool constant_on_band(const Submodel& s, const Eigen::Matrix2d& a_covariance, double w_max, double sigmas,
+                      double& worst) {
+  const int points = 2000;  // fine enough for the peak: its half-power width is 2 zeta wn
+  worst = 0.0;
+  for (int k = 1; k <= points; ++k) {
     const double w = w_max * k / points;
-    worst = std::max(worst, std::abs(s.response(w) - s.b(0)));
+    const std::complex<double> p(0.0, w);
+    const std::complex<double> A = 1.0 + s.a(0) * p + s.a(1) * p * p;
+    const std::complex<double> D = 1.0 / A - 1.0;
+    const std::complex<double> g1 = -p / (A * A), g2 = -p * p / (A * A);
+    const Eigen::Vector2d re(g1.real(), g2.real()), im(g1.imag(), g2.imag());
+    const double var = re.dot(a_covariance * re) + im.dot(a_covariance * im);
+    const double ratio = var > 0.0 ? std::abs(D) / std::sqrt(var) : std::numeric_limits<double>::infinity();
+    worst = std::max(worst, ratio);
+    if (!(ratio <= sigmas)) return false;
   }
-  return worst;
+  return true;
 }
 
 }  // namespace
@@ -89,15 +105,15 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
     if (!s.is_mode()) continue;
     ModeFinding& f = out.findings[i];
     const ModalParameters p = modal_parameters(s);
-    const double gain_std = f.fitted_std.gain;
     std::string why;
+    double worst = 0.0;
     if (!(p.wn < nyquist))
       why = format("%.4g Hz is above the Nyquist frequency %.4g Hz", p.hz(), nyquist / (2.0 * std::numbers::pi));
-    else if (gain_std > 0.0) {
-      const double deviation = band_deviation(s, nyquist);
-      if (deviation <= options.band_sigmas * gain_std)
-        why = format("its response departs from the constant b0 by at most %.3g over the band, within %.3g std of b0",
-                     deviation, options.band_sigmas);
+    else if (have_covariance) {
+      const int o = fitted.offset(i);
+      if (constant_on_band(s, beta_covariance.block<2, 2>(o, o), nyquist, options.band_sigmas, worst))
+        why = format("its response departs from the constant b0 by at most %.3g std over the band (0..%.4g Hz)", worst,
+                     nyquist / (2.0 * std::numbers::pi));
     }
     if (why.empty()) continue;
     f.verdict = ModeVerdict::feedthrough;
