@@ -124,6 +124,23 @@ TEST_F(Cli, FitWithModesOnlyStartsFromTheData) {
   EXPECT_TRUE(contains(one.output, "1 submodels")) << one.output;
 }
 
+TEST_F(Cli, DiagnoseWithModesOnlyStartsFromTheData) {
+  std::ofstream(path("plant.yaml")) << kThreeModes;
+  ASSERT_EQ(run("simulate --config " + path("plant.yaml") + " --out " + path("d.csv")).code, 0);
+  const Outcome diag = run("diagnose --config " + path("plant.yaml") + " --data " + path("d.csv") + " --report " +
+                           path("report"));
+  ASSERT_EQ(diag.code, 0) << diag.output;
+  EXPECT_TRUE(contains(diag.output, "initial modes from the data")) << diag.output;
+  const Config model = load_config(path("report/model.yaml"));
+  ASSERT_EQ(model.model.submodels.size(), 3u);
+  const double hz[] = {3.2, 5.6, 9.9}, zeta[] = {0.02, 0.06, 0.024};
+  for (int i = 0; i < 3; ++i) {
+    const ModalParameters p = modal_parameters(model.model.submodels[static_cast<std::size_t>(i)]);
+    EXPECT_NEAR(p.hz(), hz[i], 0.01 * hz[i]) << i;
+    EXPECT_NEAR(p.zeta, zeta[i], 0.2 * zeta[i]) << i;
+  }
+}
+
 // A configured mode far above the Nyquist frequency comes out as a named
 // feedthrough, in the warning and in the written model.
 TEST_F(Cli, FitWarnsOfAModeAboveNyquistAndWritesAFeedthrough) {
