@@ -9,6 +9,8 @@
 
 #include <gtest/gtest.h>
 
+#include "simulation_support.hpp"
+
 #include "modalwatch/initial_modes.hpp"
 #include "modalwatch/physical.hpp"
 #include "modalwatch/simulator.hpp"
@@ -56,15 +58,7 @@ PlantSpec plant_of(const std::vector<ModalParameters>& modes, double snr_db) {
 }
 
 ExperimentSpec experiment(double T, double duration, std::uint64_t seed) {
-  ExperimentSpec e;
-  e.sample_time = T;
-  e.duration = duration;
-  e.seed = seed;
-  e.excitation.kind = SignalSpec::Kind::prbs;
-  e.excitation.register_bits = 14;
-  e.excitation.clock_period = 1;
-  e.excitation.amplitude = 1.0;
-  return e;
+  return test_support::open_loop_prbs(T, duration, seed, 1, 14);
 }
 
 // Every true mode matched by a fitted one (both sorted by wn) within the tolerances.

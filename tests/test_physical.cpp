@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include "simulation_support.hpp"
+
 #include "modalwatch/physical.hpp"
 #include "modalwatch/polynomial.hpp"
 #include "modalwatch/simulator.hpp"
@@ -22,17 +24,7 @@ const ModeFinding& finding(const std::vector<ModeFinding>& all, const std::strin
   throw std::runtime_error("no finding for " + name);
 }
 
-ExperimentSpec prbs(double T, double duration, std::uint64_t seed) {
-  ExperimentSpec e;
-  e.sample_time = T;
-  e.duration = duration;
-  e.seed = seed;
-  e.excitation.kind = SignalSpec::Kind::prbs;
-  e.excitation.register_bits = 12;
-  e.excitation.clock_period = 1;
-  e.excitation.amplitude = 1.0;
-  return e;
-}
+using test_support::open_loop_prbs;
 
 PlantMode resonant(const std::string& name, const ModalParameters& m) {
   PlantMode pm;
@@ -165,7 +157,7 @@ TEST(FitPhysical, ModeAboveNyquistIsRefittedAsFeedthrough) {
   direct.submodel = make_rigid_body("direct", 0.3, 0);
   plant.modes.push_back(direct);
   plant.noise_variance = 1e-4;
-  const auto sim = simulate(plant, prbs(0.02, 60.0, 3));
+  const auto sim = simulate(plant, open_loop_prbs(0.02, 60.0, 3));
   AdditiveModel start;
   start.submodels = {make_mode("mode1", {2 * kPi * 1.9, 0.08, 0.8}), make_mode("mode2", {2 * kPi * 500.0, 0.1, 0.2})};
   std::vector<ModeFinding> findings;
@@ -189,7 +181,7 @@ TEST(FitPhysical, SplitResonanceIsMergedAndRefitted) {
   plant.modes.push_back(resonant("mode1", {2 * kPi * 1.0, 0.04, 1.0}));
   plant.modes.push_back(resonant("mode2", {2 * kPi * 4.0, 0.02, 0.5}));
   plant.noise_variance = 1e-3;
-  const auto sim = simulate(plant, prbs(0.02, 40.0, 5));
+  const auto sim = simulate(plant, open_loop_prbs(0.02, 40.0, 5));
   AdditiveModel fitted;
   fitted.submodels = {make_mode("mode1", {2 * kPi * 1.0, 0.04, 1.0}), make_mode("mode2", {2 * kPi * 4.0, 0.02, 0.8}),
                       make_mode("mode3", {2 * kPi * 4.001, 0.02, -0.3})};
