@@ -135,6 +135,11 @@ TEST_F(CliThreeModes, FitWithModesOnlyStartsFromTheData) {
   const Outcome one = run("fit --config " + path("fitted.yaml") + " --data " + path("d.csv") + " --modes 1");
   ASSERT_EQ(one.code, 0) << one.output;
   EXPECT_TRUE(contains(one.output, "1 submodels")) << one.output;
+  // The recursive estimator needs the submodels themselves.
+  const Outcome track = run("track --config " + path("plant.yaml") + " --data " + path("d.csv") + " --out " +
+                            path("est.csv"));
+  EXPECT_EQ(track.code, 2) << track.output;
+  EXPECT_TRUE(contains(track.output, "track needs the submodels")) << track.output;
 }
 
 TEST_F(CliThreeModes, DiagnoseWithModesOnlyStartsFromTheData) {
