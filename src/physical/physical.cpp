@@ -116,8 +116,9 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
                      nyquist / (2.0 * std::numbers::pi));
     }
     if (why.empty()) continue;
-    f.verdict = ModeVerdict::feedthrough;
-    f.reason = why + format(": replaced by the feedthrough %.6g", s.b(0));
+    f.verdict = ModeVerdict::feedthrough;  // after a projection too: the reasons add up
+    f.reason = (f.reason.empty() ? "" : f.reason + "; then ") + why +
+               format(": replaced by the feedthrough %.6g", s.b(0));
     s = make_rigid_body(s.name, s.b(0), 0);
     out.refit = true;
   }
