@@ -128,6 +128,95 @@ std::string good_rows(int n) {
   return s.str();
 }
 
+// Three modes, and a config that names only their count: `fit` starts them
+// from the data and writes a model that seeds the next command.
+const std::string kThreeModes =
+    "sample_rate_hz: 100\n"
+    "model:\n"
+    "  modes: 3\n"
+    "plant:\n"
+    "  snr_db: 30\n"
+    "  modes:\n"
+    "    - {name: a, frequency_hz: 3.2, zeta: 0.02, gain: 0.08}\n"
+    "    - {name: b, frequency_hz: 5.6, zeta: 0.06, gain: 0.22}\n"
+    "    - {name: c, frequency_hz: 9.9, zeta: 0.024, gain: -0.1}\n"
+    "simulation:\n"
+    "  duration: 120\n"
+    "  seed: 3\n"
+    "  input: {type: prbs, register_bits: 14, clock_period: 1, amplitude: 1}\n";
+
+// A record of kThreeModes' plant in d.csv, its config in plant.yaml.
+class CliThreeModes : public Cli {
+ protected:
+  void SetUp() override {
+    Cli::SetUp();
+    write("plant.yaml", kThreeModes);
+    ASSERT_EQ(run("simulate --config " + path("plant.yaml") + " --out " + path("d.csv")).code, 0);
+  }
+};
+
+// The model fitted on kThreeModes' record: each mode within 1 % in frequency and 20 % in damping.
+void expect_three_modes(const AdditiveModel& m) {
+  ASSERT_EQ(m.submodels.size(), 3u);
+  const double hz[] = {3.2, 5.6, 9.9}, zeta[] = {0.02, 0.06, 0.024};
+  for (int i = 0; i < 3; ++i) {
+    const ModalParameters p = modal_parameters(m.submodels[static_cast<std::size_t>(i)]);
+    EXPECT_NEAR(p.hz(), hz[i], 0.01 * hz[i]) << i;
+    EXPECT_NEAR(p.zeta, zeta[i], 0.2 * zeta[i]) << i;
+  }
+}
+
+TEST_F(CliThreeModes, FitWithModesOnlyStartsFromTheData) {
+  const Outcome fit = run("fit --config " + path("plant.yaml") + " --data " + path("d.csv") + " --out " +
+                          path("fitted.yaml"));
+  ASSERT_EQ(fit.code, 0) << fit.output;
+  EXPECT_TRUE(contains(fit.output, "initial modes from the data (peaks of H1 = S_yu/S_uu)")) << fit.output;
+  EXPECT_FALSE(contains(fit.output, "WARNING")) << fit.output;
+  const Config fitted = load_config(path("fitted.yaml"));
+  expect_three_modes(fitted.model);
+  // --modes overrides the file: one mode asked, one fitted.
+  const Outcome one = run("fit --config " + path("fitted.yaml") + " --data " + path("d.csv") + " --modes 1");
+  ASSERT_EQ(one.code, 0) << one.output;
+  EXPECT_TRUE(contains(one.output, "1 submodels")) << one.output;
+  // The recursive estimator needs the submodels themselves.
+  const Outcome track = run("track --config " + path("plant.yaml") + " --data " + path("d.csv") + " --out " +
+                            path("est.csv"));
+  EXPECT_EQ(track.code, 2) << track.output;
+  EXPECT_TRUE(contains(track.output, "track needs the submodels")) << track.output;
+}
+
+TEST_F(CliThreeModes, DiagnoseWithModesOnlyStartsFromTheData) {
+  const Outcome diag = run("diagnose --config " + path("plant.yaml") + " --data " + path("d.csv") + " --report " +
+                           path("report"));
+  ASSERT_EQ(diag.code, 0) << diag.output;
+  EXPECT_TRUE(contains(diag.output, "initial modes from the data")) << diag.output;
+  const Config model = load_config(path("report/model.yaml"));
+  expect_three_modes(model.model);
+}
+
+// A configured mode far above the Nyquist frequency comes out as a named
+// feedthrough, in the warning and in the written model.
+TEST_F(CliThreeModes, FitWarnsOfAModeAboveNyquistAndWritesAFeedthrough) {
+  std::ofstream(path("model.yaml")) << "sample_rate_hz: 100\n"
+                                       "model:\n"
+                                       "  submodels:\n"
+                                       "    - {name: m1, frequency_hz: 3.1, zeta: 0.03, gain: 0.1}\n"
+                                       "    - {name: m2, frequency_hz: 5.5, zeta: 0.05, gain: 0.2}\n"
+                                       "    - {name: m3, frequency_hz: 10, zeta: 0.03, gain: -0.1}\n"
+                                       "    - {name: fast, frequency_hz: 1.0e5, zeta: 0.1, gain: 0.01}\n";
+  const Outcome fit = run("fit --config " + path("model.yaml") + " --data " + path("d.csv") + " --out " +
+                          path("fitted.yaml"));
+  ASSERT_EQ(fit.code, 0) << fit.output;
+  EXPECT_TRUE(contains(fit.output, "WARNING: submodel fast is not a physical mode (feedthrough): ")) << fit.output;
+  std::ifstream in(path("fitted.yaml"));
+  std::stringstream text;
+  text << in.rdbuf();
+  EXPECT_TRUE(contains(text.str(), "kind: feedthrough")) << text.str();
+  const Config fitted = load_config(path("fitted.yaml"));
+  ASSERT_EQ(fitted.model.submodels.size(), 4u);
+  EXPECT_TRUE(fitted.model.submodels[3].is_feedthrough());
+}
+
 TEST_F(Cli, RecordWithNaNIsRejectedNamingRowAndColumn) {
   expect_rejected(*this, "t,r,u,y\n" + good_rows(3) + "0.15,0.1,0.2,nan\n", "row 5", "'y'");
 }

@@ -58,7 +58,7 @@ TEST(ConfigErrors, WrongTypes) {
             "test.yaml:3: key 'model.loop': must be one of open, closed (got maybe)");
   EXPECT_EQ(parse_error(edit(kBase, "      kind: mode", "      kind: spring")),
             "test.yaml:6: key 'model.submodels[0].kind': must be one of mode, rigid_body, "
-            "transfer_function (got spring)");
+            "feedthrough, transfer_function (got spring)");
   EXPECT_EQ(parse_error(edit(kBase, "      wn: 2.0", "      wn:")),
             "test.yaml:7: key 'model.submodels[0].wn': expected a number (got null)");
   EXPECT_EQ(parse_error(edit(kBase, "      wn: 2.0", "      wn: 2 rad/s")),
@@ -174,7 +174,7 @@ TEST(ConfigErrors, NamesRequiredUniqueAndSafe) {
             "test.yaml:11: key 'model.submodels[1].name': names may contain only letters, digits, '_' and "
             "'-' (got \"a,b\")");
   EXPECT_EQ(parse_error(edit(kBase, "  submodels:\n", "  submodels: []\n  old:\n")),
-            "test.yaml:5: key 'model.old': unknown key for model (allowed: loop, output_hold, submodels)");
+            "test.yaml:5: key 'model.old': unknown key for model (allowed: loop, output_hold, submodels, modes)");
 }
 
 TEST(ConfigErrors, EmptySubmodelList) {
@@ -213,6 +213,49 @@ TEST(ConfigErrors, TransferFunctionOrders) {
   EXPECT_EQ(parse_error(edit(kTf, "a: [0.1, 0.01]", "wn: 3")),
             "test.yaml:6: key 'model.submodels[0].wn': unknown key for kind transfer_function (allowed: name, "
             "kind, a, b, rigid_poles, forgetting, random_walk, stabilisation, initial_covariance)");
+}
+
+TEST(ConfigErrors, UnstableTransferFunction) {
+  // A(p) = 1 - 0.1 p + 0.01 p^2: zeta = -0.5, rejected like zeta <= 0 for a mode.
+  EXPECT_EQ(parse_error(edit(kTf, "a: [0.1, 0.01]", "a: [-0.1, 0.01]")),
+            "test.yaml:6: key 'model.submodels[0].a': A(p) = 1 + a_1 p + ... + a_n p^n has a root in the right "
+            "half plane (unstable) (got [-0.1, 0.01])");
+  // a_2 < 0: a real root in the right half plane.
+  EXPECT_CONTAINS(parse_error(edit(kTf, "a: [0.1, 0.01]", "a: [0.1, -0.01]")),
+                  "test.yaml:6: key 'model.submodels[0].a': A(p) = 1 + a_1 p + ... + a_n p^n has a root in the right "
+                  "half plane (unstable)");
+  // Third order, Routh fails: 1 + 0.1 p + 0.01 p^2 + 0.01 p^3.
+  EXPECT_CONTAINS(parse_error(edit(kTf, "a: [0.1, 0.01]", "a: [0.1, 0.01, 0.01]")),
+                  "test.yaml:6: key 'model.submodels[0].a': A(p) = 1 + a_1 p + ... + a_n p^n has a root in the right "
+                  "half plane (unstable)");
+  // Roots on the imaginary axis, (1 + 0.1 p)(1 + 0.01 p^2), are a lossless model, not an unstable one.
+  EXPECT_NO_THROW(parse_config(edit(kTf, "a: [0.1, 0.01]", "a: [0.1, 0.01, 0.001]"), "test.yaml"));
+}
+
+TEST(ConfigErrors, ModesInsteadOfSubmodels) {
+  const Config c = parse_config("sample_rate_hz: 20\nmodel:\n  modes: 3\n", "test.yaml");
+  EXPECT_EQ(c.model_modes, 3);
+  EXPECT_TRUE(c.model.submodels.empty());
+  EXPECT_EQ(parse_error("sample_rate_hz: 20\nmodel:\n  modes: 0\n"),
+            "test.yaml:3: key 'model.modes': must be in 1..64 (got 0)");
+  EXPECT_EQ(parse_error(edit(kBase, "  submodels:\n", "  modes: 2\n  submodels:\n")),
+            "test.yaml:4: key 'model.modes': give submodels (initial modes) or modes (a count to start from the "
+            "data), not both (got 2)");
+  EXPECT_EQ(parse_error("sample_rate_hz: 20\nmodel:\n  loop: open\n"),
+            "test.yaml:2: key 'model.submodels': missing required key (or modes: N to start N modes from the data)");
+}
+
+TEST(ConfigErrors, Feedthrough) {
+  const Config c = parse_config(edit(kTf, "      kind: transfer_function\n      a: [0.1, 0.01]\n      b: [1, 0.5]\n",
+                                     "      kind: feedthrough\n      gain: 0.25\n"),
+                                "test.yaml");
+  ASSERT_EQ(c.model.submodels.size(), 1u);
+  EXPECT_TRUE(c.model.submodels[0].is_feedthrough());
+  EXPECT_EQ(c.model.submodels[0].b(0), 0.25);
+  EXPECT_EQ(parse_error(edit(kTf, "      kind: transfer_function\n      a: [0.1, 0.01]\n      b: [1, 0.5]\n",
+                             "      kind: feedthrough\n      gain: 0.25\n      rigid_poles: 1\n")),
+            "test.yaml:7: key 'model.submodels[0].rigid_poles': unknown key for kind feedthrough (allowed: name, "
+            "kind, gain, forgetting, random_walk, stabilisation, initial_covariance)");
 }
 
 TEST(ConfigErrors, InitialCovariance) {

@@ -239,6 +239,35 @@ TEST(ConfigRoundTrip, ClosedLoopWithRigidBody) {
   expect_same_config(round_trip(c, c.model), c);
 }
 
+TEST(ConfigRoundTrip, FeedthroughAndModesOnly) {
+  const std::string yaml =
+      "sample_rate_hz: 100\n"
+      "model:\n"
+      "  submodels:\n"
+      "    - {name: m, wn: 40.0, zeta: 0.02, gain: 1}\n"
+      "    - {name: direct, kind: feedthrough, gain: -0.3}\n";
+  const Config c = parse_config(yaml, "test.yaml");
+  const std::string written = modalwatch::config_to_yaml(c, c.model);
+  EXPECT_CONTAINS(written, "kind: feedthrough");
+  expect_same_config(round_trip(c, c.model), c);
+  const Config modes = parse_config("sample_rate_hz: 100\nmodel:\n  modes: 4\n", "test.yaml");
+  expect_same_config(round_trip(modes, modes.model), modes);
+}
+
+TEST(ConfigRoundTrip, UnstableSubmodelIsNotWritten) {
+  const Config c = parse_config("sample_rate_hz: 100\nmodel:\n  submodels: [{name: m, wn: 40.0, zeta: 0.02, gain: 1}]\n",
+                                "test.yaml");
+  modalwatch::AdditiveModel fitted = c.model;
+  fitted.submodels[0].a(0) = -fitted.submodels[0].a(0);  // zeta = -0.02: written as a transfer_function before
+  try {
+    modalwatch::config_to_yaml(c, fitted);
+    ADD_FAILURE() << "an unstable submodel was written";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_CONTAINS(std::string(e.what()),
+                    "submodel m: A(p) has a root in the right half plane; an unstable model is not written");
+  }
+}
+
 TEST(ConfigRoundTrip, AllKindsAndSignals) {
   const std::string yaml =
       "sample_rate_hz: 610.3515625\n"

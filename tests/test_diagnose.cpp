@@ -252,6 +252,35 @@ INSTANTIATE_TEST_SUITE_P(Effects, AugmentedModelMatchesSimulator, ::testing::Val
 
 // ------------------------------------------------------------ residual tests
 
+// A configured mode far above Nyquist (1 kHz at 100 Hz): the fit of the
+// configured structure names it (the check of physical.hpp) and returns a
+// feedthrough beside the two true modes.
+TEST(DiagnosePhysical, ModeAboveNyquistBecomesFeedthrough) {
+  PlantSpec plant;
+  plant.modes = base_modes();
+  plant.noise_variance = 1e-6;
+  const Record est = make_record(plant, false, 11, 30.0);
+  const Record val = make_record(plant, false, 12, 15.0);
+  AdditiveModel model = configured_model();
+  model.submodels.push_back(make_mode("fast", {2 * std::numbers::pi * 1000.0, 0.1, 0.01}));
+  DiagnoseOptions options;
+  options.max_steps = 0;
+  const DiagnoseResult r = diagnose(est, val, model, LoopSpec{}, options);
+  const DiagnoseStep& s = r.steps.front();
+  ASSERT_FALSE(s.physical.empty());
+  EXPECT_EQ(s.physical.front().submodel, "fast");
+  EXPECT_EQ(s.physical.front().verdict, ModeVerdict::feedthrough) << s.physical.front().reason;
+  ASSERT_EQ(s.model.linear.submodels.size(), 3u);
+  EXPECT_TRUE(s.model.linear.submodels[2].is_feedthrough());
+  EXPECT_NEAR(s.model.linear.submodels[2].b(0), 0.0, 1e-3);  // the plant has none
+  const double wn[] = {5.0, 20.0}, zeta[] = {0.05, 0.03};
+  for (int i = 0; i < 2; ++i) {
+    const ModalParameters p = modal_parameters(s.model.linear.submodels[static_cast<std::size_t>(i)]);
+    EXPECT_NEAR(p.wn, wn[i], 0.01 * wn[i]) << i;
+    EXPECT_NEAR(p.zeta, zeta[i], 0.2 * zeta[i]) << i;
+  }
+}
+
 TEST(ResidualTests, WhiteNoisePassesAndColouredNoiseFails) {
   std::mt19937_64 rng(3);
   std::normal_distribution<double> normal;

@@ -65,5 +65,27 @@ TEST(Polynomial, HurwitzTestAgreesWithRootsOnHigherOrders) {
   for (const auto& s : roots(asc)) EXPECT_LT(s.real(), 0.0);
 }
 
+// Unstable means a root in the open right half plane: roots on the imaginary
+// axis fail is_hurwitz but are no unstable model.
+TEST(Polynomial, UnstableOnlyWithARootInTheRightHalfPlane) {
+  Eigen::VectorXd a(2);
+  a << 0.1, 0.01;  // zeta = 0.5
+  EXPECT_FALSE(is_unstable(a));
+  a << -0.1, 0.01;  // zeta = -0.5
+  EXPECT_TRUE(is_unstable(a));
+  a << 0.1, -0.01;  // real roots of opposite sign
+  EXPECT_TRUE(is_unstable(a));
+  a << 0.0, 0.01;  // +-10j
+  EXPECT_FALSE(is_hurwitz(a));
+  EXPECT_FALSE(is_unstable(a));
+  Eigen::VectorXd c(3);
+  c << 0.1, 0.01, 0.001;  // (1 + 0.1 p)(1 + 0.01 p^2)
+  EXPECT_FALSE(is_unstable(c));
+  c << 0.1, 0.01, 0.01;  // Routh: 0.1 * 0.01 < 0.01
+  EXPECT_TRUE(is_unstable(c));
+  c(0) = std::nan("");
+  EXPECT_TRUE(is_unstable(c));
+}
+
 }  // namespace
 }  // namespace modalwatch

@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include "simulation_support.hpp"
 #include "support.hpp"
 
 #include "modalwatch/polynomial.hpp"
@@ -61,17 +62,7 @@ ExperimentSpec paper_closed_loop(double duration, std::uint64_t seed) {
   return e;
 }
 
-ExperimentSpec open_loop_prbs(double T, double duration, std::uint64_t seed, int clock = 1) {
-  ExperimentSpec e;
-  e.sample_time = T;
-  e.duration = duration;
-  e.seed = seed;
-  e.excitation.kind = SignalSpec::Kind::prbs;
-  e.excitation.register_bits = 12;
-  e.excitation.clock_period = clock;
-  e.excitation.amplitude = 1.0;
-  return e;
-}
+using test_support::open_loop_prbs;
 
 AdditiveModel truth_of(const PlantSpec& p) { return plant_model_at(p, 0.0); }
 

@@ -18,6 +18,7 @@
 
 #include "modalwatch/effects.hpp"
 #include "modalwatch/model.hpp"
+#include "modalwatch/physical.hpp"
 #include "modalwatch/prefilter.hpp"
 #include "modalwatch/record.hpp"
 #include "modalwatch/transfer_function.hpp"
@@ -141,6 +142,9 @@ struct DiagnoseStep {
   ResidualAnalysis residual;          // on the validation part
   Eigen::VectorXd validation_output;  // simulated
   std::vector<Candidate> ranking;     // candidates tried from this step, best first
+  // Verdicts of the physical check (physical.hpp) on this step's fit, other
+  // than physical: the model above is the corrected one.
+  std::vector<ModeFinding> physical;
 };
 
 struct DiagnoseResult {

@@ -49,6 +49,8 @@ struct Submodel {
 
   // True when this is a plain second-order mode (n = 2, m = 0, no rigid poles).
   bool is_mode() const { return n == 2 && m == 0 && rigid_poles == 0; }
+  // True for a constant G = b0 (no poles at all): a static gain, or feedthrough.
+  bool is_feedthrough() const { return n == 0 && m == 0 && rigid_poles == 0; }
   // Throws std::invalid_argument when the sizes do not match n, m.
   void check() const;
   // Same name, orders and coefficients.
@@ -57,7 +59,7 @@ struct Submodel {
 
 // A resonant mode b0 / (p^2/wn^2 + 2 zeta/wn p + 1).
 Submodel make_mode(const std::string& name, const ModalParameters& modal);
-// A rigid body b0 / p^l.
+// A rigid body b0 / p^l; with l = 0 the feedthrough b0.
 Submodel make_rigid_body(const std::string& name, double gain, int rigid_poles = 2);
 
 // The modal view of a second-order submodel (n = 2). For m > 0 the gain is b0,

@@ -30,4 +30,9 @@ bool project_stable(Eigen::VectorXd& a, double margin = 1e-6);
 // in the open left half plane (Routh-Hurwitz, no root finding).
 bool is_hurwitz(const Eigen::VectorXd& a);
 
+// True when a root of the anti-monic A(p) lies in the open right half plane
+// (real part above tolerance |s|): unstable, not merely on the imaginary axis
+// (which is_hurwitz rejects too). Non-finite coefficients count as unstable.
+bool is_unstable(const Eigen::VectorXd& a, double tolerance = 1e-9);
+
 }  // namespace modalwatch

@@ -14,6 +14,7 @@
 #include "modalwatch/io/atomic_file.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
+#include "modalwatch/physical.hpp"
 #include "modalwatch/simulator.hpp"
 #include "modalwatch/srivc.hpp"
 
@@ -114,7 +115,9 @@ int fit(const FitArgs& args) {
     const Record full = read_record(RecordSource(args.data, {}, args.channel, config.closed_loop));
     const auto [data, settle] = window(full, args);
     const Eigen::Index used = data.size() - settle;
-    const int nb = config.model.n_beta();
+    // Modes from the data: --modes, or model.modes without submodels.
+    const std::optional<int> modes = args.modes ? args.modes : config.model_modes;
+    const int nb = modes ? 3 * *modes : config.model.n_beta();
     if (used < 2 * nb + 2)
       throw InputError(args.data, std::to_string(used) + " samples (rows) for " + std::to_string(nb) +
                                       " parameters: need at least " + std::to_string(2 * nb + 2));
@@ -126,11 +129,14 @@ int fit(const FitArgs& args) {
     options.output_hold = config.output_hold;
     options.max_iterations = args.max_iterations;
     options.settle_samples = settle;
-    const FitResult result = fit_srivc(data, config.model, options);
+    const AdditiveModel start =
+        modes ? modes_from_data(data.segment(settle, used), *modes, config.closed_loop, args.data) : config.model;
+    std::vector<ModeFinding> findings;
+    const FitResult result = fit_physical(data, start, options, findings);
 
     std::printf("modalwatch fit: %lld samples at %g Hz, %s loop, %zu submodels, %d parameters\n",
                 static_cast<long long>(used), 1.0 / T, config.closed_loop ? "closed" : "open",
-                config.model.submodels.size(), nb);
+                result.model.submodels.size(), result.model.n_beta());
     if (settle > 0)
       std::printf("(the %lld samples before --from run the filters and the model only)\n",
                   static_cast<long long>(settle));
@@ -144,13 +150,14 @@ int fit(const FitArgs& args) {
     std::printf("\nfit on the data: %.2f %%   output-error std: %.4g\n", result.fit_percent,
                 std::sqrt(result.noise_variance));
     print_identifiability(result);
+    print_physical_findings(findings);
     if (!args.out.empty()) {
       Config written = config;
       if (args.baselines) {
         set_baselines(written, result.model, covariances);
-        int modes = 0;
-        for (const auto& b : written.faults.baselines) modes += b.has_value();
-        std::printf("baselines: %d modes, with their standard deviations, as faults.baselines in %s\n", modes,
+        int n_baselines = 0;
+        for (const auto& b : written.faults.baselines) n_baselines += b.has_value();
+        std::printf("baselines: %d modes, with their standard deviations, as faults.baselines in %s\n", n_baselines,
                     args.out.c_str());
       }
       write_file_atomically(args.out, config_to_yaml(written, result.model));

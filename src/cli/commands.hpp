@@ -23,6 +23,7 @@ struct FitArgs {
   bool baselines = false;          // --out also carries the fitted modes as the fault detector's baselines
   std::optional<double> from, to;  // time window of the record to use, s
   int max_iterations = 200;
+  std::optional<int> modes;        // start this many modes from the data (else model.modes or the submodels)
 };
 
 struct TrackArgs {
@@ -63,6 +64,7 @@ struct DiagnoseArgs {
   int max_steps = 5;
   double min_improvement = 0.10;
   int max_delay = 10;
+  std::optional<int> modes;  // start this many modes from the data (else model.modes or the submodels)
 };
 
 int simulate(const SimulateArgs& args);

@@ -6,6 +6,7 @@
 #include "commands.hpp"
 #include "diagnose_report.hpp"
 #include "guarded.hpp"
+#include "table.hpp"
 #include "modalwatch/io/records.hpp"
 
 #include "modalwatch/diagnose.hpp"
@@ -106,9 +107,13 @@ int diagnose(const DiagnoseArgs& args) {
     loop.interpolate_input = args.input_hold == "foh";
     loop.substeps = args.substeps;
 
-    const DiagnoseResult r = diagnose(est, val, config.model, loop, options);
+    // Modes from the data: --modes, or model.modes without submodels.
+    const std::optional<int> modes = args.modes ? args.modes : config.model_modes;
+    const AdditiveModel initial = modes ? modes_from_data(est, *modes, config.closed_loop, args.data) : config.model;
+    const DiagnoseResult r = diagnose(est, val, initial, loop, options);
 
     write_diagnose_report({args, config, r, val, lead_in, est.size()});
+    for (const auto& step : r.steps) print_physical_findings(step.physical);
     return 0;
   });
 }

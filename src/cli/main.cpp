@@ -39,6 +39,8 @@ int main(int argc, char** argv) {
   fit_cmd->add_option("--to", fit_args.to, "use samples up to this time [s]");
   fit_cmd->add_option("--max-iterations", fit_args.max_iterations, "block-coordinate cycles")
       ->check(CLI::PositiveNumber);
+  fit_cmd->add_option("--modes", fit_args.modes, "start this many modes from the data (overrides model:)")
+      ->check(CLI::Range(1, 64));
 
   TrackArgs track_args;
   bool no_progress = false;
@@ -89,6 +91,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 1.0));
   diagnose_cmd->add_option("--max-delay", diag.max_delay, "largest input delay tried [samples]")
       ->check(CLI::PositiveNumber);
+  diagnose_cmd->add_option("--modes", diag.modes, "start this many modes from the data (overrides model:)")
+      ->check(CLI::Range(1, 64));
   WatchArgs watch_args;
   auto* watch_cmd = app.add_subcommand("watch", "Print the daemon's estimates and fault status as they arrive (LCM)");
   watch_cmd->add_option("--config,-c", watch_args.config, "YAML whose lcm: section names the URL and channels")

@@ -5,7 +5,31 @@
 #include <cstdio>
 #include <numbers>
 
+#include "modalwatch/error.hpp"
+#include "modalwatch/initial_modes.hpp"
+
 namespace modalwatch::cli {
+
+void print_physical_findings(const std::vector<ModeFinding>& findings) {
+  for (const auto& f : findings) {
+    if (f.verdict == ModeVerdict::physical) continue;
+    std::printf("WARNING: submodel %s is not a physical mode (%s): %s\n", f.submodel.c_str(), verdict_name(f.verdict),
+                f.reason.c_str());
+  }
+}
+
+AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name) {
+  const AdditiveModel start = initial_modes(data, count, closed_loop);
+  if (start.submodels.empty())
+    throw InputError(data_name, "no resonance peak in the frequency response estimate: no mode to start from");
+  std::printf("initial modes from the data (peaks of %s):", closed_loop ? "S_yr/S_ur" : "H1 = S_yu/S_uu");
+  for (const auto& s : start.submodels) std::printf(" %.5g Hz (zeta %.3g)", modal_parameters(s).hz(), modal_parameters(s).zeta);
+  std::printf("\n");
+  if (static_cast<int>(start.submodels.size()) < count)
+    std::printf("WARNING: %d modes asked, the data show %zu resonance peaks above the noise: fitting %zu\n", count,
+                start.submodels.size(), start.submodels.size());
+  return start;
+}
 
 void print_modal_table(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>& covariances) {
   std::printf("\n%-10s %11s %10s %12s %10s %9s %9s %12s %10s\n", "submodel", "f [Hz]", "+-", "wn [rad/s]", "+-", "zeta",

@@ -1,16 +1,26 @@
 #pragma once
 // The modal table that `fit` and `track` print: per submodel its frequency (Hz,
 // rad/s), damping and gain with standard deviations, or for rigid bodies and
-// general transfer functions their coefficients and resonances.
+// general transfer functions their coefficients and resonances; and the
+// warnings of `fit` and `diagnose` about submodels that are no physical mode.
 #include <vector>
 
 #include <Eigen/Core>
 
 #include "modalwatch/model.hpp"
+#include "modalwatch/physical.hpp"
 
 namespace modalwatch::cli {
 
 // covariances[i]: covariance of theta_i in physical units (zeros when unknown).
 void print_modal_table(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>& covariances);
+
+// One WARNING line per finding (verdicts other than physical), naming the submodel.
+void print_physical_findings(const std::vector<ModeFinding>& findings);
+
+// The starting modes that `fit --modes` and `diagnose --modes` take from the
+// data (initial_modes.hpp), with a warning when the data show fewer than asked.
+// Throws InputError (naming `data`) when they show none.
+AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name);
 
 }  // namespace modalwatch::cli

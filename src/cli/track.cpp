@@ -481,6 +481,8 @@ int track(const TrackArgs& args) {
   return guarded("track", [&] {
     const auto t_start = Clock::now();
     const Config config = load_config(args.config);
+    if (config.model.submodels.empty())
+      throw InputError(args.config, "model gives only modes: N; track needs the submodels (fit --out writes them)");
     const EstimatorSettings& settings = config.estimator;  // completed by load_config
 
     RecordReadOptions read_options;

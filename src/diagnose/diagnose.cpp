@@ -23,8 +23,10 @@
 #include <stdexcept>
 
 #include <Eigen/Cholesky>
+#include <Eigen/QR>
 
 #include "modalwatch/diagnose.hpp"
+#include "modalwatch/physical.hpp"
 #include "modalwatch/srivc.hpp"
 
 namespace modalwatch {
@@ -91,12 +93,15 @@ double cost_of(const Eigen::VectorXd& y_hat, const Eigen::VectorXd& y) {
 struct Refined {
   AugmentedModel model;
   double cost = kInf;  // sum of squared output errors on the estimation part
+  // Of pack(model): sigma^2 (J^T J)^{-1} at the model (refine's with_covariance); else empty.
+  Eigen::MatrixXd covariance;
 };
 
 // Levenberg-Marquardt on the output error with a forward-difference Jacobian,
-// in parameters scaled by their start values (p = p0 (1 + delta)).
-Refined refine(const AugmentedModel& start, const Problem& pb, int iterations) {
-  Refined best{start, kInf};
+// in parameters scaled by their start values (p = p0 (1 + delta)); with
+// iterations = 0 and with_covariance the model stays and gets its covariance.
+Refined refine(const AugmentedModel& start, const Problem& pb, int iterations, bool with_covariance = false) {
+  Refined best{start, kInf, {}};
   const Eigen::VectorXd p0 = pack(start);
   const int P = static_cast<int>(p0.size());
   Eigen::VectorXd scale(P);
@@ -114,14 +119,17 @@ Refined refine(const AugmentedModel& start, const Problem& pb, int iterations) {
   best.cost = cost;
   double lambda = 1e-3;
   const double h = 1e-6;
-  for (int it = 0; it < iterations && P > 0; ++it) {
-    Eigen::MatrixXd J(pb.data.size(), P);
+  Eigen::MatrixXd J(pb.data.size(), P);
+  auto jacobian = [&] {
     for (int j = 0; j < P; ++j) {
       Eigen::VectorXd d = delta;
       d(j) += h;
       const Eigen::VectorXd yj = output(model_at(d), pb);
       J.col(j) = yj.size() == y_hat.size() ? Eigen::VectorXd((yj - y_hat) / h) : Eigen::VectorXd::Zero(y_hat.size());
     }
+  };
+  for (int it = 0; it < iterations && P > 0; ++it) {
+    jacobian();
     const Eigen::VectorXd r = pb.data.y - y_hat;
     const Eigen::MatrixXd A = J.transpose() * J;
     const Eigen::VectorXd g = J.transpose() * r;
@@ -153,6 +161,13 @@ Refined refine(const AugmentedModel& start, const Problem& pb, int iterations) {
   }
   best.model = model_at(delta);
   best.cost = cost;
+  const Eigen::Index N = pb.data.size();
+  if (with_covariance && iterations == 0 && P > 0 && N > P) {
+    jacobian();
+    const Eigen::MatrixXd Js = J * scale.cwiseInverse().asDiagonal();  // d y / d p
+    const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(Js.transpose() * Js);
+    best.covariance = cost / static_cast<double>(N - P) * cod.pseudoInverse();
+  }
   return best;
 }
 
@@ -190,6 +205,30 @@ Refined fit_structure(const AugmentedModel& start, const Problem& pb, const Diag
     if (r.cost < best.cost) best = r;
   }
   return best;
+}
+
+// The physical check (physical.hpp) on a fitted structure: its verdicts
+// recorded, the projected model rescored, and a refit when the structure changed.
+Refined make_physical(Refined r, const Problem& pb, const DiagnoseOptions& options, std::vector<ModeFinding>& findings) {
+  for (std::size_t round = 0; round <= r.model.linear.submodels.size(); ++round) {
+    const int nb = r.model.linear.n_beta();
+    const Eigen::MatrixXd all = refine(r.model, pb, 0, true).covariance;
+    const Eigen::MatrixXd cov = all.rows() >= nb ? Eigen::MatrixXd(all.topLeftCorner(nb, nb)) : Eigen::MatrixXd();
+    const PhysicalCheck check = check_physical(r.model.linear, cov, pb.data.sample_time());
+    for (const auto& f : check.findings)
+      if (f.verdict != ModeVerdict::physical) findings.push_back(f);
+    if (!check.changed()) break;
+    AugmentedModel m = r.model;
+    m.linear = check.model;
+    if (check.refit) {
+      r = fit_structure(m, pb, options, true);
+      continue;
+    }
+    r.model = m;
+    r.cost = cost_of(output(m, pb), pb.data.y);
+    break;
+  }
+  return r;
 }
 
 // Least-squares size of one new scalar parameter from zero: one Gauss-Newton
@@ -493,9 +532,11 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
   DiagnoseResult result;
   AugmentedModel configured;
   configured.linear = initial;
-  Refined current = fit_structure(configured, est, options, true);
+  std::vector<ModeFinding> findings;
+  Refined current = make_physical(fit_structure(configured, est, options, true), est, options, findings);
   if (!std::isfinite(current.cost)) throw std::runtime_error("diagnose: the configured model cannot be fitted");
   result.steps.push_back(make_step("none", {}, current.model, current.cost, est, val, options));
+  result.steps.back().physical = findings;
 
   auto enabled = [&](EffectKind k) {
     return std::find(options.library.begin(), options.library.end(), k) != options.library.end();
@@ -540,8 +581,12 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
       result.stop_reason = std::string("best candidate (") + effect_name(best.kind) + ") does not lower the BIC";
       break;
     }
+    findings.clear();
     const double cost = best.estimation_rms * best.estimation_rms * static_cast<double>(estimation.size());
-    result.steps.push_back(make_step(effect_name(best.kind), best.params, best.model, cost, est, val, options));
+    const Refined chosen = make_physical({best.model, cost, {}}, est, options, findings);
+    result.steps.push_back(
+        make_step(effect_name(best.kind), best.params, chosen.model, chosen.cost, est, val, options));
+    result.steps.back().physical = findings;
   }
   if (result.stop_reason.empty()) result.stop_reason = "maximum number of steps";
   return result;

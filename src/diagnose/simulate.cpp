@@ -66,7 +66,8 @@ class SubmodelRunner {
   SubmodelRunner(const Submodel& s, double T) {
     const int l = s.rigid_poles;
     order_ = s.n + l;
-    if (order_ < 1 || order_ > kMaxFilterOrder) throw std::invalid_argument("diagnose: submodel order out of range");
+    // Order 0 is a feedthrough: the filter passes w through and b_0 scales it.
+    if (order_ < 0 || order_ > kMaxFilterOrder) throw std::invalid_argument("diagnose: submodel order out of range");
     const double ws = time_scale(s);
     const Eigen::VectorXd den = s.denominator();
     Eigen::VectorXd d = Eigen::VectorXd::Zero(order_ + 1);

@@ -82,6 +82,21 @@ bool project_stable(Eigen::VectorXd& a, double margin) {
   return true;
 }
 
+bool is_unstable(const Eigen::VectorXd& a, double tolerance) {
+  if (!a.allFinite()) return true;
+  if (is_hurwitz(a)) return false;
+  Eigen::Index n = a.size();
+  while (n > 0 && a(n - 1) == 0.0) --n;  // roots at infinity: the order is lower
+  if (n == 0) return false;
+  Eigen::VectorXd asc(n + 1);
+  asc(0) = 1.0;
+  asc.tail(n) = a.head(n);
+  const Eigen::VectorXcd r = roots(asc);
+  for (const auto& s : r)
+    if (s.real() > tolerance * std::abs(s)) return true;
+  return false;
+}
+
 bool is_hurwitz(const Eigen::VectorXd& a) {
   const Eigen::Index n = a.size();
   if (n == 0) return true;

@@ -74,6 +74,9 @@ struct Config {
   std::string axis;                                 // `axis:`, the axis this file describes (default: the file's stem)
   double sample_time = 0.0;                         // s (from sample_rate_hz)
   AdditiveModel model;                              // initial guesses / nominal model
+  // `model.modes`, given instead of submodels: the number of modes that `fit`
+  // and `diagnose` start from the data (model then has no submodels).
+  std::optional<int> model_modes;
   std::vector<SubmodelSettings> submodel_settings;  // one per submodel
   bool closed_loop = false;
   DiscreteTransferFunction controller;
@@ -108,7 +111,9 @@ Config parse_config(const std::string& yaml_text, const std::string& source_name
 FaultDetectorSettings fault_detector_settings(const Config& config);
 
 // The configuration as YAML, with `model` in place of the configured one (for
-// `fit --out`: a fitted model that seeds the other commands).
+// `fit --out`: a fitted model that seeds the other commands). Throws
+// std::invalid_argument for a submodel with an unstable A(p) (is_unstable), which the reader
+// would reject: project it first (check_physical in modalwatch/physical.hpp).
 std::string config_to_yaml(const Config& config, const AdditiveModel& model);
 
 }  // namespace modalwatch

@@ -3,10 +3,12 @@
 #include <cmath>
 #include <limits>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "modalwatch/io/config.hpp"
+#include "modalwatch/polynomial.hpp"
 #include "yaml_value.hpp"
 
 namespace modalwatch {
@@ -105,11 +107,18 @@ void write_submodel(YamlWriter& w, int indent, const Submodel& s) {
     w.number(in, "wn", modal->wn);
     w.number(in, "zeta", modal->zeta);
     w.number(in, "gain", modal->gain);
+  } else if (s.is_feedthrough() && s.b.size() == 1 && s.b(0) != 0.0) {
+    w.key(in, "kind", "feedthrough");
+    w.number(in, "gain", s.b(0));
   } else if (s.n == 0 && s.m == 0 && s.b.size() == 1 && s.b(0) != 0.0) {
     w.key(in, "kind", "rigid_body");
     w.number(in, "gain", s.b(0));
     w.key(in, "rigid_poles", std::to_string(s.rigid_poles));
   } else {
+    // The reader rejects it too: an unstable estimate is projected (physical.hpp) before it is written.
+    if (is_unstable(s.a))
+      throw std::invalid_argument("submodel " + s.name +
+                                  ": A(p) has a root in the right half plane; an unstable model is not written");
     w.key(in, "kind", "transfer_function");
     w.key(in, "a", flow_list(s.a));
     w.key(in, "b", flow_list(s.b));
@@ -130,6 +139,10 @@ void write_model(YamlWriter& w, const Config& config, const AdditiveModel& model
   w.line(0, "model:");
   w.key(1, "loop", config.closed_loop ? "closed" : "open");
   w.key(1, "output_hold", config.output_hold == Hold::foh ? "foh" : "zoh");
+  if (model.submodels.empty() && config.model_modes) {
+    w.key(1, "modes", std::to_string(*config.model_modes));
+    return;
+  }
   w.line(1, "submodels:");
   const auto& covariances = config.estimator.initial_covariance;
   for (std::size_t i = 0; i < model.submodels.size(); ++i) {

@@ -2,6 +2,8 @@
 // controller: section, and the submodel entries that plant: shares.
 #include "sections.hpp"
 
+#include "modalwatch/polynomial.hpp"
+
 #include <algorithm>
 #include <cctype>
 #include <cmath>
@@ -23,6 +25,10 @@ Submodel parse_transfer_function(const Map& m, const std::string& name, int rigi
   const std::vector<double> a = a_value.numbers();
   const std::vector<double> b = b_value.nonempty_numbers();
   if (!a.empty() && a.back() == 0.0) a_value.fail("the last coefficient a_n must be != 0");
+  // A model names the plant's mechanics: an unstable A is an estimate to be
+  // projected (fit, diagnose), never a model to track.
+  if (is_unstable(Eigen::Map<const Eigen::VectorXd>(a.data(), static_cast<Eigen::Index>(a.size()))))
+    a_value.fail("A(p) = 1 + a_1 p + ... + a_n p^n has a root in the right half plane (unstable)");
   const int n = static_cast<int>(a.size());
   const int mm = static_cast<int>(b.size()) - 1;
   if (mm > n + rigid_poles)
@@ -64,6 +70,7 @@ Keys submodel_keys(const std::string& kind, const Keys& extra) {
   Keys keys{"name", "kind"};
   if (kind == "mode") keys.insert(keys.end(), {"wn", "frequency_hz", "zeta", "gain", "rigid_poles"});
   if (kind == "rigid_body") keys.insert(keys.end(), {"gain", "rigid_poles"});
+  if (kind == "feedthrough") keys.insert(keys.end(), {"gain"});
   if (kind == "transfer_function") keys.insert(keys.end(), {"a", "b", "rigid_poles"});
   keys.insert(keys.end(), extra.begin(), extra.end());
   return keys;
@@ -72,7 +79,7 @@ Keys submodel_keys(const std::string& kind, const Keys& extra) {
 }  // namespace
 
 SubmodelEntry parse_submodel(const Map& m, const Keys& extra) {
-  const std::string kind = m.get("kind") ? m.get("kind")->choice({"mode", "rigid_body", "transfer_function"}) : "mode";
+  const std::string kind = m.get("kind") ? m.get("kind")->choice({"mode", "rigid_body", "feedthrough", "transfer_function"}) : "mode";
   if (kind != "mode")
     if (const auto t = m.get("trajectory"))
       t->fail_plain("a trajectory is only allowed for kind mode (this submodel is kind " + kind + ")");
@@ -92,6 +99,8 @@ SubmodelEntry parse_submodel(const Map& m, const Keys& extra) {
     e.submodel = make_mode(name, e.modal);
   } else if (kind == "rigid_body") {
     e.submodel = make_rigid_body(name, m.require("gain", "kind rigid_body").nonzero(), rigid_poles);
+  } else if (kind == "feedthrough") {
+    e.submodel = make_rigid_body(name, m.require("gain", "kind feedthrough").nonzero(), 0);
   } else {
     e.submodel = parse_transfer_function(m, name, rigid_poles);
   }
@@ -127,11 +136,17 @@ Eigen::VectorXd parse_initial_covariance(const Value& v, const Submodel& s) {
 }  // namespace
 
 void parse_model(const Map& model, Config& config) {
-  model.allow({"loop", "output_hold", "submodels"}, "model");
+  model.allow({"loop", "output_hold", "submodels", "modes"}, "model");
   if (const auto loop = model.get("loop")) config.closed_loop = loop->choice({"open", "closed"}) == "closed";
   if (const auto hold = model.get("output_hold"))
     config.output_hold = hold->choice({"zoh", "foh"}) == "foh" ? Hold::foh : Hold::zoh;
-  const Value list = model.require("submodels");
+  if (const auto modes = model.get("modes")) {
+    if (model.get("submodels"))
+      modes->fail("give submodels (initial modes) or modes (a count to start from the data), not both");
+    config.model_modes = static_cast<int>(modes->integer(1, 64));
+    return;
+  }
+  const Value list = model.require("submodels", "or modes: N to start N modes from the data");
   const std::vector<Value> items = list.items();
   if (items.empty()) list.fail("must list at least one submodel");
   std::vector<SubmodelEntry> entries;

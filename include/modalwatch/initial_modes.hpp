@@ -1,0 +1,53 @@
+#pragma once
+// Initial modes from the data alone: the additive fit (srivc.hpp) starts from
+// the resonances of a nonparametric frequency response estimate instead of
+// configured guesses.
+//
+// The estimate is H1 = S_yu / S_uu (Welch: Hann windows, 50 % overlap) in open
+// loop. In closed loop H1 is biased by the noise fed back into u; with the
+// reference in the record the estimate is S_yr / S_ur, which the noise does
+// not reach (the fit's instruments correct what remains). The resonances are
+// the local maxima of |H| over the excited band that rise most above their
+// surroundings (in |H|, not in dB: ripples where |H| is small rank low): damping from
+// the half-power bandwidth (default_zeta when the peak is not resolved), gain
+// from the peak, b0 = -2 zeta Im H(j wn) for b0 / (p^2/wn^2 + 2 zeta/wn p + 1).
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "modalwatch/model.hpp"
+#include "modalwatch/record.hpp"
+
+namespace modalwatch {
+
+struct FrequencyResponse {
+  Eigen::VectorXd frequency_hz;
+  Eigen::VectorXcd response;  // H(j 2 pi f), with the half-sample delay of the hold removed
+  Eigen::VectorXd excitation; // power of the excitation (u in open loop, r in closed loop) per frequency
+  Eigen::VectorXd coherence;  // squared coherence of y with the excitation
+  int segments = 0;
+};
+
+// segment_length 0: the longest power of two that still gives 8 averaged segments.
+FrequencyResponse frequency_response(const Record& data, bool closed_loop, int segment_length = 0);
+
+struct PeakOptions {
+  double default_zeta = 0.02;      // when the half-power bandwidth is not resolved
+  double excited_fraction = 1e-3;  // frequencies with less excitation power than this share of the maximum are not searched
+  // A peak must rise above the higher of its two flanking minima by this many
+  // relative standard deviations of |H| (from the coherence and the number of
+  // segments), by min_prominence of its height at least, and by min_share of
+  // the largest peak's rise.
+  double noise_sigmas = 3.0;
+  double min_prominence = 0.05;
+  double min_share = 0.01;
+};
+
+// The `count` most prominent resonances of H (fewer when the data show fewer), ascending in wn.
+std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int count, const PeakOptions& options = {});
+
+// The additive model of those resonances, named mode1..modeN in ascending frequency.
+AdditiveModel initial_modes(const Record& data, int count, bool closed_loop, const PeakOptions& options = {});
+
+}  // namespace modalwatch

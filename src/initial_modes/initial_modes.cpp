@@ -1,0 +1,151 @@
+#include "modalwatch/initial_modes.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <complex>
+#include <numbers>
+#include <stdexcept>
+
+#include "modalwatch/diagnose.hpp"
+
+namespace modalwatch {
+namespace {
+
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+
+struct Peak {
+  Eigen::Index bin = 0;
+  double prominence = 0.0;  // |H| above the higher flanking minimum
+};
+
+// Frequency (Hz) where log|H| crosses `level` walking from the peak bin in
+// direction `step`, linearly interpolated; negative when |H| rises above the
+// peak or the band ends first (the half-power point is not resolved on that side).
+double crossing(const Eigen::VectorXd& logh, const Eigen::VectorXd& f, Eigen::Index peak, int step, double level,
+                Eigen::Index first, Eigen::Index last) {
+  for (Eigen::Index k = peak + step; k >= first && k <= last; k += step) {
+    if (logh(k) > logh(peak)) return -1.0;
+    if (logh(k) <= level) {
+      const Eigen::Index j = k - step;
+      const double w = (logh(j) - level) / (logh(j) - logh(k));
+      return f(j) + w * (f(k) - f(j));
+    }
+  }
+  return -1.0;
+}
+
+}  // namespace
+
+FrequencyResponse frequency_response(const Record& data, bool closed_loop, int segment_length) {
+  const Eigen::Index N = data.size();
+  if (closed_loop && !data.has_reference())
+    throw std::invalid_argument("frequency_response: closed loop needs the reference r in the record");
+  if (segment_length <= 0) {
+    segment_length = 64;
+    while (9 * static_cast<Eigen::Index>(segment_length) <= 2 * N) segment_length *= 2;
+    segment_length = std::max(64, segment_length / 2);
+  }
+  const double T = data.sample_time();
+  FrequencyResponse out;
+  if (!closed_loop) {
+    const Spectra s = welch_spectra(data.y, data.u, T, segment_length);
+    out.frequency_hz = s.frequency_hz;
+    out.response = s.cross;
+    out.excitation = s.input_psd;
+    out.coherence = s.coherence;
+    out.segments = s.segments;
+  } else {
+    const Spectra yr = welch_spectra(data.y, data.r, T, segment_length);
+    const Spectra ur = welch_spectra(data.u, data.r, T, segment_length);
+    out.frequency_hz = yr.frequency_hz;
+    out.response.resize(yr.cross.size());
+    for (Eigen::Index k = 0; k < yr.cross.size(); ++k)
+      out.response(k) = std::abs(ur.cross(k)) > 0.0 ? yr.cross(k) / ur.cross(k) : std::complex<double>(0.0);
+    out.excitation = yr.input_psd;
+    out.coherence = yr.coherence;
+    out.segments = yr.segments;
+  }
+  // The zero-order hold delays by half a sample: H_d ~ G e^{-j w T / 2}.
+  for (Eigen::Index k = 0; k < out.response.size(); ++k)
+    out.response(k) *= std::polar(1.0, 0.5 * kTwoPi * out.frequency_hz(k) * T);
+  return out;
+}
+
+std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int count, const PeakOptions& options) {
+  const Eigen::Index F = h.frequency_hz.size();
+  std::vector<ModalParameters> out;
+  if (count <= 0 || F < 4) return out;
+  // The searched band: from the first to the last excited frequency, without DC.
+  const double excited = options.excited_fraction * h.excitation.tail(F - 1).maxCoeff();
+  Eigen::Index first = -1, last = -1;
+  for (Eigen::Index k = 1; k < F; ++k)
+    if (h.excitation(k) > excited) {
+      if (first < 0) first = k;
+      last = k;
+    }
+  if (first < 0 || last - first < 2) return out;
+  Eigen::VectorXd logh(F);
+  for (Eigen::Index k = 0; k < F; ++k) logh(k) = std::log(std::max(std::abs(h.response(k)), 1e-300));
+
+  std::vector<Peak> peaks;
+  for (Eigen::Index k = first + 1; k < last; ++k) {
+    if (!(logh(k) > logh(k - 1) && logh(k) >= logh(k + 1))) continue;
+    // Topographic prominence: the lowest point on each side before the curve
+    // rises above this peak (or the band ends); the higher of the two.
+    double left = logh(k), right = logh(k);
+    for (Eigen::Index j = k - 1; j >= first && logh(j) <= logh(k); --j) left = std::min(left, logh(j));
+    for (Eigen::Index j = k + 1; j <= last && logh(j) <= logh(k); ++j) right = std::min(right, logh(j));
+    const double relative = 1.0 - std::exp(std::max(left, right) - logh(k));  // of |H| at the peak
+    // Relative standard deviation of |H1| with K averages: sqrt((1 - g) / (2 K g)), g the coherence.
+    const double g = std::clamp(h.coherence(k), 1e-6, 1.0);
+    const double noise = std::sqrt((1.0 - g) / (2.0 * std::max(1, h.segments) * g));
+    if (relative < std::max(options.min_prominence, options.noise_sigmas * noise)) continue;
+    // Ranked by the height the resonance adds to |H|: a ripple where |H| is
+    // small (near Nyquist, between modes) rises little in absolute terms.
+    peaks.push_back({k, relative * std::exp(logh(k))});
+  }
+  std::sort(peaks.begin(), peaks.end(), [](const Peak& a, const Peak& b) { return a.prominence > b.prominence; });
+  if (!peaks.empty()) {
+    const double floor = options.min_share * peaks.front().prominence;
+    peaks.erase(std::remove_if(peaks.begin(), peaks.end(), [&](const Peak& p) { return p.prominence < floor; }),
+                peaks.end());
+  }
+  if (static_cast<int>(peaks.size()) > count) peaks.resize(static_cast<std::size_t>(count));
+
+  const double df = h.frequency_hz(1) - h.frequency_hz(0);
+  for (const Peak& p : peaks) {
+    const Eigen::Index k = p.bin;
+    // Parabolic interpolation of log|H| through the three bins at the peak.
+    const double c = 0.5 * (logh(k - 1) - logh(k + 1)) / (logh(k - 1) - 2.0 * logh(k) + logh(k + 1));
+    const double f0 = h.frequency_hz(k) + std::clamp(c, -0.5, 0.5) * df;
+    const double level = logh(k) - 0.5 * std::log(2.0);  // half power
+    const double lo = crossing(logh, h.frequency_hz, k, -1, level, first, last);
+    const double hi = crossing(logh, h.frequency_hz, k, +1, level, first, last);
+    double width = -1.0;  // half-power bandwidth, Hz
+    if (lo > 0.0 && hi > 0.0)
+      width = hi - lo;
+    else if (lo > 0.0)
+      width = 2.0 * (f0 - lo);
+    else if (hi > 0.0)
+      width = 2.0 * (hi - f0);
+    ModalParameters m;
+    m.wn = kTwoPi * f0;
+    // A bandwidth under two bins is the Hann window's, not the mode's.
+    m.zeta = width > 2.0 * df ? width / (2.0 * f0) : options.default_zeta;
+    m.gain = -2.0 * m.zeta * h.response(k).imag();
+    if (m.gain == 0.0) m.gain = 2.0 * m.zeta * std::abs(h.response(k));
+    out.push_back(m);
+  }
+  std::sort(out.begin(), out.end(), [](const ModalParameters& a, const ModalParameters& b) { return a.wn < b.wn; });
+  return out;
+}
+
+AdditiveModel initial_modes(const Record& data, int count, bool closed_loop, const PeakOptions& options) {
+  const std::vector<ModalParameters> peaks = resonance_peaks(frequency_response(data, closed_loop), count, options);
+  AdditiveModel model;
+  for (std::size_t i = 0; i < peaks.size(); ++i)
+    model.submodels.push_back(make_mode("mode" + std::to_string(i + 1), peaks[i]));
+  return model;
+}
+
+}  // namespace modalwatch
