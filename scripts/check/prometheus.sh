@@ -7,7 +7,10 @@
 # x, the same beam without the drift onto axis y. Passes when Prometheus sees
 # modalwatch_mode_flag{axis="x",mode="flex",quantity="wn"} at 2 (raised) while
 # axis y, which processed samples, never flagged.
-#   scripts/check/prometheus.sh      BUILD_DIR=build, SPEED=2 (replay, times real time), TIMEOUT=180 (s)
+# PLOT=FILE.png (a path from the repository's root) then lets axis x's replay
+# finish and draws, from Prometheus's query_range, both axes' flex wn deviation
+# and flag across the fault (scripts/plot/plot_prometheus.py).
+#   scripts/check/prometheus.sh      BUILD_DIR=build, SPEED=2 (replay, times real time), TIMEOUT=180 (s), PLOT=
 # Exit 77 (skipped) without prometheus or promtool, or when modalwatchd does not
 # know the `axis:` and `daemon.metrics:` keys.
 set -euo pipefail
@@ -144,6 +147,7 @@ echo "== simulate: the fault record (axis x) and the same beam without the drift
 "$build/modalwatch" simulate --config "$out/steady.yaml" --out "$out/y.csv" --truth "$out/y-truth.csv"
 
 echo "== replay: both records at ${speed}x real time"
+replay_started=$EPOCHREALTIME
 "$build/modalwatch" replay --config "$out/x.yaml" --data "$out/x.csv" --speed "$speed" --batch 64 \
   --start-utime 0 >/dev/null &
 replay_x=$!
@@ -187,6 +191,16 @@ echo "   axis y: $processed_y samples processed, $changes_y flag changes, highes
 if [ -z "$processed_y" ] || [ "$processed_y" = 0 ] || [ "$changes_y" != 0 ] || [ "$ever_y" = 2 ]; then
   echo "axis y did not run clean" >&2
   exit 1
+fi
+
+if [ -n "${PLOT:-}" ]; then
+  echo "== plot: axis x's replay to its end, then $PLOT"
+  wait "$replay_x" || true
+  replay_x=""
+  sleep 2  # two scrapes after the replay's end
+  # The fault's span in record time, from the config's header.
+  scripts/plot/plot_prometheus.py --url "http://127.0.0.1:$port_prom" --start "$replay_started" --speed "$speed" \
+    --fault 30:32 --mode flex --quantity wn --out "$PLOT"
 fi
 
 echo "== stop"

@@ -17,7 +17,12 @@
 # another modalwatchd build (an A/B comparison; the bench stays this tree's).
 # MACHINE_SECONDS (10; 0 skips) runs `modalwatch_daemon_bench machine` first: the
 # machine's own wake-up latency and CPU preemption, the floor under the figures.
-#   scripts/measure/daemon_bench.sh    LOOPS="2000 10000" SECONDS_PER_RUN=30 BUILD_DIR=build-release JOBS=2 RT_PRIORITY=0
+# METRICS=1 turns the Prometheus endpoint on (daemon.metrics on a port of its
+# own) and scrapes it every SCRAPE_PERIOD s (1) with curl during each latency
+# run, as a Prometheus with that scrape_interval would; the scraper's own CPU
+# is not in the daemon's figure. A run with METRICS=0 against one with
+# METRICS=1 is the endpoint's cost.
+#   scripts/measure/daemon_bench.sh    LOOPS="2000 10000" SECONDS_PER_RUN=30 BUILD_DIR=build-release JOBS=2 RT_PRIORITY=0 METRICS=0
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 source scripts/lib/daemon.sh
@@ -26,9 +31,13 @@ loops="${LOOPS:-2000 10000}"
 rt="${RT_PRIORITY:-0}"
 skip="${SKIP_SECONDS:-10}"  # the warm-up (5 s), its fit and the catch-up on the input held meanwhile
 run_s="${SECONDS_PER_RUN:-30}"
+metrics="${METRICS:-0}"
+scrape_period="${SCRAPE_PERIOD:-1}"
 work="$(mktemp -d)"
-trap 'mw_kill_daemon; rm -rf "$work"' EXIT
+scraper=""
+trap '[ -z "$scraper" ] || kill "$scraper" 2>/dev/null; mw_kill_daemon; rm -rf "$work"' EXIT
 port=$((7900 + $$ % 90))
+metrics_port=$((9500 + $$ % 90))
 
 # Release, with the benchmark drivers; the same tree scripts/measure/bench.sh uses.
 mw_build "$build" "modalwatch modalwatchd modalwatch_daemon_bench" -DCMAKE_BUILD_TYPE=Release -DMODALWATCH_BENCHMARKS=ON
@@ -42,7 +51,28 @@ mw_config "$config" "$work/base.yaml" "$url"
 config_for() {  # loop rate, publish period
   local realtime=()
   if [ "$rt" -gt 0 ]; then realtime=(daemon.realtime_priority="$rt"); fi
+  if [ "$metrics" = 1 ]; then realtime+=(daemon.metrics="{listen: 127.0.0.1:$metrics_port}"); fi
   mw_config "$config" "$work/bench.yaml" "$url" daemon.loop_rate_hz="$1" daemon.publish_period="$2" "${realtime[@]}"
+}
+# GET /metrics every scrape_period s while $work/scraping exists; one line per
+# scrape (HTTP code, bytes) in $work/scrapes.
+start_scraper() {
+  [ "$metrics" = 1 ] || return 0
+  : >"$work/scrapes"
+  touch "$work/scraping"
+  while sleep "$scrape_period" && [ -e "$work/scraping" ]; do
+    curl -s -o /dev/null -w '%{http_code} %{size_download}\n' --max-time 1 \
+      "http://127.0.0.1:$metrics_port/metrics" >>"$work/scrapes" || echo "000 0" >>"$work/scrapes"
+  done &
+  scraper=$!
+}
+stop_scraper() {  # the loop ends within a scrape period
+  [ -n "$scraper" ] || return 0
+  rm -f "$work/scraping"
+  wait "$scraper" 2>/dev/null || true
+  scraper=""
+  awk '$1 == 200 { ok++; bytes += $2 } END { printf "  metrics endpoint: %d scrapes of %d, %.0f bytes each\n", ok, NR, ok ? bytes / ok : 0 }' \
+    "$work/scrapes"
 }
 bench() {
   if [ "$rt" -gt 0 ]; then chrt -f $((rt + 1)) "$build/tests/bench/modalwatch_daemon_bench" "$@"
@@ -50,7 +80,8 @@ bench() {
 }
 
 cpu_ticks() { awk '{print $14 + $15}' "/proc/$1/stat"; }
-# One line per thread: tid, name, user+system ticks (comm has no spaces here).
+# One line per thread: tid, name, user+system ticks (comm has no spaces here;
+# a tick is 1/CLK_TCK s, the resolution of the per-thread figures).
 thread_ticks() {
   for t in /proc/"$1"/task/*; do
     echo "${t##*/} $(cat "$t/comm") $(awk '{print $14 + $15}' "$t/stat")"
@@ -63,7 +94,8 @@ start_daemon() {
   daemon=$MW_DAEMON_PID
 }
 
-echo "== machine: $(nproc) cores, load average $(cut -d' ' -f1-3 /proc/loadavg); realtime priority ${rt} (0: off)"
+echo "== machine: $(nproc) cores, load average $(cut -d' ' -f1-3 /proc/loadavg); realtime priority ${rt} (0: off);" \
+  "metrics endpoint $([ "$metrics" = 1 ] && echo "on, scraped every ${scrape_period} s" || echo off)"
 # The floor under every figure below: the machine's own wake-up latency and the
 # time it takes CPUs away, measured without modalwatch (at the bench's priority).
 if [ "${MACHINE_SECONDS:-10}" != 0 ]; then bench machine --seconds "${MACHINE_SECONDS:-10}"; fi
@@ -72,15 +104,17 @@ for loop_hz in $loops; do
   echo "== 4096 Hz, one sample_t per packet, ${run_s} s, loop ${loop_hz} Hz, an estimate every 10 ms"
   config_for "$loop_hz" 0.01
   start_daemon
+  start_scraper
   c0=$(cpu_ticks "$daemon"); t0=$(date +%s.%N); thread_ticks "$daemon" > "$work/threads0"
   bench latency --config "$work/bench.yaml" --data "$work/record.csv" --rate 4096 \
     --seconds "$run_s" --skip "$skip"
   c1=$(cpu_ticks "$daemon"); t1=$(date +%s.%N); thread_ticks "$daemon" > "$work/threads1"
+  stop_scraper
   awk -v c="$((c1 - c0))" -v hz="$hz" -v a="$t0" -v b="$t1" \
     'BEGIN { printf "  daemon CPU: %.1f %% of one core (user+system over %.1f s, warm-up fit included)\n", 100 * c / hz / (b - a), b - a }'
   # Per thread (LCM's receive thread is the second "modalwatchd").
   awk -v hz="$hz" -v a="$t0" -v b="$t1" 'NR == FNR { before[$1] = $3; next }
-    { line = line sprintf(" %s %.1f,", $2, 100 * ($3 - before[$1]) / hz / (b - a)) }
+    { line = line sprintf(" %s %.2f,", $2, 100 * ($3 - before[$1]) / hz / (b - a)) }
     END { sub(/,$/, "", line); print "    per thread (%):" line }' "$work/threads0" "$work/threads1"
   echo "  load average now: $(cut -d' ' -f1-3 /proc/loadavg)"
   grep -o "warm-up over.*" "$work/daemon.log" | sed 's/^/  daemon: /' || true

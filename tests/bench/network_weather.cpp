@@ -29,8 +29,8 @@
 
 #include "modalwatch/error.hpp"
 #include "modalwatch/io/config.hpp"
-#include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/messages.hpp"
+#include "modalwatch/io/records.hpp"
 
 namespace {
 
@@ -71,7 +71,7 @@ int main(int argc, char** argv) {
     const Config config = load_config(config_path);
     RecordReadOptions options;
     options.sample_time = config.sample_time;
-    const Record rec = read_record(data, {}, options);
+    const Record rec = read_record(RecordSource(data, {}, {}, config.closed_loop), options);
     const Eigen::Index N = rec.size();
     const double T = config.sample_time;
     const double t_end = rec.t(N - 1);

@@ -21,7 +21,11 @@ std::string directory_of(const std::string& path) {
 
 AtomicFile::AtomicFile(std::string path, mode_t mode) : path_(std::move(path)), mode_(mode) {
   const std::filesystem::path target(path_);
-  tmp_ = (std::filesystem::path(directory_of(path_)) / ("." + target.filename().string() + ".XXXXXX")).string();
+  // Built by appending: GCC 12's -O3 warns (-Wstringop-overflow) on "." + std::string.
+  std::string name = ".";
+  name += target.filename().string();
+  name += ".XXXXXX";
+  tmp_ = (std::filesystem::path(directory_of(path_)) / name).string();
   fd_ = ::mkstemp(tmp_.data());
   if (fd_ < 0) {
     const int err = errno;

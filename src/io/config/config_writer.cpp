@@ -41,8 +41,14 @@ std::string flow_list(const Range& values) {
 
 std::string points(const Trajectory& traj) {
   std::string out = "[";
-  for (const auto& [t, v] : traj.points)
-    (out += out.size() > 1 ? ", " : "") += "[" + format_number(t) + ", " + format_number(v) + "]";
+  // Appended piece by piece: GCC 12's -O3 warns (-Wrestrict) on "[" + std::string.
+  for (const auto& [t, v] : traj.points) {
+    out += out.size() > 1 ? ", [" : "[";
+    out += format_number(t);
+    out += ", ";
+    out += format_number(v);
+    out += "]";
+  }
   return out + "]";
 }
 
