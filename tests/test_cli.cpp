@@ -229,6 +229,47 @@ TEST_F(Cli, RecordWithMissingColumnIsRejectedNamingIt) {
   expect_rejected(*this, "t,r,y\n0,0,0\n0.05,0,0\n", "'u'", "missing");
 }
 
+// A measured record names its columns its own way: fit and diagnose read the
+// ones --t-column and --y-column name, and a missing one is named with the
+// option that picks another.
+TEST_F(Cli, FitAndDiagnoseReadTheNamedColumnsAndNameTheOptionForAMissingOne) {
+  ASSERT_EQ(run("simulate --config " + config("paper-sim.yaml") + " --out " + path("d.csv") + " --duration 100").code,
+            0);
+  const Record r = read_record(path("d.csv"));
+  Eigen::MatrixXd table(r.size(), 5);
+  table << r.t, r.r, r.u, r.u, r.y;  // y1: a decoy, y2: the output
+  write_table(path("run.csv"), {"time", "r", "u", "y1", "y2"}, table);
+
+  const Outcome plain = run("fit --config " + config("paper-sim.yaml") + " --data " + path("d.csv") + " --to 90");
+  ASSERT_EQ(plain.code, 0) << plain.output;
+  const Outcome named = run("fit --config " + config("paper-sim.yaml") + " --data " + path("run.csv") +
+                            " --to 90 --t-column time --y-column y2");
+  ASSERT_EQ(named.code, 0) << named.output;
+  EXPECT_EQ(named.output, plain.output);  // the same samples, the same fit
+
+  const Outcome no_y = run("fit --config " + config("paper-sim.yaml") + " --data " + path("run.csv") +
+                           " --t-column time");
+  EXPECT_EQ(no_y.code, 2) << no_y.output;
+  for (const char* s : {"run.csv", "missing column 'y'", "time, r, u, y1, y2", "pick one with --y-column"})
+    EXPECT_TRUE(contains(no_y.output, s)) << s << "\n" << no_y.output;
+  const Outcome no_t = run("diagnose --config " + config("paper-sim.yaml") + " --data " + path("run.csv") +
+                           " --y-column y2 --report " + path("report"));
+  EXPECT_EQ(no_t.code, 2) << no_t.output;
+  for (const char* s : {"run.csv", "missing column 't'", "pick one with --t-column"})
+    EXPECT_TRUE(contains(no_t.output, s)) << s << "\n" << no_t.output;
+  const Outcome no_y_diagnose = run("diagnose --config " + config("paper-sim.yaml") + " --data " + path("d.csv") +
+                                    " --validate " + path("run.csv") + " --report " + path("report"));
+  EXPECT_EQ(no_y_diagnose.code, 2) << no_y_diagnose.output;
+  EXPECT_TRUE(contains(no_y_diagnose.output, "run.csv: missing column 't'")) << no_y_diagnose.output;
+  EXPECT_FALSE(fs::exists(path("report/report.md")));
+  // A column no option picks keeps the reader's message.
+  write_table(path("no_u.csv"), {"t", "r", "y"}, table.leftCols(3));
+  const Outcome no_u = run("fit --config " + config("paper-sim.yaml") + " --data " + path("no_u.csv"));
+  EXPECT_EQ(no_u.code, 2) << no_u.output;
+  EXPECT_TRUE(contains(no_u.output, "missing column 'u'")) << no_u.output;
+  EXPECT_FALSE(contains(no_u.output, "pick one")) << no_u.output;
+}
+
 TEST_F(Cli, RecordWithNonIncreasingTimeIsRejectedNamingRow) {
   expect_rejected(*this, "t,r,u,y\n0,0,0,0\n0.05,0,0,0\n0.05,0,0,0\n", "row 4", "'t'");
 }

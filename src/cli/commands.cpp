@@ -112,7 +112,7 @@ void set_baselines(Config& config, const AdditiveModel& fitted, const std::vecto
 int fit(const FitArgs& args) {
   return guarded("fit", [&] {
     const Config config = load_config(args.config);
-    const Record full = read_record(RecordSource(args.data, {}, args.channel, config.closed_loop));
+    const Record full = read_record_with_columns(RecordSource(args.data, record_columns(args.columns), args.channel, config.closed_loop));
     const auto [data, settle] = window(full, args);
     const Eigen::Index used = data.size() - settle;
     // Modes from the data: --modes, or model.modes without submodels.

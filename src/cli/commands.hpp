@@ -5,6 +5,8 @@
 #include <optional>
 #include <string>
 
+#include "record_columns.hpp"
+
 namespace modalwatch::cli {
 
 struct SimulateArgs {
@@ -24,6 +26,7 @@ struct FitArgs {
   std::optional<double> from, to;  // time window of the record to use, s
   int max_iterations = 200;
   std::optional<int> modes;        // start this many modes from the data (else model.modes or the submodels)
+  ColumnArgs columns;
 };
 
 struct TrackArgs {
@@ -58,7 +61,7 @@ struct DiagnoseArgs {
   std::string report;                          // output directory
   std::string effects;                         // comma-separated library (default: all)
   std::string plot_script;                     // scripts/plot/plot_diagnose.py, run when given
-  std::string t_column = "t", y_column = "y";  // record columns (e.g. n, y2)
+  ColumnArgs columns;
   std::string input_hold = "zoh";              // zoh, or foh: held value (u_k + u_k+1)/2 (open loop)
   int substeps = 1;                            // integration substeps per sample
   int max_steps = 5;

@@ -62,15 +62,13 @@ int diagnose(const DiagnoseArgs& args) {
   return guarded("diagnose", [&] {
     const Config config = load_config(args.config);
     if (!args.validate.empty() && args.split) throw InputError("--split", "give --validate or --split, not both");
-    RecordColumns columns;
-    columns.t = args.t_column;
-    columns.y = args.y_column;
-    const Record full = read_record(RecordSource(args.data, columns, args.channel, config.closed_loop));
+    const RecordColumns columns = record_columns(args.columns);
+    const Record full = read_record_with_columns(RecordSource(args.data, columns, args.channel, config.closed_loop));
     Record est, val;
     Eigen::Index lead_in = 0;
     if (!args.validate.empty()) {
       est = samples(full, args.estimate_samples, "--estimate-samples", args.data);
-      val = samples(read_record(RecordSource(args.validate, columns, args.channel, config.closed_loop)),
+      val = samples(read_record_with_columns(RecordSource(args.validate, columns, args.channel, config.closed_loop)),
                     args.validate_samples, "--validate-samples", args.validate);
     } else if (!args.estimate_samples.empty() || !args.validate_samples.empty()) {
       if (args.estimate_samples.empty() || args.validate_samples.empty())

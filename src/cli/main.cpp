@@ -10,6 +10,17 @@
 #include "commands.hpp"
 #include "modalwatch_version.hpp"
 
+namespace {
+
+// The record columns of the offline commands (CSV records; an LCM log has fixed fields).
+void add_column_options(CLI::App* command, modalwatch::cli::ColumnArgs& columns) {
+  command->add_option("--t-column", columns.t, "time column of the record (e.g. n: sample index)")
+      ->capture_default_str();
+  command->add_option("--y-column", columns.y, "output column of the record (e.g. y2)")->capture_default_str();
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
   using namespace modalwatch::cli;
   CLI::App app{"modalwatch: identification of continuous-time modal models (additive RSRIVC)"};
@@ -41,6 +52,7 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   fit_cmd->add_option("--modes", fit_args.modes, "start this many modes from the data (overrides model:)")
       ->check(CLI::Range(1, 64));
+  add_column_options(fit_cmd, fit_args.columns);
 
   TrackArgs track_args;
   bool no_progress = false;
@@ -80,8 +92,7 @@ int main(int argc, char** argv) {
   diagnose_cmd->add_option("--report,-r", diag.report, "directory for report.md, summary.json, model.yaml")->required();
   diagnose_cmd->add_option("--effects", diag.effects, "comma-separated candidate effects (default: all)");
   diagnose_cmd->add_option("--plot-script", diag.plot_script, "run this scripts/plot/plot_diagnose.py on the report");
-  diagnose_cmd->add_option("--t-column", diag.t_column, "time column of the records (e.g. n: sample index)");
-  diagnose_cmd->add_option("--y-column", diag.y_column, "output column of the records (e.g. y2)");
+  add_column_options(diagnose_cmd, diag.columns);
   diagnose_cmd->add_option("--input-hold", diag.input_hold, "zoh (held input) or foh (band-limited input, open loop)")
       ->check(CLI::IsMember({"zoh", "foh"}));
   diagnose_cmd->add_option("--substeps", diag.substeps, "integration substeps per sample (nonlinear effects)")

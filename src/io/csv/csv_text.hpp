@@ -218,7 +218,8 @@ inline Table parse_text(std::string_view text, const std::string& path, bool all
 
 inline int require_column(const std::string& path, const std::vector<std::string>& columns, const std::string& name) {
   const auto it = std::find(columns.begin(), columns.end(), name);
-  if (it == columns.end()) throw InputError(path, "missing column '" + name + "' (available: " + join(columns) + ")");
+  if (it == columns.end())
+    throw MissingColumnError(path, name, columns, "missing column '" + name + "' (available: " + join(columns) + ")");
   return static_cast<int>(it - columns.begin());
 }
 

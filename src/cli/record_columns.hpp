@@ -1,0 +1,39 @@
+#pragma once
+// The CSV columns the offline commands (fit, diagnose) read as t and y, chosen
+// with --t-column and --y-column, and the reader that names those options when
+// a record lacks the column.
+#include <string>
+
+#include "modalwatch/error.hpp"
+#include "modalwatch/io/csv.hpp"
+#include "modalwatch/io/records.hpp"
+
+namespace modalwatch::cli {
+
+struct ColumnArgs {
+  std::string t = "t", y = "y";  // e.g. n (sample index), y2
+};
+
+inline RecordColumns record_columns(const ColumnArgs& args) {
+  RecordColumns columns;
+  columns.t = args.t;
+  columns.y = args.y;
+  return columns;
+}
+
+inline Record read_record_with_columns(const RecordSource& source) {
+  try {
+    return read_record(source);
+  } catch (const MissingColumnError& e) {
+    const char* option = e.column() == source.columns.t   ? "--t-column"
+                         : e.column() == source.columns.y ? "--y-column"
+                                                          : nullptr;
+    if (!option) throw;
+    std::string message = e.what();
+    if (!e.location().empty() && message.starts_with(e.location() + ": "))
+      message.erase(0, e.location().size() + 2);
+    throw InputError(e.location(), message + "; pick one with " + option);
+  }
+}
+
+}  // namespace modalwatch::cli
