@@ -404,6 +404,58 @@ simulation:
   EXPECT_NE(out.output.find("--effects"), std::string::npos) << out.output;
 }
 
+std::string read_text(const std::string& file) {
+  std::ifstream in(file);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// The number after `key` on the line of `text` that contains `line`.
+double number_after(const std::string& text, const std::string& line, const std::string& key) {
+  const auto at = text.find(line);
+  if (at == std::string::npos) return std::nan("");
+  const auto k = text.find(key, at);
+  if (k == std::string::npos || k > text.find('\n', at)) return std::nan("");
+  return std::stod(text.substr(k + key.size()));
+}
+
+// A long run is not silent: one line per fit on stderr (the effect tried, its
+// validation RMS, the time since the start); stdout keeps the report's table.
+TEST_F(DiagnoseCli, PrintsEachFitOnStderr) {
+  const std::string config = write("plant.yaml", R"(sample_rate_hz: 100
+model:
+  submodels:
+    - {name: m1, kind: mode, wn: 5.3, zeta: 0.08, gain: 0.8}
+    - {name: m2, kind: mode, wn: 19, zeta: 0.05, gain: 0.6}
+plant:
+  noise_variance: 1.0e-6
+  output_offset: 0.2
+  modes:
+    - {name: m1, kind: mode, wn: 5, zeta: 0.05, gain: 1}
+    - {name: m2, kind: mode, wn: 20, zeta: 0.03, gain: 0.5}
+simulation:
+  duration: 40
+  input: {type: multisine, f_min_hz: 0.1, f_max_hz: 10, period_s: 10, rms: 1}
+)");
+  ASSERT_EQ(test_support::run_cli("simulate --config " + config + " --out " + path("run.csv")).code, 0);
+  const std::string cmd = std::string(MODALWATCH_CLI) + " diagnose --config " + config + " --data " + path("run.csv") +
+                          " --effects mode,offset,cubic --report " + path("report") + " >" + path("stdout.txt") +
+                          " 2>" + path("stderr.txt");
+  ASSERT_EQ(std::system(cmd.c_str()), 0);
+  const std::string err = read_text(path("stderr.txt")), out = read_text(path("stdout.txt"));
+  // The configured model misses the 0.2 offset: its RMS is the offset's.
+  EXPECT_NEAR(number_after(err, "step 0: configured model", "validation RMS "), 0.2, 0.01) << err;
+  for (const char* effect : {"mode", "offset", "cubic"})
+    EXPECT_NE(err.find(std::string("step 1/5: tried ") + effect + ": validation RMS "), std::string::npos)
+        << effect << "\n" << err;
+  // The offset takes the error down to the noise (std 1e-3).
+  EXPECT_NEAR(number_after(err, "tried offset", "validation RMS "), 1e-3, 2e-4) << err;
+  const double elapsed = number_after(err, "tried cubic", "(");
+  EXPECT_GE(elapsed, 0.0) << err;
+  EXPECT_LT(elapsed, 60.0) << err;
+  EXPECT_EQ(out.find("tried"), std::string::npos) << out;
+  EXPECT_NE(out.find("stopped:"), std::string::npos) << out;
+}
+
 // The report's JSON: strings escaped, numbers finite or null.
 TEST(DiagnoseReportJson, EscapesStringsAndWritesNonFiniteAsNull) {
   using cli::json_string;

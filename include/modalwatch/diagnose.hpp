@@ -10,6 +10,7 @@
 // structure `simulate` makes records with. Only the modes and rigid bodies are
 // carried by the recursive estimator (`track`) and the daemon; the effects are
 // fitted by `diagnose` alone.
+#include <functional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -103,6 +104,16 @@ struct ResidualAnalysis {
 };
 ResidualAnalysis analyse_residual(const Eigen::VectorXd& e, const Eigen::VectorXd& u, double T, int max_lag);
 
+// One fit of a run, for a caller that shows progress: the configured structure
+// (step 0, effect "none") or a candidate tried at step >= 1.
+struct DiagnoseProgress {
+  int step = 0;
+  std::string effect;
+  double validation_rms = 0.0;
+  bool valid = true;  // false when the fit failed (note says why)
+  std::string note;
+};
+
 struct DiagnoseOptions {
   int max_steps = 5;              // effects added at most
   double min_improvement = 0.10;  // an effect is added when it lowers the validation RMS by this fraction
@@ -115,6 +126,7 @@ struct DiagnoseOptions {
   Eigen::Index validation_lead_in = 0;
   Hold output_hold = Hold::zoh;  // SRIVC prefilters
   std::vector<EffectKind> library = all_effects();
+  std::function<void(const DiagnoseProgress&)> progress;  // called after each fit when set
 };
 
 using EffectParams = std::vector<std::pair<std::string, double>>;

@@ -1,6 +1,8 @@
 // `modalwatch diagnose`: the residual analysis and model augmentation of
 // include/modalwatch/diagnose.hpp on a record; its report is diagnose_report.hpp's.
+#include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <sstream>
 
 #include "commands.hpp"
@@ -99,6 +101,20 @@ int diagnose(const DiagnoseArgs& args) {
     options.max_delay = args.max_delay;
     options.output_hold = config.output_hold;
     options.library = parse_effects(args.effects);
+    // A long run is not silent: a line on stderr per fit.
+    const auto start = std::chrono::steady_clock::now();
+    options.progress = [&](const DiagnoseProgress& p) {
+      const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      if (p.step == 0)
+        std::fprintf(stderr, "modalwatch diagnose: step 0: configured model: validation RMS %.4g (%.1f s)\n",
+                     p.validation_rms, elapsed);
+      else if (p.valid)
+        std::fprintf(stderr, "modalwatch diagnose: step %d/%d: tried %s: validation RMS %.4g (%.1f s)\n", p.step,
+                     args.max_steps, p.effect.c_str(), p.validation_rms, elapsed);
+      else
+        std::fprintf(stderr, "modalwatch diagnose: step %d/%d: tried %s: not fitted (%s) (%.1f s)\n", p.step,
+                     args.max_steps, p.effect.c_str(), p.note.c_str(), elapsed);
+    };
     LoopSpec loop;
     loop.closed = config.closed_loop;
     loop.controller = config.controller;

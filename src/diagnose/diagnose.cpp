@@ -21,6 +21,7 @@
 #include <limits>
 #include <numbers>
 #include <stdexcept>
+#include <utility>
 
 #include <Eigen/Cholesky>
 #include <Eigen/QR>
@@ -537,6 +538,7 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
   if (!std::isfinite(current.cost)) throw std::runtime_error("diagnose: the configured model cannot be fitted");
   result.steps.push_back(make_step("none", {}, current.model, current.cost, est, val, options));
   result.steps.back().physical = findings;
+  if (options.progress) options.progress({0, "none", result.steps.back().validation_rms, true, {}});
 
   auto enabled = [&](EffectKind k) {
     return std::find(options.library.begin(), options.library.end(), k) != options.library.end();
@@ -553,14 +555,18 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
     }
     const Eigen::VectorXd y0 = output(now.model, est);
     std::vector<Candidate> candidates;
+    auto tried = [&](Candidate c) {
+      if (options.progress) options.progress({step + 1, effect_name(c.kind), c.validation_rms, c.valid, c.note});
+      candidates.push_back(std::move(c));
+    };
     if (enabled(EffectKind::mode) && added_modes(now.model) < options.max_modes_added)
-      candidates.push_back(candidate_mode(now.model, y0, ctx));
-    if (enabled(EffectKind::rigid_body)) candidates.push_back(candidate_rigid_body(now.model, y0, ctx));
-    if (enabled(EffectKind::offset)) candidates.push_back(candidate_offset(now.model, y0, ctx));
-    if (enabled(EffectKind::drift)) candidates.push_back(candidate_drift(now.model, y0, ctx));
-    if (enabled(EffectKind::delay)) candidates.push_back(candidate_delay(now.model, y0, ctx));
-    if (enabled(EffectKind::coulomb)) candidates.push_back(candidate_coulomb(now.model, y0, ctx));
-    if (enabled(EffectKind::cubic)) candidates.push_back(candidate_cubic(now.model, y0, ctx));
+      tried(candidate_mode(now.model, y0, ctx));
+    if (enabled(EffectKind::rigid_body)) tried(candidate_rigid_body(now.model, y0, ctx));
+    if (enabled(EffectKind::offset)) tried(candidate_offset(now.model, y0, ctx));
+    if (enabled(EffectKind::drift)) tried(candidate_drift(now.model, y0, ctx));
+    if (enabled(EffectKind::delay)) tried(candidate_delay(now.model, y0, ctx));
+    if (enabled(EffectKind::coulomb)) tried(candidate_coulomb(now.model, y0, ctx));
+    if (enabled(EffectKind::cubic)) tried(candidate_cubic(now.model, y0, ctx));
     std::stable_sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
       if (a.valid != b.valid) return a.valid;
       return a.validation_rms < b.validation_rms;
