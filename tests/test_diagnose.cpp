@@ -208,6 +208,94 @@ INSTANTIATE_TEST_SUITE_P(Synthetic, DiagnoseNoEffect, ::testing::Values(false, t
                            return std::string(i.param ? "closed" : "open");
                          });
 
+// ------------------------------------------------------------ stop rules
+
+// The stop reason is the rule that ended the run, each provoked on a small record.
+DiagnoseResult diagnose_with(const PlantSpec& plant, const DiagnoseOptions& options) {
+  return diagnose(make_record(plant, false, 11, 30.0), make_record(plant, false, 12, 15.0), configured_model(),
+                  LoopSpec{}, options);
+}
+
+bool mentions(const std::string& text, const std::string& what) { return text.find(what) != std::string::npos; }
+
+TEST(DiagnoseStop, TheBestCandidateImprovesLessThanAsked) {
+  DiagnoseOptions options;
+  options.library = {EffectKind::offset};
+  options.min_improvement = 0.999;
+  const DiagnoseResult r = diagnose_with(plant_with("offset", false), options);
+  ASSERT_EQ(r.steps.size(), 1u) << r.stop_reason;
+  EXPECT_EQ(r.stop, DiagnoseStop::min_improvement) << r.stop_reason;
+  // The offset was found (the error drops from the 0.2 offset to the 1e-3 noise) but not added.
+  ASSERT_EQ(r.steps[0].ranking.size(), 1u);
+  EXPECT_NEAR(r.steps[0].ranking[0].validation_rms, 1e-3, 2e-4);
+  EXPECT_NEAR(r.steps[0].validation_rms, 0.2, 0.01);
+  EXPECT_TRUE(mentions(r.stop_reason, "best candidate (offset) lowers the validation RMS by 99.5 %")) << r.stop_reason;
+  EXPECT_TRUE(mentions(r.stop_reason, "less than the 99.9 % asked")) << r.stop_reason;
+}
+
+// A plant with an output offset and a third mode (60 rad/s) the model lacks.
+PlantSpec offset_and_mode() {
+  PlantSpec p = plant_with("mode", false);
+  p.effects.output_offset = 0.2;
+  return p;
+}
+
+TEST(DiagnoseStop, MaxStepsReachedWhileTheResidualStillFails) {
+  DiagnoseOptions options;
+  options.library = {EffectKind::mode, EffectKind::offset};
+  options.max_steps = 1;
+  const DiagnoseResult r = diagnose_with(offset_and_mode(), options);
+  ASSERT_EQ(r.steps.size(), 2u) << r.stop_reason;
+  EXPECT_EQ(r.stop, DiagnoseStop::max_steps) << r.stop_reason;
+  EXPECT_FALSE(r.steps[1].residual.pass());
+  EXPECT_EQ(r.stop_reason, "1 effects added, the most allowed");
+}
+
+TEST(DiagnoseStop, ModeCapReached) {
+  DiagnoseOptions options;
+  options.library = {EffectKind::mode, EffectKind::offset};
+  options.max_modes_added = 0;
+  const DiagnoseResult r = diagnose_with(offset_and_mode(), options);
+  // The missing mode is never tried, and the offset alone explains little of the error.
+  ASSERT_EQ(r.steps.size(), 1u) << r.stop_reason;
+  EXPECT_EQ(r.stop, DiagnoseStop::mode_cap) << r.stop_reason;
+  ASSERT_EQ(r.steps[0].ranking.size(), 1u);
+  EXPECT_EQ(r.steps[0].ranking[0].kind, EffectKind::offset);
+  EXPECT_TRUE(mentions(r.stop_reason, "0 modes added, the most allowed; of the other effects, best candidate (offset)"))
+      << r.stop_reason;
+
+  // Two modes missing, one allowed: the first is added, the second never tried.
+  PlantSpec two = plant_with("mode", false);
+  PlantMode m;
+  m.modal = {40.0, 0.02, 0.3};
+  m.submodel = make_mode("m4", m.modal);
+  two.modes.push_back(m);
+  options.library = {EffectKind::mode};
+  options.max_modes_added = 1;
+  const DiagnoseResult one = diagnose_with(two, options);
+  ASSERT_EQ(one.steps.size(), 2u) << one.stop_reason;
+  EXPECT_EQ(one.steps[1].effect, "mode");
+  const double hz = param(one.steps[1], "hz");
+  EXPECT_TRUE(std::abs(hz - 60.0 / (2 * std::numbers::pi)) < 0.02 * hz ||
+              std::abs(hz - 40.0 / (2 * std::numbers::pi)) < 0.02 * hz)
+      << hz;
+  EXPECT_FALSE(one.steps[1].residual.pass());
+  EXPECT_TRUE(one.steps[1].ranking.empty());
+  EXPECT_EQ(one.stop, DiagnoseStop::mode_cap) << one.stop_reason;
+  EXPECT_EQ(one.stop_reason, "1 modes added, the most allowed, and no other effect to try");
+}
+
+TEST(DiagnoseStop, NoCandidateCouldBeFittedNamesEachAndWhy) {
+  DiagnoseOptions options;
+  options.library = {EffectKind::drift};
+  const DiagnoseResult r = diagnose_with(plant_with("offset", false), options);
+  // A drift stands in for the offset once; the second drift is refused.
+  ASSERT_EQ(r.steps.size(), 2u) << r.stop_reason;
+  EXPECT_EQ(r.steps[1].effect, "drift");
+  EXPECT_EQ(r.stop, DiagnoseStop::not_fitted) << r.stop_reason;
+  EXPECT_EQ(r.stop_reason, "no candidate could be fitted: drift (already in the model)");
+}
+
 // ------------------------------------------------------------ one effects model
 
 // The augmented model with the true modes and effects, run on a noise-free
@@ -362,10 +450,8 @@ plant:
 
 class DiagnoseCli : public test_support::ScratchDir {};
 
-// simulate -> diagnose through the real binary: the record carries an output
-// offset the config does not declare; summary.json names it.
-TEST_F(DiagnoseCli, FindsTheOffsetAndWritesTheReport) {
-  const std::string config = write("plant.yaml", R"(sample_rate_hz: 100
+// A 2-mode plant with an output offset its config's model does not declare.
+constexpr const char* kOffsetPlant = R"(sample_rate_hz: 100
 model:
   submodels:
     - {name: m1, kind: mode, wn: 5.3, zeta: 0.08, gain: 0.8}
@@ -379,7 +465,12 @@ plant:
 simulation:
   duration: 40
   input: {type: multisine, f_min_hz: 0.1, f_max_hz: 10, period_s: 10, rms: 1}
-)");
+)";
+
+// simulate -> diagnose through the real binary: the record carries an output
+// offset the config does not declare; summary.json names it.
+TEST_F(DiagnoseCli, FindsTheOffsetAndWritesTheReport) {
+  const std::string config = write("plant.yaml", kOffsetPlant);
   auto out = test_support::run_cli("simulate --config " + config + " --out " + path("run.csv"));
   ASSERT_EQ(out.code, 0) << out.output;
   out = test_support::run_cli("diagnose --config " + config + " --data " + path("run.csv") +
@@ -421,21 +512,7 @@ double number_after(const std::string& text, const std::string& line, const std:
 // A long run is not silent: one line per fit on stderr (the effect tried, its
 // validation RMS, the time since the start); stdout keeps the report's table.
 TEST_F(DiagnoseCli, PrintsEachFitOnStderr) {
-  const std::string config = write("plant.yaml", R"(sample_rate_hz: 100
-model:
-  submodels:
-    - {name: m1, kind: mode, wn: 5.3, zeta: 0.08, gain: 0.8}
-    - {name: m2, kind: mode, wn: 19, zeta: 0.05, gain: 0.6}
-plant:
-  noise_variance: 1.0e-6
-  output_offset: 0.2
-  modes:
-    - {name: m1, kind: mode, wn: 5, zeta: 0.05, gain: 1}
-    - {name: m2, kind: mode, wn: 20, zeta: 0.03, gain: 0.5}
-simulation:
-  duration: 40
-  input: {type: multisine, f_min_hz: 0.1, f_max_hz: 10, period_s: 10, rms: 1}
-)");
+  const std::string config = write("plant.yaml", kOffsetPlant);
   ASSERT_EQ(test_support::run_cli("simulate --config " + config + " --out " + path("run.csv")).code, 0);
   const std::string cmd = std::string(MODALWATCH_CLI) + " diagnose --config " + config + " --data " + path("run.csv") +
                           " --effects mode,offset,cubic --report " + path("report") + " >" + path("stdout.txt") +
@@ -454,6 +531,29 @@ simulation:
   EXPECT_LT(elapsed, 60.0) << err;
   EXPECT_EQ(out.find("tried"), std::string::npos) << out;
   EXPECT_NE(out.find("stopped:"), std::string::npos) << out;
+}
+
+// The report names the option whose rule stopped the run.
+TEST_F(DiagnoseCli, StopReasonNamesTheOption) {
+  const std::string config = write("plant.yaml", kOffsetPlant);
+  ASSERT_EQ(test_support::run_cli("simulate --config " + config + " --out " + path("run.csv")).code, 0);
+  const std::string data = " --config " + config + " --data " + path("run.csv");
+  auto out = test_support::run_cli("diagnose" + data + " --max-steps 0 --report " + path("a"));
+  ASSERT_EQ(out.code, 0) << out.output;
+  EXPECT_NE(out.output.find("stopped: 0 effects added, the most allowed (--max-steps)"), std::string::npos)
+      << out.output;
+  EXPECT_NE(read_text(path("a/summary.json")).find("\"stop\": \"max_steps\""), std::string::npos);
+  EXPECT_NE(read_text(path("a/report.md")).find("Stopped: 0 effects added, the most allowed (--max-steps)."),
+            std::string::npos);
+  out = test_support::run_cli("diagnose" + data + " --effects offset --min-improvement 0.999 --report " + path("b"));
+  ASSERT_EQ(out.code, 0) << out.output;
+  EXPECT_NE(out.output.find("less than the 99.9 % asked (--min-improvement)"), std::string::npos) << out.output;
+  out = test_support::run_cli("diagnose" + data + " --effects mode --max-added-modes 0 --report " + path("c"));
+  ASSERT_EQ(out.code, 0) << out.output;
+  EXPECT_NE(out.output.find("stopped: 0 modes added, the most allowed, and no other effect to try (--max-added-modes)"),
+            std::string::npos)
+      << out.output;
+  EXPECT_NE(read_text(path("c/summary.json")).find("\"stop\": \"mode_cap\""), std::string::npos);
 }
 
 // The report's JSON: strings escaped, numbers finite or null.

@@ -120,7 +120,7 @@ struct DiagnoseOptions {
   int max_delay = 10;             // samples
   int max_lag = 25;               // residual correlation lags
   int oe_iterations = 40;         // Levenberg-Marquardt iterations of the output-error refinement
-  int max_modes_added = 4;
+  int max_modes_added = 4;       // modes added at most (the mode candidate is not tried past it)
   // Samples at the start of the validation record that only set the model's
   // state (the estimation part before a split): simulated, not scored.
   Eigen::Index validation_lead_in = 0;
@@ -159,9 +159,22 @@ struct DiagnoseStep {
   std::vector<ModeFinding> physical;
 };
 
+// The rule that ended the augmentation.
+enum class DiagnoseStop {
+  residual_passes,  // whiteness and independence pass: nothing left to explain
+  diverges,         // the model's simulation is not finite on the validation part
+  max_steps,        // options.max_steps effects added
+  min_improvement,  // the best candidate lowers the validation RMS by less than options.min_improvement
+  bic,              // the best candidate does not lower the BIC
+  mode_cap,         // options.max_modes_added modes added, and no other effect qualifies
+  not_fitted,       // no candidate could be fitted (stop_reason names each and why)
+};
+const char* stop_name(DiagnoseStop stop);
+
 struct DiagnoseResult {
   std::vector<DiagnoseStep> steps;  // steps[0]: the configured structure
-  std::string stop_reason;
+  DiagnoseStop stop = DiagnoseStop::max_steps;
+  std::string stop_reason;  // the rule and the numbers that decided it
 };
 
 // Throws std::invalid_argument for records too short or a closed loop without r.

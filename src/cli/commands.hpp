@@ -65,6 +65,7 @@ struct DiagnoseArgs {
   std::string input_hold = "zoh";              // zoh, or foh: held value (u_k + u_k+1)/2 (open loop)
   int substeps = 1;                            // integration substeps per sample
   int max_steps = 5;
+  int max_modes_added = 4;  // the mode candidate is not tried past it
   double min_improvement = 0.10;
   int max_delay = 10;
   std::optional<int> modes;  // start this many modes from the data (else model.modes or the submodels)

@@ -58,6 +58,20 @@ std::vector<EffectKind> parse_effects(const std::string& list) {
   return out;
 }
 
+// The option that sets the rule which stopped the augmentation.
+const char* stop_option(DiagnoseStop stop) {
+  switch (stop) {
+    case DiagnoseStop::max_steps:
+      return " (--max-steps)";
+    case DiagnoseStop::min_improvement:
+      return " (--min-improvement)";
+    case DiagnoseStop::mode_cap:
+      return " (--max-added-modes)";
+    default:
+      return "";
+  }
+}
+
 }  // namespace
 
 int diagnose(const DiagnoseArgs& args) {
@@ -96,6 +110,7 @@ int diagnose(const DiagnoseArgs& args) {
     }
     DiagnoseOptions options;
     options.max_steps = args.max_steps;
+    options.max_modes_added = args.max_modes_added;
     options.validation_lead_in = lead_in;
     options.min_improvement = args.min_improvement;
     options.max_delay = args.max_delay;
@@ -124,7 +139,8 @@ int diagnose(const DiagnoseArgs& args) {
     // Modes from the data: --modes, or model.modes without submodels.
     const std::optional<int> modes = args.modes ? args.modes : config.model_modes;
     const AdditiveModel initial = modes ? modes_from_data(est, *modes, config.closed_loop, args.data) : config.model;
-    const DiagnoseResult r = diagnose(est, val, initial, loop, options);
+    DiagnoseResult r = diagnose(est, val, initial, loop, options);
+    r.stop_reason += stop_option(r.stop);
 
     write_diagnose_report({args, config, r, val, lead_in, est.size()});
     for (const auto& step : r.steps) print_physical_findings(step.physical);

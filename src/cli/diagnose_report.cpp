@@ -303,6 +303,7 @@ std::string diagnose_summary_json(const DiagnoseResult& result) {
   j.begin_object().key("steps").begin_array(JsonWriter::Layout::lines);
   for (const DiagnoseStep& s : result.steps) write_step(j, s);
   j.end_array();
+  j.key("stop").value(stop_name(result.stop));
   j.key("stop_reason").value(result.stop_reason);
   return j.end_object().finish();
 }

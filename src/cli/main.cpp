@@ -98,6 +98,9 @@ int main(int argc, char** argv) {
   diagnose_cmd->add_option("--substeps", diag.substeps, "integration substeps per sample (nonlinear effects)")
       ->check(CLI::Range(1, 64));
   diagnose_cmd->add_option("--max-steps", diag.max_steps, "effects added at most")->check(CLI::NonNegativeNumber);
+  diagnose_cmd->add_option("--max-added-modes", diag.max_modes_added, "modes added at most")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   diagnose_cmd->add_option("--min-improvement", diag.min_improvement, "relative drop of the validation RMS to add")
       ->check(CLI::Range(0.0, 1.0));
   diagnose_cmd->add_option("--max-delay", diag.max_delay, "largest input delay tried [samples]")

@@ -18,9 +18,11 @@
 // validation RMS (by DiagnoseOptions::min_improvement) and the BIC.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <numbers>
 #include <stdexcept>
+#include <string>
 #include <utility>
 
 #include <Eigen/Cholesky>
@@ -488,6 +490,13 @@ Candidate candidate_delay(const AugmentedModel& current, const Eigen::VectorXd& 
   return c;
 }
 
+// 0.1 -> "10 %", 0.025 -> "2.5 %".
+std::string percent(double fraction) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3g %%", 100.0 * fraction);
+  return text;
+}
+
 int added_modes(const AugmentedModel& m) {
   int n = 0;
   for (const auto& s : m.linear.submodels) n += s.name.rfind("added", 0) == 0 ? 1 : 0;
@@ -514,6 +523,26 @@ DiagnoseStep make_step(const std::string& effect, const EffectParams& params, co
 }
 
 }  // namespace
+
+const char* stop_name(DiagnoseStop stop) {
+  switch (stop) {
+    case DiagnoseStop::residual_passes:
+      return "residual_passes";
+    case DiagnoseStop::diverges:
+      return "diverges";
+    case DiagnoseStop::max_steps:
+      return "max_steps";
+    case DiagnoseStop::min_improvement:
+      return "min_improvement";
+    case DiagnoseStop::bic:
+      return "bic";
+    case DiagnoseStop::mode_cap:
+      return "mode_cap";
+    case DiagnoseStop::not_fitted:
+      return "not_fitted";
+  }
+  return "?";
+}
 
 DiagnoseResult diagnose(const Record& estimation, const Record& validation, const AdditiveModel& initial,
                         const LoopSpec& loop, const DiagnoseOptions& options) {
@@ -543,14 +572,22 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
   auto enabled = [&](EffectKind k) {
     return std::find(options.library.begin(), options.library.end(), k) != options.library.end();
   };
-  for (int step = 0; step < options.max_steps; ++step) {
+  auto stop = [&](DiagnoseStop rule, std::string why) {
+    result.stop = rule;
+    result.stop_reason = std::move(why);
+  };
+  for (int step = 0;; ++step) {
     DiagnoseStep& now = result.steps.back();
     if (!std::isfinite(now.validation_rms)) {
-      result.stop_reason = "the model diverges on the validation part";
+      stop(DiagnoseStop::diverges, "the model diverges on the validation part");
       break;
     }
     if (now.residual.pass()) {
-      result.stop_reason = "residual tests pass";
+      stop(DiagnoseStop::residual_passes, "residual tests pass");
+      break;
+    }
+    if (step >= options.max_steps) {
+      stop(DiagnoseStop::max_steps, std::to_string(step) + " effects added, the most allowed");
       break;
     }
     const Eigen::VectorXd y0 = output(now.model, est);
@@ -559,8 +596,8 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
       if (options.progress) options.progress({step + 1, effect_name(c.kind), c.validation_rms, c.valid, c.note});
       candidates.push_back(std::move(c));
     };
-    if (enabled(EffectKind::mode) && added_modes(now.model) < options.max_modes_added)
-      tried(candidate_mode(now.model, y0, ctx));
+    const bool mode_capped = enabled(EffectKind::mode) && added_modes(now.model) >= options.max_modes_added;
+    if (enabled(EffectKind::mode) && !mode_capped) tried(candidate_mode(now.model, y0, ctx));
     if (enabled(EffectKind::rigid_body)) tried(candidate_rigid_body(now.model, y0, ctx));
     if (enabled(EffectKind::offset)) tried(candidate_offset(now.model, y0, ctx));
     if (enabled(EffectKind::drift)) tried(candidate_drift(now.model, y0, ctx));
@@ -572,21 +609,37 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
       return a.validation_rms < b.validation_rms;
     });
     now.ranking = candidates;
+    // Why no candidate qualifies; with the mode left out by the cap, the cap is the rule that stopped it.
+    std::string why;
+    DiagnoseStop rule = DiagnoseStop::not_fitted;
     if (candidates.empty() || !candidates.front().valid) {
-      result.stop_reason = "no candidate could be fitted";
+      why = "no candidate could be fitted";
+      for (std::size_t i = 0; i < candidates.size(); ++i)
+        why += std::string(i == 0 ? ": " : ", ") + effect_name(candidates[i].kind) + " (" + candidates[i].note + ")";
+    } else if (const Candidate& best = candidates.front();
+               !(best.validation_rms < (1.0 - options.min_improvement) * now.validation_rms)) {
+      rule = DiagnoseStop::min_improvement;
+      const double drop = 1.0 - best.validation_rms / now.validation_rms;
+      why = std::string("best candidate (") + effect_name(best.kind) + ") " +
+            (drop > 0.0 ? "lowers the validation RMS by " + percent(drop) + ", less than the "
+                        : "does not lower the validation RMS (" + percent(-drop) + " higher), ") +
+            percent(options.min_improvement) + " asked";
+    } else if (!(best.bic < now.bic)) {
+      rule = DiagnoseStop::bic;
+      why = std::string("best candidate (") + effect_name(best.kind) + ") does not lower the BIC";
+    }
+    if (!why.empty()) {
+      if (mode_capped && candidates.empty())
+        stop(DiagnoseStop::mode_cap,
+             std::to_string(options.max_modes_added) + " modes added, the most allowed, and no other effect to try");
+      else if (mode_capped)
+        stop(DiagnoseStop::mode_cap, std::to_string(options.max_modes_added) +
+                                         " modes added, the most allowed; of the other effects, " + why);
+      else
+        stop(rule, why);
       break;
     }
     const Candidate& best = candidates.front();
-    if (!(best.validation_rms < (1.0 - options.min_improvement) * now.validation_rms)) {
-      result.stop_reason = std::string("best candidate (") + effect_name(best.kind) +
-                           ") lowers the validation RMS by less than " +
-                           std::to_string(static_cast<int>(std::lround(100 * options.min_improvement))) + " %";
-      break;
-    }
-    if (!(best.bic < now.bic)) {
-      result.stop_reason = std::string("best candidate (") + effect_name(best.kind) + ") does not lower the BIC";
-      break;
-    }
     findings.clear();
     const double cost = best.estimation_rms * best.estimation_rms * static_cast<double>(estimation.size());
     const Refined chosen = make_physical({best.model, cost, {}}, est, options, findings);
@@ -594,7 +647,6 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
         make_step(effect_name(best.kind), best.params, chosen.model, chosen.cost, est, val, options));
     result.steps.back().physical = findings;
   }
-  if (result.stop_reason.empty()) result.stop_reason = "maximum number of steps";
   return result;
 }
 
