@@ -1,6 +1,8 @@
 // The modalwatch command line as a user meets it: real files, the real binary,
 // exit codes, and messages that say where the problem is.
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -268,6 +270,58 @@ TEST_F(Cli, FitAndDiagnoseReadTheNamedColumnsAndNameTheOptionForAMissingOne) {
   EXPECT_EQ(no_u.code, 2) << no_u.output;
   EXPECT_TRUE(contains(no_u.output, "missing column 'u'")) << no_u.output;
   EXPECT_FALSE(contains(no_u.output, "pick one")) << no_u.output;
+}
+
+// A record without a sample rate: its time column n counts samples, the config
+// says sample_rate_hz: 1 (modes in rad/sample). The report says so, and the
+// plots' axes are in samples and cycles/sample; a record in seconds keeps s and Hz.
+TEST_F(Cli, DiagnoseOfASampleIndexRecordLabelsTimeInSamples) {
+  const std::string cfg = write("plant.yaml", R"(sample_rate_hz: 1
+model:
+  submodels:
+    - {name: m1, kind: mode, wn: 0.053, zeta: 0.08, gain: 0.8}
+plant:
+  noise_variance: 1.0e-6
+  modes:
+    - {name: m1, kind: mode, wn: 0.05, zeta: 0.05, gain: 1}
+simulation:
+  duration: 3000
+  input: {type: multisine, f_min_hz: 0.001, f_max_hz: 0.1, period_s: 1000, rms: 1}
+)");
+  ASSERT_EQ(run("simulate --config " + cfg + " --out " + path("t.csv")).code, 0);
+  const Table t = read_table(path("t.csv"));
+  write_table(path("n.csv"), {"n", "u", "y"}, t.data(Eigen::all, std::vector<int>{0, t.column("u"), t.column("y")}));
+  const std::string script = std::string(MODALWATCH_SOURCE_DIR) + "/scripts/plot/plot_diagnose.py";
+  const bool plots = fs::exists("/usr/bin/python3") &&
+                     std::system("/usr/bin/python3 -c 'import matplotlib, numpy' 2>/dev/null") == 0;
+  auto labels = [&](const std::string& report) {
+    const std::string cmd = "/usr/bin/python3 -c 'import sys; sys.path.insert(0, sys.argv[1]); import plot_diagnose; "
+                            "print(\"|\".join(plot_diagnose.axis_labels(sys.argv[2])))' " +
+                            fs::path(script).parent_path().string() + " " + report;
+    FILE* pipe = popen(cmd.c_str(), "r");
+    char line[256] = {};
+    const bool read = pipe && std::fgets(line, sizeof line, pipe);
+    if (pipe) pclose(pipe);
+    return read ? std::string(line) : std::string();
+  };
+  for (const bool samples : {true, false}) {
+    const std::string report = path(samples ? "samples" : "seconds");
+    const Outcome d = run("diagnose --config " + cfg + " --data " + path(samples ? "n.csv" : "t.csv") +
+                          (samples ? " --t-column n" : "") + " --max-steps 0 --report " + report +
+                          (plots ? " --plot-script " + script : ""));
+    ASSERT_EQ(d.code, 0) << d.output;
+    std::ifstream json(report + "/summary.json"), md(report + "/report.md");
+    std::stringstream summary, markdown;
+    summary << json.rdbuf();
+    markdown << md.rdbuf();
+    EXPECT_TRUE(contains(summary.str(), samples ? "\"time_unit\": \"samples\"" : "\"time_unit\": \"s\""))
+        << summary.str();
+    EXPECT_EQ(contains(markdown.str(), "`n` is a sample index (no sample rate)"), samples) << markdown.str();
+    if (!plots) continue;  // the labels need the script's imports
+    EXPECT_EQ(labels(report), samples ? "t [samples]|frequency [cycles/sample]\n" : "t [s]|frequency [Hz]\n");
+    for (const char* png : {"bode.png", "validation.png", "residual_spectrum.png"})
+      EXPECT_TRUE(fs::exists(report + "/" + png)) << png << "\n" << d.output;
+  }
 }
 
 TEST_F(Cli, RecordWithNonIncreasingTimeIsRejectedNamingRow) {

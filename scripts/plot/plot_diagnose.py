@@ -5,8 +5,11 @@ Usage: scripts/plot/plot_diagnose.py REPORT_DIR
 
 Reads spectra.csv, validation.csv and bode.csv written by `modalwatch diagnose`
 and writes residual_spectrum.png, validation.png and bode.png next to them
-(the report links these). Needs Debian's python3-matplotlib (Agg backend).
+(the report links these). When summary.json's time_unit is "samples" (the
+record's time is a sample index, no sample rate) the axes are in samples and
+cycles/sample. Needs Debian's python3-matplotlib (Agg backend).
 """
+import json
 import os
 import sys
 
@@ -22,11 +25,24 @@ def load(path):
     return data
 
 
+def axis_labels(report_dir):
+    """(time label, frequency label) for the report's unit of time."""
+    try:
+        with open(os.path.join(report_dir, "summary.json"), encoding="utf-8") as f:
+            unit = json.load(f).get("time_unit", "s")
+    except FileNotFoundError:
+        unit = "s"
+    if unit == "samples":
+        return "t [samples]", "frequency [cycles/sample]"
+    return "t [s]", "frequency [Hz]"
+
+
 def main():
     if len(sys.argv) != 2:
         sys.stderr.write(__doc__)
         return 2
     d = sys.argv[1]
+    t_label, f_label = axis_labels(d)
 
     s = load(os.path.join(d, "spectra.csv"))
     f = s["f_hz"][1:]
@@ -39,7 +55,7 @@ def main():
     ax[1].semilogy(f, s["e_to_u_before"][1:], label="before")
     ax[1].semilogy(f, s["e_to_u_after"][1:], label="after")
     ax[1].set_ylabel("|S_eu / S_uu|")
-    ax[1].set_xlabel("frequency [Hz]")
+    ax[1].set_xlabel(f_label)
     ax[1].grid(True, which="both", alpha=0.3)
     fig.suptitle("Residual spectrum on the validation part (Welch)")
     fig.tight_layout()
@@ -56,7 +72,7 @@ def main():
     ax[1].plot(v["t"], v["y"] - v["y_before"], lw=0.8, label="error before")
     ax[1].plot(v["t"], v["y"] - v["y_after"], lw=0.8, label="error after")
     ax[1].set_ylabel("y - y_sim")
-    ax[1].set_xlabel("t [s]")
+    ax[1].set_xlabel(t_label)
     ax[1].legend(loc="upper right")
     fig.suptitle("Simulated against measured, validation part")
     fig.tight_layout()
@@ -73,7 +89,7 @@ def main():
     ax[1].semilogx(b["f_hz"], b["phase_before_deg"])
     ax[1].semilogx(b["f_hz"], b["phase_after_deg"], "--")
     ax[1].set_ylabel("phase [deg]")
-    ax[1].set_xlabel("frequency [Hz]")
+    ax[1].set_xlabel(f_label)
     ax[1].grid(True, which="both", alpha=0.3)
     fig.suptitle("Bode of both models")
     fig.tight_layout()

@@ -187,6 +187,10 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
   o << ". Input intersample: " << (args.input_hold == "foh" ? "band-limited (first-order hold)" : "held (ZOH)") << ", "
     << args.substeps << " integration substep(s) per sample";
   o << ". Estimation part: " << n_est << " samples; validation part: " << n_val << " samples.\n\n";
+  if (in.time_in_samples)
+    o << "Time: the record's `" << args.columns.t
+      << "` is a sample index (no sample rate): times are in samples, frequencies in cycles/sample (the `f_hz` "
+         "columns of the tables).\n\n";
   o << "Validation error: the model simulated on the validation part ("
     << (config.closed_loop ? "closed loop from r, with the measured excitation besides the controller"
                            : "open loop from the measured u")
@@ -298,13 +302,14 @@ void print_steps(const DiagnoseResult& r, const std::string& dir) {
 
 }  // namespace
 
-std::string diagnose_summary_json(const DiagnoseResult& result) {
+std::string diagnose_summary_json(const DiagnoseResult& result, bool time_in_samples) {
   JsonWriter j;
   j.begin_object().key("steps").begin_array(JsonWriter::Layout::lines);
   for (const DiagnoseStep& s : result.steps) write_step(j, s);
   j.end_array();
   j.key("stop").value(stop_name(result.stop));
   j.key("stop_reason").value(result.stop_reason);
+  j.key("time_unit").value(time_in_samples ? "samples" : "s");
   return j.end_object().finish();
 }
 
@@ -312,7 +317,7 @@ void write_diagnose_report(const DiagnoseReport& in) {
   const DiagnoseArgs& args = in.args;
   const DiagnoseResult& r = in.result;
   std::filesystem::create_directories(args.report);
-  write_file_atomically(args.report + "/summary.json", diagnose_summary_json(r));
+  write_file_atomically(args.report + "/summary.json", diagnose_summary_json(r, in.time_in_samples));
   write_tables(args.report, r, in.validation, in.lead_in);
   std::string yaml = config_to_yaml(in.config, r.steps.back().model.linear);
   const std::string eff = effects_comment(r.steps.back().model.effects);

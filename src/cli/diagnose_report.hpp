@@ -24,14 +24,19 @@ struct DiagnoseReport {
   const Record& validation;  // as simulated: its first lead_in samples only set the state
   Eigen::Index lead_in = 0;
   Eigen::Index estimation_samples = 0;
+  // The record has no sample rate: t is a sample index (a --t-column such as n
+  // of whole numbers, sample_rate_hz: 1), so times are in samples and
+  // frequencies in cycles/sample. summary.json's "time_unit" says which.
+  bool time_in_samples = false;
 };
 
 // Writes the report into args.report (each file replaced atomically), runs
 // args.plot_script on it when given, and prints the steps on stdout.
 void write_diagnose_report(const DiagnoseReport& report);
 
-// summary.json: the steps (each with its model) and the stop reason; nothing
-// of where the records came from, so the same data gives the same file.
-std::string diagnose_summary_json(const DiagnoseResult& result);
+// summary.json: the steps (each with its model), the stop rule and reason, and
+// the unit of time ("s" or "samples"); nothing of where the records came from,
+// so the same data gives the same file.
+std::string diagnose_summary_json(const DiagnoseResult& result, bool time_in_samples);
 
 }  // namespace modalwatch::cli
