@@ -38,17 +38,6 @@ double& at(ModalParameters& p, Quantity q) {
   }
 }
 
-double get(const ModalParameters& p, Quantity q) {
-  switch (q) {
-    case Quantity::wn:
-      return p.wn;
-    case Quantity::zeta:
-      return p.zeta;
-    default:
-      return p.gain;
-  }
-}
-
 ModalParameters scaled(const ModalParameters& p, double f) { return {p.wn * f, p.zeta * f, p.gain * f}; }
 
 FaultDetectorSettings configured(const std::vector<ModalParameters>& baseline = kBaseline) {
@@ -196,7 +185,8 @@ TEST(FaultDetector, NoiseConsistentWithTheReportedStdNeverFlagsOverTenThousandUp
   for (int k = 0; k < 10000; ++k) {
     for (int i = 0; i < 3; ++i)
       for (Quantity q : {Quantity::wn, Quantity::zeta, Quantity::gain}) {
-        const double x0 = get(kBaseline[i], q);
+        ModalParameters baseline = kBaseline[i];
+        const double x0 = at(baseline, q);
         at(s.std_dev[i], q) = rel_std[i] * x0;
         at(s.value[i], q) = x0 + rel_std[i] * x0 * z(rng);
       }

@@ -22,6 +22,7 @@
 #include "modalwatch/physical.hpp"
 #include "modalwatch/prefilter.hpp"
 #include "modalwatch/record.hpp"
+#include "modalwatch/spectra.hpp"
 #include "modalwatch/transfer_function.hpp"
 
 namespace modalwatch {
@@ -75,18 +76,6 @@ struct ResidualTest {
   bool pass = false;
 };
 
-// Welch estimates (Hann window, 50 % overlap).
-struct Spectra {
-  Eigen::VectorXd frequency_hz;
-  Eigen::VectorXd residual_psd;
-  Eigen::VectorXd input_psd;
-  Eigen::VectorXd residual_to_input;  // |S_eu / S_uu|
-  Eigen::VectorXd coherence;          // |S_eu|^2 / (S_ee S_uu)
-  int segments = 0;
-  Eigen::VectorXcd cross;  // S_eu / S_uu (complex), for mode starts
-};
-Spectra welch_spectra(const Eigen::VectorXd& e, const Eigen::VectorXd& u, double T, int segment_length);
-
 struct ResidualAnalysis {
   // Autocorrelation of e at lags 1..M against the 99 % band 2.58/sqrt(N):
   // statistic = the largest |rho|, pass when at most 5 % of the lags are outside
@@ -120,7 +109,7 @@ struct DiagnoseOptions {
   int max_delay = 10;             // samples
   int max_lag = 25;               // residual correlation lags
   int oe_iterations = 40;         // Levenberg-Marquardt iterations of the output-error refinement
-  int max_modes_added = 4;       // modes added at most (the mode candidate is not tried past it)
+  int max_modes_added = 4;        // modes added at most (the mode candidate is not tried past it)
   // Samples at the start of the validation record that only set the model's
   // state (the estimation part before a split): simulated, not scored.
   Eigen::Index validation_lead_in = 0;

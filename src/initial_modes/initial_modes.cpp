@@ -6,7 +6,7 @@
 #include <numbers>
 #include <stdexcept>
 
-#include "modalwatch/diagnose.hpp"
+#include "modalwatch/spectra.hpp"
 
 namespace modalwatch {
 namespace {
