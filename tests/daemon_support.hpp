@@ -4,6 +4,7 @@
 // publishing of that record, and collection of the daemon's messages.
 #include <lcm/lcm.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -161,6 +162,11 @@ inline void publish_paced(lcm_t* lcm, const Config& c, Daemon& d, const Record& 
                           Eigen::Index end, std::uint64_t& published, std::int64_t utime_shift = 0,
                           std::int64_t seq_shift = 0, std::uint64_t backlog = 2048) {
   Eigen::Index done = begin;
+  // Input that arrives during the warm-up fit is held up to daemon.warmup_backlog:
+  // never more ahead than that less one batch, or a low sample rate's small
+  // backlog overflows.
+  const double held_at_most = std::floor(c.daemon.warmup_backlog / c.sample_time);
+  backlog = std::min<std::uint64_t>(backlog, static_cast<std::uint64_t>(std::max(64.0, held_at_most - 64.0)));
   publish_range(lcm, c.lcm.batches_channel, rec, begin, end, 64, utime_shift, seq_shift, [&](Eigen::Index next) {
     published += static_cast<std::uint64_t>(next - done);
     done = next;

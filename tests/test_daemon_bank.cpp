@@ -35,20 +35,17 @@ std::vector<std::filesystem::path> fault_records(const std::string& bank, std::s
 
 TEST_F(DaemonOnBankRecords, FlagChangesAreThoseOfTrackOnThreeFaultRecords) {
   const char* bank = std::getenv("MODALWATCH_BANK_DIR");
-  if (!bank) GTEST_SKIP() << "MODALWATCH_BANK_DIR not set: scripts/check/scenario_bank_small.sh runs this test on a "
-                             "generated bank";
+  if (!bank)
+    GTEST_SKIP() << "MODALWATCH_BANK_DIR not set: scripts/check/scenario_bank_small.sh runs this test on a "
+                    "generated bank";
   const auto records = fault_records(bank, 3);
   ASSERT_EQ(records.size(), 3u) << "the bank in " << bank << " has fewer than three fault records";
   std::size_t flagged = 0;
   for (const auto& dir : records) {
     SCOPED_TRACE(dir.filename().string());
     const std::string config_path = (dir / "config.yaml").string();
-    Config c = load_config(config_path);
+    const Config c = load_config(config_path);
     const Record rec = read_record((dir / "record.csv").string());
-    // Sent far faster than real time, the input that arrives during the
-    // warm-up fit is the rest of the record: the backlog holds all of it
-    // (estimation does not depend on it).
-    c.daemon.warmup_backlog = static_cast<double>(rec.size() + 1) * c.sample_time;
 
     lcm_t* lcm = lcm_create("memq://");
     ASSERT_NE(lcm, nullptr);
