@@ -1,29 +1,22 @@
 // modalwatch diagnose on records with one undeclared effect each, made by the
 // simulator from a 2-mode plant plus the effect, diagnosed with the 2-mode
-// model; the residual tests themselves; the report; and the measured records.
+// model; an effect's credit over the refit without it; the residual tests
+// themselves; and the measured records. The command and its report:
+// test_diagnose_report.cpp.
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <filesystem>
-#include <fstream>
-#include <iterator>
-#include <limits>
 #include <numbers>
-#include <optional>
 #include <ostream>
 #include <random>
-#include <stdexcept>
 #include <string>
 
 #include <gtest/gtest.h>
 
-#include "../src/cli/json_writer.hpp"
 #include "modalwatch/diagnose.hpp"
 #include "modalwatch/io/config.hpp"
-#include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/records.hpp"
 #include "modalwatch/simulator.hpp"
-#include "support.hpp"
 
 namespace modalwatch {
 namespace {
@@ -296,6 +289,69 @@ TEST(DiagnoseStop, NoCandidateCouldBeFittedNamesEachAndWhy) {
   EXPECT_EQ(r.stop_reason, "no candidate could be fitted: drift (already in the model)");
 }
 
+// ------------------------------------------------------------ credit over the refit
+
+// The open-loop plant with a cubic stiffness (and an output offset when given),
+// diagnosed with cubic and offset only and 2 output-error iterations per fit:
+// the cubic model of step 1 has no SRIVC start and is left short of its
+// optimum, so a refit of it alone lowers the validation error further.
+DiagnoseResult under_converged(double offset) {
+  PlantSpec plant = plant_with("cubic", false);
+  plant.effects.output_offset = offset;
+  DiagnoseOptions options;
+  options.library = {EffectKind::cubic, EffectKind::offset};
+  options.oe_iterations = 2;
+  options.max_steps = 2;
+  return diagnose_with(plant, options);
+}
+
+const Candidate* ranked(const DiagnoseStep& s, EffectKind kind) {
+  for (const Candidate& c : s.ranking)
+    if (c.kind == kind) return &c;
+  return nullptr;
+}
+
+TEST(DiagnoseCredit, AnOffsetTheDataLackGetsNoCreditForTheRefit) {
+  const DiagnoseResult r = under_converged(0.0);
+  ASSERT_EQ(r.steps.size(), 2u) << r.stop_reason;
+  const DiagnoseStep& cubic = r.steps[1];
+  ASSERT_EQ(cubic.effect, "cubic");
+  // Under-converged: 0.016 left where the refit alone reaches the 1e-3 noise.
+  EXPECT_GT(cubic.validation_rms, 0.01);
+  EXPECT_NEAR(cubic.refit.validation_rms, 1e-3, 1e-4);
+  // The offset's fit, a refit with one more parameter, leaves the same error:
+  // against the step's model it would be a 90 % drop, against the refit nothing.
+  const Candidate* offset = ranked(cubic, EffectKind::offset);
+  ASSERT_NE(offset, nullptr);
+  EXPECT_NEAR(offset->validation_rms, 1e-3, 1e-4);
+  EXPECT_LT(offset->validation_rms, 0.1 * cubic.validation_rms);
+  EXPECT_DOUBLE_EQ(offset->credit, cubic.refit.validation_rms - offset->validation_rms);
+  EXPECT_LT(std::abs(offset->credit), 1e-3 * cubic.refit.validation_rms);
+  EXPECT_EQ(r.stop, DiagnoseStop::min_improvement) << r.stop_reason;
+  EXPECT_TRUE(mentions(r.stop_reason, "best candidate (offset)")) << r.stop_reason;
+  EXPECT_TRUE(mentions(r.stop_reason, "beyond the refit without it")) << r.stop_reason;
+}
+
+TEST(DiagnoseCredit, AnOffsetInTheDataIsCreditedWithWhatItAdds) {
+  const DiagnoseResult r = under_converged(0.02);
+  ASSERT_EQ(r.steps.size(), 3u) << r.stop_reason;
+  ASSERT_EQ(r.steps[1].effect, "cubic");
+  const DiagnoseStep& added = r.steps[2];
+  ASSERT_EQ(added.effect, "offset");
+  EXPECT_NEAR(param(added, "value"), 0.02, 0.1 * 0.02);
+  // From the cubic step's 0.026: the refit alone takes it to the offset's 0.02,
+  // the offset from there to the 1e-3 noise; the offset is credited with the second part.
+  EXPECT_GT(r.steps[1].validation_rms, 0.024);
+  EXPECT_NEAR(added.refit_validation_rms, 0.02, 0.001);
+  EXPECT_DOUBLE_EQ(added.refit_validation_rms, r.steps[1].refit.validation_rms);
+  EXPECT_NEAR(added.validation_rms, 1e-3, 1e-4);
+  const Candidate* offset = ranked(r.steps[1], EffectKind::offset);
+  ASSERT_NE(offset, nullptr);
+  EXPECT_DOUBLE_EQ(added.credit, offset->credit);
+  EXPECT_NEAR(added.credit, 0.019, 0.001);
+  EXPECT_GT(added.credit, 0.9 * added.refit_validation_rms);
+}
+
 // ------------------------------------------------------------ one effects model
 
 // The augmented model with the true modes and effects, run on a noise-free
@@ -405,251 +461,6 @@ TEST(ResidualTests, WelchFindsASineAtItsFrequency) {
   Eigen::Index peak = 0;
   sp.residual_psd.maxCoeff(&peak);
   EXPECT_NEAR(sp.frequency_hz(peak), 12.5, 100.0 / 1024);
-}
-
-// ------------------------------------------------------------ config and CLI
-
-TEST(DiagnoseConfig, PlantEffectKeysAreReadAndChecked) {
-  const std::string base = R"(sample_rate_hz: 100
-model:
-  submodels:
-    - {name: m1, kind: mode, wn: 5, zeta: 0.05, gain: 1}
-plant:
-  coulomb: 0.3
-  cubic: 0.02
-  output_offset: 0.1
-  input_offset: -0.2
-  input_delay: 3
-  modes:
-    - {name: m1, kind: mode, wn: 5, zeta: 0.05, gain: 1}
-)";
-  const Config c = parse_config(base, "effects.yaml");
-  ASSERT_TRUE(c.plant.has_value());
-  EXPECT_EQ(c.plant->effects.coulomb, 0.3);
-  EXPECT_EQ(c.plant->effects.cubic, 0.02);
-  EXPECT_EQ(c.plant->effects.output_offset, 0.1);
-  EXPECT_EQ(c.plant->effects.input_offset, -0.2);
-  EXPECT_EQ(c.plant->effects.input_delay, 3);
-  // Written back by config_to_yaml and read again.
-  const Config again = parse_config(config_to_yaml(c, c.model), "again.yaml");
-  EXPECT_EQ(again.plant->effects.input_delay, 3);
-  EXPECT_EQ(again.plant->effects.coulomb, 0.3);
-  auto replace = [&](const std::string& from, const std::string& to) {
-    std::string t = base;
-    t.replace(t.find(from), from.size(), to);
-    return t;
-  };
-  std::string msg = test_support::error_of([&] { parse_config(replace("coulomb: 0.3", "coulomb: -1"), "e.yaml"); });
-  EXPECT_NE(msg.find("e.yaml:6"), std::string::npos) << msg;
-  EXPECT_NE(msg.find("plant.coulomb"), std::string::npos) << msg;
-  msg = test_support::error_of([&] { parse_config(replace("input_delay: 3", "input_delay: 1.5"), "e.yaml"); });
-  EXPECT_NE(msg.find("plant.input_delay"), std::string::npos) << msg;
-  msg = test_support::error_of([&] { parse_config(replace("cubic: 0.02", "cubik: 0.02"), "e.yaml"); });
-  EXPECT_NE(msg.find("unknown key"), std::string::npos) << msg;
-}
-
-class DiagnoseCli : public test_support::ScratchDir {};
-
-// A 2-mode plant with an output offset its config's model does not declare.
-constexpr const char* kOffsetPlant = R"(sample_rate_hz: 100
-model:
-  submodels:
-    - {name: m1, kind: mode, wn: 5.3, zeta: 0.08, gain: 0.8}
-    - {name: m2, kind: mode, wn: 19, zeta: 0.05, gain: 0.6}
-plant:
-  noise_variance: 1.0e-6
-  output_offset: 0.2
-  modes:
-    - {name: m1, kind: mode, wn: 5, zeta: 0.05, gain: 1}
-    - {name: m2, kind: mode, wn: 20, zeta: 0.03, gain: 0.5}
-simulation:
-  duration: 40
-  input: {type: multisine, f_min_hz: 0.1, f_max_hz: 10, period_s: 10, rms: 1}
-)";
-
-// simulate -> diagnose through the real binary: the record carries an output
-// offset the config does not declare; summary.json names it.
-TEST_F(DiagnoseCli, FindsTheOffsetAndWritesTheReport) {
-  const std::string config = write("plant.yaml", kOffsetPlant);
-  auto out = test_support::run_cli("simulate --config " + config + " --out " + path("run.csv"));
-  ASSERT_EQ(out.code, 0) << out.output;
-  out = test_support::run_cli("diagnose --config " + config + " --data " + path("run.csv") +
-                              " --split 0.7 --effects mode,offset,cubic --report " + path("report"));
-  ASSERT_EQ(out.code, 0) << out.output;
-  std::ifstream in(path("report/summary.json"));
-  const std::string json((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  EXPECT_NE(json.find("{\"effect\": \"none\", \"params\": {}"), std::string::npos) << json;
-  const std::string key = "{\"effect\": \"offset\", \"params\": {\"value\": ";
-  const auto at = json.find(key);
-  ASSERT_NE(at, std::string::npos) << json;
-  EXPECT_NEAR(std::stod(json.substr(at + key.size())), 0.2, 0.02) << json;
-  EXPECT_TRUE(std::filesystem::exists(path("report/report.md")));
-  EXPECT_TRUE(std::filesystem::exists(path("report/model.yaml")));
-  // The augmented model is a config `fit` reads.
-  out = test_support::run_cli("fit --config " + path("report/model.yaml") + " --data " + path("run.csv"));
-  EXPECT_EQ(out.code, 0) << out.output;
-  // Bad input is exit code 2 with the flag named.
-  out = test_support::run_cli("diagnose --config " + config + " --data " + path("run.csv") +
-                              " --effects mode,friction --report " + path("r2"));
-  EXPECT_EQ(out.code, 2);
-  EXPECT_NE(out.output.find("--effects"), std::string::npos) << out.output;
-}
-
-std::string read_text(const std::string& file) {
-  std::ifstream in(file);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-// The number after `key` on the line of `text` that contains `line`.
-double number_after(const std::string& text, const std::string& line, const std::string& key) {
-  const auto at = text.find(line);
-  if (at == std::string::npos) return std::nan("");
-  const auto k = text.find(key, at);
-  if (k == std::string::npos || k > text.find('\n', at)) return std::nan("");
-  return std::stod(text.substr(k + key.size()));
-}
-
-// A long run is not silent: one line per fit on stderr (the effect tried, its
-// validation RMS, the time since the start); stdout keeps the report's table.
-TEST_F(DiagnoseCli, PrintsEachFitOnStderr) {
-  const std::string config = write("plant.yaml", kOffsetPlant);
-  ASSERT_EQ(test_support::run_cli("simulate --config " + config + " --out " + path("run.csv")).code, 0);
-  const std::string cmd = std::string(MODALWATCH_CLI) + " diagnose --config " + config + " --data " + path("run.csv") +
-                          " --effects mode,offset,cubic --report " + path("report") + " >" + path("stdout.txt") +
-                          " 2>" + path("stderr.txt");
-  ASSERT_EQ(std::system(cmd.c_str()), 0);
-  const std::string err = read_text(path("stderr.txt")), out = read_text(path("stdout.txt"));
-  // The configured model misses the 0.2 offset: its RMS is the offset's.
-  EXPECT_NEAR(number_after(err, "step 0: configured model", "validation RMS "), 0.2, 0.01) << err;
-  for (const char* effect : {"mode", "offset", "cubic"})
-    EXPECT_NE(err.find(std::string("step 1/5: tried ") + effect + ": validation RMS "), std::string::npos)
-        << effect << "\n" << err;
-  // The offset takes the error down to the noise (std 1e-3).
-  EXPECT_NEAR(number_after(err, "tried offset", "validation RMS "), 1e-3, 2e-4) << err;
-  const double elapsed = number_after(err, "tried cubic", "(");
-  EXPECT_GE(elapsed, 0.0) << err;
-  EXPECT_LT(elapsed, 60.0) << err;
-  EXPECT_EQ(out.find("tried"), std::string::npos) << out;
-  EXPECT_NE(out.find("stopped:"), std::string::npos) << out;
-}
-
-// The report names the option whose rule stopped the run.
-TEST_F(DiagnoseCli, StopReasonNamesTheOption) {
-  const std::string config = write("plant.yaml", kOffsetPlant);
-  ASSERT_EQ(test_support::run_cli("simulate --config " + config + " --out " + path("run.csv")).code, 0);
-  const std::string data = " --config " + config + " --data " + path("run.csv");
-  auto out = test_support::run_cli("diagnose" + data + " --max-steps 0 --report " + path("a"));
-  ASSERT_EQ(out.code, 0) << out.output;
-  EXPECT_NE(out.output.find("stopped: 0 effects added, the most allowed (--max-steps)"), std::string::npos)
-      << out.output;
-  EXPECT_NE(read_text(path("a/summary.json")).find("\"stop\": \"max_steps\""), std::string::npos);
-  EXPECT_NE(read_text(path("a/report.md")).find("Stopped: 0 effects added, the most allowed (--max-steps)."),
-            std::string::npos);
-  out = test_support::run_cli("diagnose" + data + " --effects offset --min-improvement 0.999 --report " + path("b"));
-  ASSERT_EQ(out.code, 0) << out.output;
-  EXPECT_NE(out.output.find("less than the 99.9 % asked (--min-improvement)"), std::string::npos) << out.output;
-  out = test_support::run_cli("diagnose" + data + " --effects mode --max-added-modes 0 --report " + path("c"));
-  ASSERT_EQ(out.code, 0) << out.output;
-  EXPECT_NE(out.output.find("stopped: 0 modes added, the most allowed, and no other effect to try (--max-added-modes)"),
-            std::string::npos)
-      << out.output;
-  EXPECT_NE(read_text(path("c/summary.json")).find("\"stop\": \"mode_cap\""), std::string::npos);
-}
-
-// The report's JSON: strings escaped, numbers finite or null.
-TEST(DiagnoseReportJson, EscapesStringsAndWritesNonFiniteAsNull) {
-  using cli::json_string;
-  EXPECT_EQ(json_string("plain"), "\"plain\"");
-  EXPECT_EQ(json_string("a \"b\" c\\d"), "\"a \\\"b\\\" c\\\\d\"");
-  EXPECT_EQ(json_string("l1\nl2\r\t\b\f"), "\"l1\\nl2\\r\\t\\b\\f\"");
-  EXPECT_EQ(json_string(std::string("x\x01y\x1f", 4) + std::string(1, '\0')), "\"x\\u0001y\\u001f\\u0000\"");
-  EXPECT_EQ(json_string("caf\xc3\xa9 \xe2\x82\xac"), "\"caf\xc3\xa9 \xe2\x82\xac\"");  // valid UTF-8 kept
-  // Bytes that are not UTF-8 (a lone continuation, a truncated sequence, an
-  // overlong form, a surrogate) become U+FFFD, one per byte.
-  EXPECT_EQ(json_string("a\x80z"), "\"a\\ufffdz\"");
-  EXPECT_EQ(json_string("\xe2\x82"), "\"\\ufffd\\ufffd\"");
-  EXPECT_EQ(json_string("\xc0\xaf"), "\"\\ufffd\\ufffd\"");
-  EXPECT_EQ(json_string("\xed\xa0\x80"), "\"\\ufffd\\ufffd\\ufffd\"");
-  EXPECT_EQ(cli::json_number(0.25, 6), "0.25");
-  EXPECT_EQ(cli::json_number(-1.5e-300, 3), "-1.5e-300");
-  EXPECT_EQ(cli::json_number(std::nan(""), 6), "null");
-  EXPECT_EQ(cli::json_number(-std::numeric_limits<double>::infinity(), 6), "null");
-
-  cli::JsonWriter j;
-  j.begin_object().key("k\"").value("v\n").key("list").begin_array(cli::JsonWriter::Layout::lines);
-  j.value(1.0).begin_object().end_object().null().end_array();
-  j.key("x").value(std::numeric_limits<double>::infinity()).key("b").value(true).end_object();
-  EXPECT_EQ(j.finish(), "{\"k\\\"\": \"v\\n\", \"list\": [\n  1,\n  {},\n  null\n], \"x\": null, \"b\": true}\n");
-  cli::JsonWriter bad;
-  bad.begin_object();
-  EXPECT_THROW(bad.value(1.0), std::logic_error);  // no key
-  EXPECT_THROW(bad.end_array(), std::logic_error);
-  EXPECT_THROW(bad.finish(), std::logic_error);  // still open
-}
-
-// Single-quoted for sh: the paths below hold quotes and newlines.
-std::string sh_quote(const std::string& s) {
-  std::string q = "'";
-  for (const char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-// Paths with quotes, a tab and a newline: diagnose reads and writes there, the
-// JSON of them parses back to them, and the plot script runs without a shell
-// (its path is an argument, never parsed) with its exit status and stderr
-// reported.
-TEST_F(DiagnoseCli, ReportJsonAndPlotScriptWithQuotesAndNewlinesInPaths) {
-  if (!std::filesystem::exists("/usr/bin/python3")) GTEST_SKIP() << "no /usr/bin/python3 to run the scripts";
-  const std::string dir = path("it's a \"dir\"\nhere");
-  std::filesystem::create_directories(dir);
-  const std::string config = dir + "/plant \"q\".yaml";
-  std::ofstream(config) << R"(sample_rate_hz: 100
-model:
-  submodels:
-    - {name: m1, kind: mode, wn: 5.3, zeta: 0.08, gain: 0.8}
-plant:
-  noise_variance: 1.0e-6
-  modes:
-    - {name: m1, kind: mode, wn: 5, zeta: 0.05, gain: 1}
-simulation:
-  duration: 20
-  input: {type: multisine, f_min_hz: 0.1, f_max_hz: 10, period_s: 10, rms: 1}
-)";
-  const std::string data = dir + "/run\t1.csv";
-  auto out = test_support::run_cli("simulate --config " + sh_quote(config) + " --out " + sh_quote(data));
-  ASSERT_EQ(out.code, 0) << out.output;
-  const std::string script = dir + "/plot's \"fail\".py";
-  std::ofstream(script) << "import sys\nsys.stderr.write('no \"plots\" here\\n')\nsys.exit(3)\n";
-  const std::string report = dir + "/report";
-  out = test_support::run_cli("diagnose --config " + sh_quote(config) + " --data " + sh_quote(data) +
-                              " --split 0.7 --effects offset --max-steps 0 --report " + sh_quote(report) +
-                              " --plot-script " + sh_quote(script));
-  ASSERT_EQ(out.code, 0) << out.output;
-  EXPECT_NE(out.output.find("no \"plots\" here"), std::string::npos) << out.output;
-  EXPECT_NE(out.output.find("plots failed (/usr/bin/python3 " + script + " exited with status 3)"), std::string::npos)
-      << out.output;
-  std::ifstream md(report + "/report.md");
-  const std::string report_md((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
-  EXPECT_NE(report_md.find("Not made (/usr/bin/python3 " + script + " exited with status 3)"), std::string::npos);
-
-  // Parsed back by Python's json: summary.json, and a document holding the paths.
-  cli::JsonWriter doc;
-  doc.begin_object().key("config").value(config).key("data").value(data).key("report").value(report).end_object();
-  const std::string paths = write("paths.json", doc.finish());
-  const std::string checker = write("check.py", R"(import json, sys
-s = json.load(open(sys.argv[1], encoding="utf-8"))
-assert s["steps"][0]["effect"] == "none" and s["steps"][0]["submodels"][0]["name"] == "m1"
-d = json.load(open(sys.argv[2], encoding="utf-8"))
-open(sys.argv[3], "wb").write((d["config"] + "\0" + d["data"] + "\0" + d["report"]).encode("utf-8"))
-)");
-  ASSERT_EQ(std::system(("/usr/bin/python3 " + checker + " " + sh_quote(report + "/summary.json") + " " + paths + " " +
-                         path("parsed.bin"))
-                            .c_str()),
-            0);
-  std::ifstream parsed(path("parsed.bin"), std::ios::binary);
-  const std::string nul(1, '\0');
-  EXPECT_EQ(std::string((std::istreambuf_iterator<char>(parsed)), std::istreambuf_iterator<char>()),
-            config + nul + data + nul + report);
 }
 
 // ------------------------------------------------------------ measured records

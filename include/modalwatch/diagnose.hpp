@@ -1,8 +1,10 @@
 #pragma once
 // Closing the loop with measured data: fit the configured additive model, test
 // the residual, trace it to an effect the model lacks, add the best effect,
-// refit, and repeat while the validation error drops significantly and the
-// residual tests still fail.
+// refit, and repeat while the residual tests still fail and an effect lowers
+// the validation error significantly beyond what a refit of the model without
+// it gives (its credit: a refit alone may only continue a refinement the
+// previous fit left unfinished).
 //
 // The augmented model is the additive model of eq. (5) with the effects of
 // include/modalwatch/effects.hpp around it (input offset, delay, Coulomb and
@@ -11,6 +13,7 @@
 // carried by the recursive estimator (`track`) and the daemon; the effects are
 // fitted by `diagnose` alone.
 #include <functional>
+#include <limits>
 #include <string>
 #include <utility>
 #include <vector>
@@ -94,7 +97,8 @@ struct ResidualAnalysis {
 ResidualAnalysis analyse_residual(const Eigen::VectorXd& e, const Eigen::VectorXd& u, double T, int max_lag);
 
 // One fit of a run, for a caller that shows progress: the configured structure
-// (step 0, effect "none") or a candidate tried at step >= 1.
+// (step 0, effect "none"), the current model refitted alone (effect "refit") or
+// a candidate tried at step >= 1.
 struct DiagnoseProgress {
   int step = 0;
   std::string effect;
@@ -104,8 +108,10 @@ struct DiagnoseProgress {
 };
 
 struct DiagnoseOptions {
-  int max_steps = 5;              // effects added at most
-  double min_improvement = 0.10;  // an effect is added when it lowers the validation RMS by this fraction
+  int max_steps = 5;  // effects added at most
+  // An effect is added when its credit is at least this fraction of the
+  // validation RMS of the refit without it.
+  double min_improvement = 0.10;
   int max_delay = 10;             // samples
   int max_lag = 25;               // residual correlation lags
   int oe_iterations = 40;         // Levenberg-Marquardt iterations of the output-error refinement
@@ -128,8 +134,23 @@ struct Candidate {
   double validation_rms = 0.0;
   double fit_percent = 0.0;  // validation
   double bic = 0.0;          // N ln(MSE_est) + k ln N on the estimation part
-  bool valid = true;         // false when the fit failed (note says why)
+  // What the effect itself lowers the validation RMS by: the refit of the
+  // model without it (DiagnoseStep::refit) minus validation_rms. NaN when not valid.
+  double credit = std::numeric_limits<double>::quiet_NaN();
+  bool valid = true;  // false when the fit failed (note says why)
   std::string note;
+};
+
+// The current model refitted alone, from the same start and with the same
+// iterations as each candidate's fit: a candidate that only continues the
+// refinement gains nothing over it.
+struct Refit {
+  AugmentedModel model;
+  double estimation_rms = std::numeric_limits<double>::infinity();
+  double validation_rms = std::numeric_limits<double>::infinity();
+  double fit_percent = -std::numeric_limits<double>::infinity();
+  double bic = std::numeric_limits<double>::infinity();
+  bool valid = false;  // its simulation is finite on the validation part
 };
 
 struct DiagnoseStep {
@@ -142,7 +163,12 @@ struct DiagnoseStep {
   double bic = 0.0;
   ResidualAnalysis residual;          // on the validation part
   Eigen::VectorXd validation_output;  // simulated
-  std::vector<Candidate> ranking;     // candidates tried from this step, best first
+  std::vector<Candidate> ranking;     // candidates tried from this step, best first (by credit)
+  Refit refit;                        // of this step's model, when candidates were tried from it
+  // Steps >= 1: the validation RMS of the previous step's refit (the model
+  // without the added effect) and the added effect's credit over it. NaN at step 0.
+  double refit_validation_rms = std::numeric_limits<double>::quiet_NaN();
+  double credit = std::numeric_limits<double>::quiet_NaN();
   // Verdicts of the physical check (physical.hpp) on this step's fit, other
   // than physical: the model above is the corrected one.
   std::vector<ModeFinding> physical;
@@ -153,8 +179,8 @@ enum class DiagnoseStop {
   residual_passes,  // whiteness and independence pass: nothing left to explain
   diverges,         // the model's simulation is not finite on the validation part
   max_steps,        // options.max_steps effects added
-  min_improvement,  // the best candidate lowers the validation RMS by less than options.min_improvement
-  bic,              // the best candidate does not lower the BIC
+  min_improvement,  // the best candidate's credit is less than options.min_improvement of the refit's validation RMS
+  bic,              // the best candidate does not lower the BIC of the refit without it
   mode_cap,         // options.max_modes_added modes added, and no other effect qualifies
   not_fitted,       // no candidate could be fitted (stop_reason names each and why)
 };

@@ -130,6 +130,9 @@ int diagnose(const DiagnoseArgs& args) {
       if (p.step == 0)
         std::fprintf(stderr, "modalwatch diagnose: step 0: configured model: validation RMS %.4g (%.1f s)\n",
                      p.validation_rms, elapsed);
+      else if (p.effect == "refit")
+        std::fprintf(stderr, "modalwatch diagnose: step %d/%d: refit alone: validation RMS %.4g (%.1f s)\n", p.step,
+                     args.max_steps, p.validation_rms, elapsed);
       else if (p.valid)
         std::fprintf(stderr, "modalwatch diagnose: step %d/%d: tried %s: validation RMS %.4g (%.1f s)\n", p.step,
                      args.max_steps, p.effect.c_str(), p.validation_rms, elapsed);
@@ -149,7 +152,7 @@ int diagnose(const DiagnoseArgs& args) {
     DiagnoseResult r = diagnose(est, val, initial, loop, options);
     r.stop_reason += stop_option(r.stop);
 
-    write_diagnose_report({args, config, r, val, lead_in, est.size(), time_in_samples(full, args, config)});
+    write_diagnose_report({args, config, r, val, lead_in, est, time_in_samples(full, args, config)});
     for (const auto& step : r.steps) print_physical_findings(step.physical);
     return 0;
   });

@@ -10,6 +10,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
+#include <complex>
 #include <cstring>
 #include <filesystem>
 #include <numbers>
@@ -18,6 +19,7 @@
 
 #include "json_writer.hpp"
 #include "modalwatch/io/atomic_file.hpp"
+#include "modalwatch/initial_modes.hpp"
 #include "modalwatch/io/csv.hpp"
 
 extern char** environ;
@@ -64,11 +66,35 @@ void write_effects(JsonWriter& j, const ModelEffects& e) {
   j.end_object();
 }
 
-void write_step(JsonWriter& j, const DiagnoseStep& s) {
-  j.begin_object().key("effect").value(s.effect).key("params").begin_object();
-  for (const auto& [k, v] : s.params) j.key(k).value(v, 10);
+void write_params(JsonWriter& j, const EffectParams& params) {
+  j.begin_object();
+  for (const auto& [k, v] : params) j.key(k).value(v, 10);
   j.end_object();
+}
+
+// The refit alone of a step's model and the candidates tried from it, each with its credit over that refit.
+void write_candidates(JsonWriter& j, const DiagnoseStep& s) {
+  j.key("refit").begin_object();
+  j.key("validation_rms").value(s.refit.validation_rms, 10).key("fit_percent").value(s.refit.fit_percent, 8);
+  j.key("estimation_rms").value(s.refit.estimation_rms, 10).key("bic").value(s.refit.bic, 10);
+  j.end_object();
+  j.key("candidates").begin_array();
+  for (const Candidate& c : s.ranking) {
+    j.begin_object().key("effect").value(effect_name(c.kind));
+    write_params(j.key("params"), c.params);
+    j.key("validation_rms").value(c.validation_rms, 10).key("credit").value(c.credit, 10);
+    j.key("estimation_rms").value(c.estimation_rms, 10).key("bic").value(c.bic, 10);
+    j.key("valid").value(c.valid).key("note").value(c.note);
+    j.end_object();
+  }
+  j.end_array();
+}
+
+void write_step(JsonWriter& j, const DiagnoseStep& s) {
+  j.begin_object().key("effect").value(s.effect);
+  write_params(j.key("params"), s.params);
   j.key("validation_rms").value(s.validation_rms, 10).key("fit_percent").value(s.fit_percent, 8);
+  j.key("refit_validation_rms").value(s.refit_validation_rms, 10).key("credit").value(s.credit, 10);
   j.key("estimation_rms").value(s.estimation_rms, 10).key("bic").value(s.bic, 10);
   j.key("whiteness_pass").value(s.residual.whiteness.pass);
   write_test(j.key("whiteness"), s.residual.whiteness);
@@ -78,6 +104,7 @@ void write_step(JsonWriter& j, const DiagnoseStep& s) {
   for (const Submodel& sm : s.model.linear.submodels) write_submodel(j, sm);
   j.end_array();
   write_effects(j.key("effects"), s.model.effects);
+  if (!s.ranking.empty() || s.refit.valid) write_candidates(j, s);
   j.end_object();
 }
 
@@ -178,7 +205,7 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
   const DiagnoseResult& r = in.result;
   const DiagnoseArgs& args = in.args;
   const Config& config = in.config;
-  const Eigen::Index n_est = in.estimation_samples, n_val = in.validation.size() - in.lead_in;
+  const Eigen::Index n_est = in.estimation.size(), n_val = in.validation.size() - in.lead_in;
   std::ostringstream o;
   o << "# modalwatch diagnose\n\n";
   o << "Config `" << args.config << "` (" << (config.closed_loop ? "closed" : "open") << " loop), data `" << args.data
@@ -194,15 +221,20 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
   o << "Validation error: the model simulated on the validation part ("
     << (config.closed_loop ? "closed loop from r, with the measured excitation besides the controller"
                            : "open loop from the measured u")
-    << "). fit % = 100 (1 - ||y - y_sim|| / ||y - mean(y)||). BIC = N ln(MSE) + k ln N on the estimation part.\n\n";
+    << "). fit % = 100 (1 - ||y - y_sim|| / ||y - mean(y)||). BIC = N ln(MSE) + k ln N on the estimation part. "
+       "Credit of an effect: the validation RMS of the model without it, refitted alone from the same start with "
+       "the same iterations (refit alone), minus the validation RMS with it; an effect is added on its credit, so "
+       "what further refinement alone gives is not counted as the effect's.\n\n";
   o << "## Steps (before/after)\n\n";
-  o << "| step | added effect | fitted parameters | est. RMS | val. RMS | fit % | BIC | whiteness | independence | "
-       "coherence |\n|---|---|---|---|---|---|---|---|---|---|\n";
+  o << "| step | added effect | fitted parameters | est. RMS | refit alone val. RMS | val. RMS | credit | fit % | BIC | "
+       "whiteness | independence | coherence |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (std::size_t i = 0; i < r.steps.size(); ++i) {
     const DiagnoseStep& s = r.steps[i];
     o << "| " << i << " | " << s.effect << " | " << params_text(s.params) << " | " << format_number(s.estimation_rms, 4)
-      << " | " << format_number(s.validation_rms, 4) << " | " << format_number(s.fit_percent, 4) << " | "
-      << format_number(s.bic, 6) << " | " << test_line(s.residual.whiteness) << " | "
+      << " | " << (i == 0 ? "-" : format_number(s.refit_validation_rms, 4)) << " | "
+      << format_number(s.validation_rms, 4) << " | " << (i == 0 ? "-" : format_number(s.credit, 4)) << " | "
+      << format_number(s.fit_percent, 4) << " | " << format_number(s.bic, 6) << " | " << test_line(s.residual.whiteness)
+      << " | "
       << test_line(s.residual.independence) << " | " << test_line(s.residual.coherence) << " |\n";
   }
   o << "\nStopped: " << r.stop_reason << ".\n\n";
@@ -213,14 +245,19 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
   for (std::size_t i = 0; i < r.steps.size(); ++i) {
     const DiagnoseStep& s = r.steps[i];
     if (s.ranking.empty()) continue;
-    o << "### Candidates from step " << i << " (ranked by validation RMS)\n\n";
-    o << "| rank | effect | parameters | est. RMS | val. RMS | fit % | BIC | note "
-         "|\n|---|---|---|---|---|---|---|---|\n";
+    o << "### Candidates from step " << i << " (ranked by credit)\n\n";
+    o << "Refit alone of step " << i << "'s model: est. RMS " << format_number(s.refit.estimation_rms, 4)
+      << ", val. RMS " << format_number(s.refit.validation_rms, 4) << " (step " << i << ": "
+      << format_number(s.validation_rms, 4) << "), fit " << format_number(s.refit.fit_percent, 4) << " %, BIC "
+      << format_number(s.refit.bic, 6) << ".\n\n";
+    o << "| rank | effect | parameters | est. RMS | val. RMS | credit | fit % | BIC | note "
+         "|\n|---|---|---|---|---|---|---|---|---|\n";
     for (std::size_t j = 0; j < s.ranking.size(); ++j) {
       const Candidate& c = s.ranking[j];
       o << "| " << j + 1 << " | " << effect_name(c.kind) << " | " << params_text(c.params) << " | "
         << format_number(c.estimation_rms, 4) << " | " << format_number(c.validation_rms, 4) << " | "
-        << format_number(c.fit_percent, 4) << " | " << format_number(c.bic, 6) << " | " << c.note << " |\n";
+        << format_number(c.credit, 4) << " | " << format_number(c.fit_percent, 4) << " | "
+        << format_number(c.bic, 6) << " | " << c.note << " |\n";
     }
     o << "\n";
   }
@@ -235,7 +272,7 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
   if (plots.made) {
     o << "![Residual spectrum before and after](residual_spectrum.png)\n\n";
     o << "![Simulated against measured, validation part](validation.png)\n\n";
-    o << "![Bode of both models](bode.png)\n";
+    o << "![Bode of both models and the measured frequency response](bode.png)\n";
   } else {
     o << "Not made";
     if (!plots.failure.empty()) o << " (" << plots.failure << ")";
@@ -243,6 +280,28 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
       << "bode.png from the CSV files here.\n";
   }
   return o.str();
+}
+
+double degrees(std::complex<double> h) { return std::arg(h) * 180.0 / std::numbers::pi; }
+
+// The measured frequency response of the estimation part (H1 = S_yu / S_uu in
+// open loop, S_yr / S_ur in closed loop, the hold's half-sample delay removed)
+// and its coherence, beside both models' responses at the same frequencies.
+void write_measured_frf(const std::string& dir, const DiagnoseResult& r, const Record& estimation, bool closed_loop) {
+  const FrequencyResponse h = frequency_response(estimation, closed_loop);
+  const Eigen::Index F = h.frequency_hz.size() - 1;  // without DC
+  Eigen::MatrixXd t(F, 8);
+  for (Eigen::Index k = 0; k < F; ++k) {
+    const double f = h.frequency_hz(k + 1);
+    const std::complex<double> m = h.response(k + 1);
+    const auto g0 = r.steps.front().model.linear.response(2.0 * std::numbers::pi * f);
+    const auto g1 = r.steps.back().model.linear.response(2.0 * std::numbers::pi * f);
+    t.row(k) << f, std::abs(m), degrees(m), h.coherence(k + 1), std::abs(g0), degrees(g0), std::abs(g1), degrees(g1);
+  }
+  write_table(dir + "/frf.csv",
+              {"f_hz", "mag_measured", "phase_measured_deg", "coherence", "mag_before", "phase_before_deg", "mag_after",
+               "phase_after_deg"},
+              t);
 }
 
 void write_tables(const std::string& dir, const DiagnoseResult& r, const Record& full_val, Eigen::Index lead_in) {
@@ -274,8 +333,7 @@ void write_tables(const std::string& dir, const DiagnoseResult& r, const Record&
       const double f = f0 * std::pow(f1 / f0, double(i) / (F - 1));
       const double w = 2.0 * std::numbers::pi * f;
       const auto g0 = first.model.linear.response(w), g1 = last.model.linear.response(w);
-      t.row(i) << f, std::abs(g0), std::arg(g0) * 180.0 / std::numbers::pi, std::abs(g1),
-          std::arg(g1) * 180.0 / std::numbers::pi;
+      t.row(i) << f, std::abs(g0), degrees(g0), std::abs(g1), degrees(g1);
     }
     write_table(dir + "/bode.csv", {"f_hz", "mag_before", "phase_before_deg", "mag_after", "phase_after_deg"}, t);
   }
@@ -290,12 +348,13 @@ void write_tables(const std::string& dir, const DiagnoseResult& r, const Record&
 }
 
 void print_steps(const DiagnoseResult& r, const std::string& dir) {
-  std::printf("%-4s %-11s %-44s %12s %12s %8s %10s\n", "step", "effect", "parameters", "est. RMS", "val. RMS", "fit %",
-              "whiteness");
+  std::printf("%-4s %-11s %-44s %12s %12s %12s %12s %8s %10s\n", "step", "effect", "parameters", "est. RMS",
+              "refit RMS", "val. RMS", "credit", "fit %", "whiteness");
   for (std::size_t i = 0; i < r.steps.size(); ++i) {
     const DiagnoseStep& s = r.steps[i];
-    std::printf("%-4zu %-11s %-44s %12.5g %12.5g %8.3f %10s\n", i, s.effect.c_str(), params_text(s.params).c_str(),
-                s.estimation_rms, s.validation_rms, s.fit_percent, s.residual.whiteness.pass ? "pass" : "fail");
+    std::printf("%-4zu %-11s %-44s %12.5g %12.5g %12.5g %12.5g %8.3f %10s\n", i, s.effect.c_str(),
+                params_text(s.params).c_str(), s.estimation_rms, s.refit_validation_rms, s.validation_rms, s.credit,
+                s.fit_percent, s.residual.whiteness.pass ? "pass" : "fail");
   }
   std::printf("stopped: %s\nreport: %s/report.md\n", r.stop_reason.c_str(), dir.c_str());
 }
@@ -319,6 +378,7 @@ void write_diagnose_report(const DiagnoseReport& in) {
   std::filesystem::create_directories(args.report);
   write_file_atomically(args.report + "/summary.json", diagnose_summary_json(r, in.time_in_samples));
   write_tables(args.report, r, in.validation, in.lead_in);
+  write_measured_frf(args.report, r, in.estimation, in.config.closed_loop);
   std::string yaml = config_to_yaml(in.config, r.steps.back().model.linear);
   const std::string eff = effects_comment(r.steps.back().model.effects);
   if (!eff.empty())

@@ -2,7 +2,9 @@
 // The report of `modalwatch diagnose`, in its directory: report.md (the steps
 // before and after, the ranked candidates, the models), summary.json (the same
 // steps for programs), model.yaml (the augmented model as a config), the CSV
-// tables, and the PNGs scripts/plot/plot_diagnose.py makes from them.
+// tables (frf.csv: the measured frequency response of the estimation part with
+// its coherence, beside both models'), and the PNGs
+// scripts/plot/plot_diagnose.py makes from them.
 #include <string>
 
 #include <Eigen/Core>
@@ -23,7 +25,7 @@ struct DiagnoseReport {
   const DiagnoseResult& result;
   const Record& validation;  // as simulated: its first lead_in samples only set the state
   Eigen::Index lead_in = 0;
-  Eigen::Index estimation_samples = 0;
+  const Record& estimation;  // the part the models were fitted on: its measured frequency response is frf.csv
   // The record has no sample rate: t is a sample index (a --t-column such as n
   // of whole numbers, sample_rate_hz: 1), so times are in samples and
   // frequencies in cycles/sample. summary.json's "time_unit" says which.

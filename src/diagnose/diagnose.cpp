@@ -12,10 +12,15 @@
 // spectrum (then SRIVC of the enlarged additive model), a delay by a scan of
 // whole samples with a short refit each (the cross-correlation lag is reported).
 //
-// Ranking. By the validation RMS each candidate leaves; the Bayesian
-// information criterion BIC = N ln(MSE_est) + k ln N on the estimation part is
-// reported, and the best candidate is added only when it lowers both the
-// validation RMS (by DiagnoseOptions::min_improvement) and the BIC.
+// Ranking. Each step refits the current model alone, from the same start and
+// with the same iterations as each candidate; a candidate's credit is the
+// validation RMS of that refit minus its own, so an effect is not credited with
+// what more refinement of the model gives anyway. Candidates are ranked by
+// credit (the order of the validation RMS they leave); the Bayesian information
+// criterion BIC = N ln(MSE_est) + k ln N on the estimation part is reported,
+// and the best candidate is added only when its credit is more than
+// DiagnoseOptions::min_improvement of the refit's validation RMS and it lowers
+// the refit's BIC.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -294,6 +299,19 @@ Candidate finish(EffectKind kind, const Refined& r, const Context& ctx) {
   return c;
 }
 
+Refit refit_alone(const AugmentedModel& current, const Context& ctx) {
+  const Refined r = fit_structure(current, ctx.est, ctx.options, true);
+  const Scored s = score(r.model, r.cost, ctx.est, ctx.val, ctx.options.validation_lead_in);
+  Refit out;
+  out.model = r.model;
+  out.estimation_rms = s.estimation_rms;
+  out.validation_rms = s.validation_rms;
+  out.fit_percent = s.fit_percent;
+  out.bic = s.bic;
+  out.valid = std::isfinite(s.validation_rms);
+  return out;
+}
+
 Candidate invalid(EffectKind kind, const std::string& why) {
   Candidate c;
   c.kind = kind;
@@ -497,6 +515,13 @@ std::string percent(double fraction) {
   return text;
 }
 
+// 0.0123456 -> "0.01235".
+std::string number(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.4g", v);
+  return text;
+}
+
 int added_modes(const AugmentedModel& m) {
   int n = 0;
   for (const auto& s : m.linear.submodels) n += s.name.rfind("added", 0) == 0 ? 1 : 0;
@@ -591,6 +616,13 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
       break;
     }
     const Eigen::VectorXd y0 = output(now.model, est);
+    now.refit = refit_alone(now.model, ctx);
+    if (options.progress)
+      options.progress({step + 1, "refit", now.refit.validation_rms, now.refit.valid,
+                        now.refit.valid ? "" : "diverged on validation"});
+    // The yardstick of the credit; the model as it stands when its refit diverges on validation.
+    const double base_rms = now.refit.valid ? now.refit.validation_rms : now.validation_rms;
+    const double base_bic = now.refit.valid ? now.refit.bic : now.bic;
     std::vector<Candidate> candidates;
     auto tried = [&](Candidate c) {
       if (options.progress) options.progress({step + 1, effect_name(c.kind), c.validation_rms, c.valid, c.note});
@@ -604,9 +636,11 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
     if (enabled(EffectKind::delay)) tried(candidate_delay(now.model, y0, ctx));
     if (enabled(EffectKind::coulomb)) tried(candidate_coulomb(now.model, y0, ctx));
     if (enabled(EffectKind::cubic)) tried(candidate_cubic(now.model, y0, ctx));
+    for (Candidate& c : candidates)
+      if (c.valid) c.credit = base_rms - c.validation_rms;
     std::stable_sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {
       if (a.valid != b.valid) return a.valid;
-      return a.validation_rms < b.validation_rms;
+      return a.credit > b.credit;
     });
     now.ranking = candidates;
     // Why no candidate qualifies; with the mode left out by the cap, the cap is the rule that stopped it.
@@ -616,17 +650,17 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
       why = "no candidate could be fitted";
       for (std::size_t i = 0; i < candidates.size(); ++i)
         why += std::string(i == 0 ? ": " : ", ") + effect_name(candidates[i].kind) + " (" + candidates[i].note + ")";
-    } else if (const Candidate& best = candidates.front();
-               !(best.validation_rms < (1.0 - options.min_improvement) * now.validation_rms)) {
+    } else if (const Candidate& best = candidates.front(); !(best.credit > options.min_improvement * base_rms)) {
       rule = DiagnoseStop::min_improvement;
-      const double drop = 1.0 - best.validation_rms / now.validation_rms;
+      const double drop = best.credit / base_rms;
+      const std::string against = "the refit without it (" + number(base_rms) + " -> " + number(best.validation_rms) + ")";
       why = std::string("best candidate (") + effect_name(best.kind) + ") " +
-            (drop > 0.0 ? "lowers the validation RMS by " + percent(drop) + ", less than the "
-                        : "does not lower the validation RMS (" + percent(-drop) + " higher), ") +
+            (drop > 0.0 ? "lowers the validation RMS by " + percent(drop) + " beyond " + against + ", less than the "
+                        : "does not lower the validation RMS beyond " + against + ", against the ") +
             percent(options.min_improvement) + " asked";
-    } else if (!(best.bic < now.bic)) {
+    } else if (!(best.bic < base_bic)) {
       rule = DiagnoseStop::bic;
-      why = std::string("best candidate (") + effect_name(best.kind) + ") does not lower the BIC";
+      why = std::string("best candidate (") + effect_name(best.kind) + ") does not lower the BIC of the refit without it";
     }
     if (!why.empty()) {
       if (mode_capped && candidates.empty())
@@ -646,6 +680,8 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
     result.steps.push_back(
         make_step(effect_name(best.kind), best.params, chosen.model, chosen.cost, est, val, options));
     result.steps.back().physical = findings;
+    result.steps.back().refit_validation_rms = base_rms;
+    result.steps.back().credit = best.credit;
   }
   return result;
 }
