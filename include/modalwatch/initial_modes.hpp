@@ -17,20 +17,25 @@
 #include <Eigen/Core>
 
 #include "modalwatch/model.hpp"
+#include "modalwatch/prefilter.hpp"
 #include "modalwatch/record.hpp"
 
 namespace modalwatch {
 
 struct FrequencyResponse {
   Eigen::VectorXd frequency_hz;
-  Eigen::VectorXcd response;  // H(j 2 pi f), with the half-sample delay of the hold removed
+  Eigen::VectorXcd response;  // H(j 2 pi f), with the half-sample delay of a held input removed
   Eigen::VectorXd excitation; // power of the excitation (u in open loop, r in closed loop) per frequency
   Eigen::VectorXd coherence;  // squared coherence of y with the excitation
   int segments = 0;
 };
 
-// segment_length 0: the longest power of two that still gives 8 averaged segments.
-FrequencyResponse frequency_response(const Record& data, bool closed_loop, int segment_length = 0);
+// segment_length 0: the longest power of two that still gives 8 averaged
+// segments. A held input (Hold::zoh) lags the samples by half a sample, which
+// is removed; a band-limited input (Hold::foh, interpolated between samples)
+// does not.
+FrequencyResponse frequency_response(const Record& data, bool closed_loop, int segment_length = 0,
+                                     Hold input = Hold::zoh);
 
 struct PeakOptions {
   double default_zeta = 0.02;      // when the half-power bandwidth is not resolved

@@ -3,9 +3,10 @@
 
 Usage: scripts/plot/plot_diagnose.py REPORT_DIR
 
-Reads spectra.csv, validation.csv and bode.csv written by `modalwatch diagnose`
-and writes residual_spectrum.png, validation.png and bode.png next to them
-(the report links these). When summary.json's time_unit is "samples" (the
+Reads spectra.csv, validation.csv, bode.csv and frf.csv (the measured
+frequency response with its coherence) written by `modalwatch diagnose` and
+writes residual_spectrum.png, validation.png and bode.png next to them (the
+report links these). When summary.json's time_unit is "samples" (the
 record's time is a sample index, no sample rate) the axes are in samples and
 cycles/sample. Needs Debian's python3-matplotlib (Agg backend).
 """
@@ -80,7 +81,19 @@ def main():
     plt.close(fig)
 
     b = load(os.path.join(d, "bode.csv"))
-    fig, ax = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    frf_path = os.path.join(d, "frf.csv")
+    m = load(frf_path) if os.path.exists(frf_path) else None
+    rows = 3 if m is not None else 2
+    fig, ax = plt.subplots(rows, 1, figsize=(8, 8 if m is not None else 6), sharex=True,
+                           gridspec_kw={"height_ratios": [3, 2, 1][:rows]})
+    if m is not None:
+        # Measured: thin line with dots, below the models.
+        ax[0].loglog(m["f_hz"], m["mag_measured"], ".-", color="0.45", lw=0.5, ms=2.5,
+                     label="measured (estimation part)")
+        # Wrapped to within 180 degrees of the augmented model's phase: no jumps where both are near -180.
+        phase = m["phase_measured_deg"]
+        phase = phase - 360.0 * np.round((phase - m["phase_after_deg"]) / 360.0)
+        ax[1].semilogx(m["f_hz"], phase, ".-", color="0.45", lw=0.5, ms=2.5)
     ax[0].loglog(b["f_hz"], b["mag_before"], label="configured model")
     ax[0].loglog(b["f_hz"], b["mag_after"], "--", label="augmented (linear part)")
     ax[0].set_ylabel("|G|")
@@ -89,9 +102,17 @@ def main():
     ax[1].semilogx(b["f_hz"], b["phase_before_deg"])
     ax[1].semilogx(b["f_hz"], b["phase_after_deg"], "--")
     ax[1].set_ylabel("phase [deg]")
-    ax[1].set_xlabel(f_label)
     ax[1].grid(True, which="both", alpha=0.3)
-    fig.suptitle("Bode of both models")
+    if m is not None:
+        # Where the coherence is low the measured response is not to be trusted.
+        ax[2].semilogx(m["f_hz"], m["coherence"], color="0.3", lw=0.8)
+        ax[2].fill_between(m["f_hz"], 0, m["coherence"], color="0.3", alpha=0.2)
+        ax[2].set_ylim(0, 1.05)
+        ax[2].set_ylabel("coherence")
+        ax[2].grid(True, which="both", alpha=0.3)
+    ax[-1].set_xlabel(f_label)
+    fig.suptitle("Bode of both models and the measured frequency response" if m is not None
+                 else "Bode of both models")
     fig.tight_layout()
     fig.savefig(os.path.join(d, "bode.png"), dpi=110)
     plt.close(fig)

@@ -285,10 +285,11 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
 double degrees(std::complex<double> h) { return std::arg(h) * 180.0 / std::numbers::pi; }
 
 // The measured frequency response of the estimation part (H1 = S_yu / S_uu in
-// open loop, S_yr / S_ur in closed loop, the hold's half-sample delay removed)
-// and its coherence, beside both models' responses at the same frequencies.
-void write_measured_frf(const std::string& dir, const DiagnoseResult& r, const Record& estimation, bool closed_loop) {
-  const FrequencyResponse h = frequency_response(estimation, closed_loop);
+// open loop, S_yr / S_ur in closed loop, a held input's half-sample delay
+// removed) and its coherence, beside both models' responses at the same frequencies.
+void write_measured_frf(const std::string& dir, const DiagnoseResult& r, const Record& estimation, bool closed_loop,
+                        Hold input) {
+  const FrequencyResponse h = frequency_response(estimation, closed_loop, 0, input);
   const Eigen::Index F = h.frequency_hz.size() - 1;  // without DC
   Eigen::MatrixXd t(F, 8);
   for (Eigen::Index k = 0; k < F; ++k) {
@@ -378,7 +379,8 @@ void write_diagnose_report(const DiagnoseReport& in) {
   std::filesystem::create_directories(args.report);
   write_file_atomically(args.report + "/summary.json", diagnose_summary_json(r, in.time_in_samples));
   write_tables(args.report, r, in.validation, in.lead_in);
-  write_measured_frf(args.report, r, in.estimation, in.config.closed_loop);
+  write_measured_frf(args.report, r, in.estimation, in.config.closed_loop,
+                     args.input_hold == "foh" ? Hold::foh : Hold::zoh);
   std::string yaml = config_to_yaml(in.config, r.steps.back().model.linear);
   const std::string eff = effects_comment(r.steps.back().model.effects);
   if (!eff.empty())

@@ -36,7 +36,7 @@ double crossing(const Eigen::VectorXd& logh, const Eigen::VectorXd& f, Eigen::In
 
 }  // namespace
 
-FrequencyResponse frequency_response(const Record& data, bool closed_loop, int segment_length) {
+FrequencyResponse frequency_response(const Record& data, bool closed_loop, int segment_length, Hold input) {
   const Eigen::Index N = data.size();
   if (closed_loop && !data.has_reference())
     throw std::invalid_argument("frequency_response: closed loop needs the reference r in the record");
@@ -66,8 +66,9 @@ FrequencyResponse frequency_response(const Record& data, bool closed_loop, int s
     out.segments = yr.segments;
   }
   // The zero-order hold delays by half a sample: H_d ~ G e^{-j w T / 2}.
-  for (Eigen::Index k = 0; k < out.response.size(); ++k)
-    out.response(k) *= std::polar(1.0, 0.5 * kTwoPi * out.frequency_hz(k) * T);
+  if (input == Hold::zoh)
+    for (Eigen::Index k = 0; k < out.response.size(); ++k)
+      out.response(k) *= std::polar(1.0, 0.5 * kTwoPi * out.frequency_hz(k) * T);
   return out;
 }
 
