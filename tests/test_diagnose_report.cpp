@@ -115,20 +115,20 @@ TEST_F(DiagnoseCli, FindsTheOffsetAndWritesTheReport) {
 // The 2-mode plant of kOffsetPlant without the offset, in open loop or in
 // closed loop with a PD controller and a multisine reference.
 std::string two_mode_plant(bool closed) {
-  std::string loop = closed ? "  loop: closed\n" : "";
-  std::string controller = closed ? "controller:\n  numerator: [4.5, -4]\n  denominator: [1, 0]\n" : "";
-  return "sample_rate_hz: 100\nmodel:\n" + loop + R"(  submodels:
-    - {name: m1, kind: mode, wn: 5.3, zeta: 0.08, gain: 0.8}
-    - {name: m2, kind: mode, wn: 19, zeta: 0.05, gain: 0.6}
-)" + controller + R"(plant:
-  noise_variance: 1.0e-6
-  modes:
-    - {name: m1, kind: mode, wn: 5, zeta: 0.05, gain: 1}
-    - {name: m2, kind: mode, wn: 20, zeta: 0.03, gain: 0.5}
-simulation:
-  duration: 40
-  )" + std::string(closed ? "reference" : "input") + R"(: {type: multisine, f_min_hz: 0.1, f_max_hz: 10, period_s: 10, rms: 1}
-)";
+  const std::string excitation = closed ? "reference" : "input";
+  return "sample_rate_hz: 100\nmodel:\n" + std::string(closed ? "  loop: closed\n" : "") +
+         "  submodels:\n"
+         "    - {name: m1, kind: mode, wn: 5.3, zeta: 0.08, gain: 0.8}\n"
+         "    - {name: m2, kind: mode, wn: 19, zeta: 0.05, gain: 0.6}\n" +
+         std::string(closed ? "controller:\n  numerator: [4.5, -4]\n  denominator: [1, 0]\n" : "") +
+         "plant:\n"
+         "  noise_variance: 1.0e-6\n"
+         "  modes:\n"
+         "    - {name: m1, kind: mode, wn: 5, zeta: 0.05, gain: 1}\n"
+         "    - {name: m2, kind: mode, wn: 20, zeta: 0.03, gain: 0.5}\n"
+         "simulation:\n"
+         "  duration: 40\n  " +
+         excitation + ": {type: multisine, f_min_hz: 0.1, f_max_hz: 10, period_s: 10, rms: 1}\n";
 }
 
 // frf.csv holds the measured frequency response of the estimation part: where

@@ -109,13 +109,13 @@ struct DiagnoseProgress {
 
 struct DiagnoseOptions {
   int max_steps = 5;  // effects added at most
-  // An effect is added when its credit is at least this fraction of the
+  // An effect is added when its credit is more than this fraction of the
   // validation RMS of the refit without it.
   double min_improvement = 0.10;
-  int max_delay = 10;             // samples
-  int max_lag = 25;               // residual correlation lags
-  int oe_iterations = 40;         // Levenberg-Marquardt iterations of the output-error refinement
-  int max_modes_added = 4;        // modes added at most (the mode candidate is not tried past it)
+  int max_delay = 10;       // samples
+  int max_lag = 25;         // residual correlation lags
+  int oe_iterations = 40;   // Levenberg-Marquardt iterations of the output-error refinement
+  int max_modes_added = 4;  // modes added at most (the mode candidate is not tried past it)
   // Samples at the start of the validation record that only set the model's
   // state (the estimation part before a split): simulated, not scored.
   Eigen::Index validation_lead_in = 0;

@@ -24,9 +24,9 @@ namespace modalwatch {
 
 struct FrequencyResponse {
   Eigen::VectorXd frequency_hz;
-  Eigen::VectorXcd response;  // H(j 2 pi f), with the half-sample delay of a held input removed
-  Eigen::VectorXd excitation; // power of the excitation (u in open loop, r in closed loop) per frequency
-  Eigen::VectorXd coherence;  // squared coherence of y with the excitation
+  Eigen::VectorXcd response;   // H(j 2 pi f), with the half-sample delay of a held input removed
+  Eigen::VectorXd excitation;  // power of the excitation (u in open loop, r in closed loop) per frequency
+  Eigen::VectorXd coherence;   // squared coherence of y with the excitation
   int segments = 0;
 };
 

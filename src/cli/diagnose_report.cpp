@@ -226,7 +226,8 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
        "the same iterations (refit alone), minus the validation RMS with it; an effect is added on its credit, so "
        "what further refinement alone gives is not counted as the effect's.\n\n";
   o << "## Steps (before/after)\n\n";
-  o << "| step | added effect | fitted parameters | est. RMS | refit alone val. RMS | val. RMS | credit | fit % | BIC | "
+  o << "| step | added effect | fitted parameters | est. RMS | refit alone val. RMS | val. RMS | credit | fit % | BIC "
+       "| "
        "whiteness | independence | coherence |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (std::size_t i = 0; i < r.steps.size(); ++i) {
     const DiagnoseStep& s = r.steps[i];
@@ -234,8 +235,7 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
       << " | " << (i == 0 ? "-" : format_number(s.refit_validation_rms, 4)) << " | "
       << format_number(s.validation_rms, 4) << " | " << (i == 0 ? "-" : format_number(s.credit, 4)) << " | "
       << format_number(s.fit_percent, 4) << " | " << format_number(s.bic, 6) << " | " << test_line(s.residual.whiteness)
-      << " | "
-      << test_line(s.residual.independence) << " | " << test_line(s.residual.coherence) << " |\n";
+      << " | " << test_line(s.residual.independence) << " | " << test_line(s.residual.coherence) << " |\n";
   }
   o << "\nStopped: " << r.stop_reason << ".\n\n";
   o << "Residual tests (validation part): whiteness = largest |autocorrelation| at lags 1..M against the 99 % band "
@@ -256,8 +256,8 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
       const Candidate& c = s.ranking[j];
       o << "| " << j + 1 << " | " << effect_name(c.kind) << " | " << params_text(c.params) << " | "
         << format_number(c.estimation_rms, 4) << " | " << format_number(c.validation_rms, 4) << " | "
-        << format_number(c.credit, 4) << " | " << format_number(c.fit_percent, 4) << " | "
-        << format_number(c.bic, 6) << " | " << c.note << " |\n";
+        << format_number(c.credit, 4) << " | " << format_number(c.fit_percent, 4) << " | " << format_number(c.bic, 6)
+        << " | " << c.note << " |\n";
     }
     o << "\n";
   }
@@ -351,11 +351,12 @@ void write_tables(const std::string& dir, const DiagnoseResult& r, const Record&
 void print_steps(const DiagnoseResult& r, const std::string& dir) {
   std::printf("%-4s %-11s %-44s %12s %12s %12s %12s %8s %10s\n", "step", "effect", "parameters", "est. RMS",
               "refit RMS", "val. RMS", "credit", "fit %", "whiteness");
+  const auto text = [](double v) { return std::isfinite(v) ? format_number(v, 5) : std::string("-"); };
   for (std::size_t i = 0; i < r.steps.size(); ++i) {
     const DiagnoseStep& s = r.steps[i];
-    std::printf("%-4zu %-11s %-44s %12.5g %12.5g %12.5g %12.5g %8.3f %10s\n", i, s.effect.c_str(),
-                params_text(s.params).c_str(), s.estimation_rms, s.refit_validation_rms, s.validation_rms, s.credit,
-                s.fit_percent, s.residual.whiteness.pass ? "pass" : "fail");
+    std::printf("%-4zu %-11s %-44s %12.5g %12s %12.5g %12s %8.3f %10s\n", i, s.effect.c_str(),
+                params_text(s.params).c_str(), s.estimation_rms, text(s.refit_validation_rms).c_str(), s.validation_rms,
+                text(s.credit).c_str(), s.fit_percent, s.residual.whiteness.pass ? "pass" : "fail");
   }
   std::printf("stopped: %s\nreport: %s/report.md\n", r.stop_reason.c_str(), dir.c_str());
 }

@@ -101,7 +101,9 @@ int main(int argc, char** argv) {
   diagnose_cmd->add_option("--max-added-modes", diag.max_modes_added, "modes added at most")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  diagnose_cmd->add_option("--min-improvement", diag.min_improvement, "relative drop of the validation RMS to add")
+  diagnose_cmd
+      ->add_option("--min-improvement", diag.min_improvement,
+                   "credit to add an effect: its drop of the validation RMS beyond the refit without it, relative")
       ->check(CLI::Range(0.0, 1.0));
   diagnose_cmd->add_option("--max-delay", diag.max_delay, "largest input delay tried [samples]")
       ->check(CLI::PositiveNumber);

@@ -653,14 +653,16 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
     } else if (const Candidate& best = candidates.front(); !(best.credit > options.min_improvement * base_rms)) {
       rule = DiagnoseStop::min_improvement;
       const double drop = best.credit / base_rms;
-      const std::string against = "the refit without it (" + number(base_rms) + " -> " + number(best.validation_rms) + ")";
+      const std::string against =
+          "the refit without it (" + number(base_rms) + " -> " + number(best.validation_rms) + ")";
       why = std::string("best candidate (") + effect_name(best.kind) + ") " +
             (drop > 0.0 ? "lowers the validation RMS by " + percent(drop) + " beyond " + against + ", less than the "
                         : "does not lower the validation RMS beyond " + against + ", against the ") +
             percent(options.min_improvement) + " asked";
     } else if (!(best.bic < base_bic)) {
       rule = DiagnoseStop::bic;
-      why = std::string("best candidate (") + effect_name(best.kind) + ") does not lower the BIC of the refit without it";
+      why =
+          std::string("best candidate (") + effect_name(best.kind) + ") does not lower the BIC of the refit without it";
     }
     if (!why.empty()) {
       if (mode_capped && candidates.empty())
