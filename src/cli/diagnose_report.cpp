@@ -264,7 +264,10 @@ std::string report_md(const DiagnoseReport& in, const PlotOutcome& plots) {
   o << "## Models\n\nConfigured structure, fitted (step 0):\n\n" << model_table(r.steps.front().model.linear);
   o << "\nAugmented (last step):\n\n" << model_table(r.steps.back().model.linear);
   const std::string eff = effects_comment(r.steps.back().model.effects);
-  if (!eff.empty()) o << "\nEffects (fitted by diagnose only):\n\n```\n" << eff << "```\n";
+  if (!eff.empty())
+    o << "\nEffects (fitted by diagnose only; the offsets add: the plant input is u + input_offset, the output "
+         "G(p)(u + input_offset - ...) + output_offset):\n\n```\n"
+      << eff << "```\n";
   o << "\n`model.yaml` holds the augmented model: its modes and rigid bodies are read by `fit`, `track` and the "
        "daemon; offset, drift, delay, Coulomb and cubic terms are written as comments, since only `diagnose` "
        "fits them.\n\n";
