@@ -616,10 +616,16 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
       break;
     }
     const Eigen::VectorXd y0 = output(now.model, est);
-    now.refit = refit_alone(now.model, ctx);
-    if (options.progress)
-      options.progress({step + 1, "refit", now.refit.validation_rms, now.refit.valid,
-                        now.refit.valid ? "" : "diverged on validation"});
+    const bool mode_capped = enabled(EffectKind::mode) && added_modes(now.model) >= options.max_modes_added;
+    // The refit alone only when a candidate will be measured against it.
+    const bool any_candidate = std::any_of(options.library.begin(), options.library.end(),
+                                           [&](EffectKind k) { return k != EffectKind::mode || !mode_capped; });
+    if (any_candidate) {
+      now.refit = refit_alone(now.model, ctx);
+      if (options.progress)
+        options.progress({step + 1, "refit", now.refit.validation_rms, now.refit.valid,
+                          now.refit.valid ? "" : "diverged on validation"});
+    }
     // The yardstick of the credit; the model as it stands when its refit diverges on validation.
     const double base_rms = now.refit.valid ? now.refit.validation_rms : now.validation_rms;
     const double base_bic = now.refit.valid ? now.refit.bic : now.bic;
@@ -628,7 +634,6 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
       if (options.progress) options.progress({step + 1, effect_name(c.kind), c.validation_rms, c.valid, c.note});
       candidates.push_back(std::move(c));
     };
-    const bool mode_capped = enabled(EffectKind::mode) && added_modes(now.model) >= options.max_modes_added;
     if (enabled(EffectKind::mode) && !mode_capped) tried(candidate_mode(now.model, y0, ctx));
     if (enabled(EffectKind::rigid_body)) tried(candidate_rigid_body(now.model, y0, ctx));
     if (enabled(EffectKind::offset)) tried(candidate_offset(now.model, y0, ctx));
