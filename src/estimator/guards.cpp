@@ -83,8 +83,12 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
     b.P = b.good_P;
     rediscretise(b);
   }
+  // The noise level goes back with the state. The first residuals on the
+  // restarted filters are their transient, not noise: they must not set e_var
+  // again (as the very first residual does), only the outlier test restarts
+  // (after a hundred residuals, as at the start).
   e_var = e_var_good;
-  e_count = 0;  // outlier statistics restart with the filters
+  e_count = 1;
   restart_filters();
   // Give the restored state one residual window before judging it again.
   rearm = static_cast<std::uint64_t>(1.0 / (1.0 - e_alpha));

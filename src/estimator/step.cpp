@@ -147,7 +147,8 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   // value, and e_short follows the error to tell when the transient has died out.
   if (!std::isfinite(s.y)) {
     y = y_hat;
-  } else if (e_count > 100 && outlier_run < kOutlierRun && e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var &&
+  } else if (settling == 0 && e_count > 100 && outlier_run < kOutlierRun &&
+             e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var &&
              above_round_off()) {
     y = y_hat;
     ++outlier_run;
