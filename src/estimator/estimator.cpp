@@ -141,22 +141,18 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
     throw std::invalid_argument("estimator: one forgetting factor per submodel");
   for (double l : settings.forgetting)
     if (!(l > 0.0 && l <= 1.0)) throw std::invalid_argument("estimator: forgetting factor outside (0, 1]");
-  if (!settings.random_walks.empty() && settings.random_walks.size() != initial.submodels.size())
-    throw std::invalid_argument("estimator: one random walk per submodel (or none)");
-  for (double q : settings.random_walks)
-    if (!(q >= 0.0 && std::isfinite(q))) throw std::invalid_argument("estimator: random walk negative or not finite");
-  if (!settings.stabilisations.empty() && settings.stabilisations.size() != initial.submodels.size())
-    throw std::invalid_argument("estimator: one stabilisation per submodel (or none)");
-  for (double q : settings.stabilisations)
-    if (!(q >= 0.0 && std::isfinite(q))) throw std::invalid_argument("estimator: stabilisation negative or not finite");
-  if (!(settings.stabilisation >= 0.0 && std::isfinite(settings.stabilisation)))
-    throw std::invalid_argument("estimator: stabilisation negative or not finite");
-  if (!settings.min_memories.empty() && settings.min_memories.size() != initial.submodels.size())
-    throw std::invalid_argument("estimator: one min_memory per submodel (or none)");
-  for (double c : settings.min_memories)
-    if (!(c >= 0.0 && std::isfinite(c))) throw std::invalid_argument("estimator: min_memory negative or not finite");
-  if (!(settings.min_memory >= 0.0 && std::isfinite(settings.min_memory)))
-    throw std::invalid_argument("estimator: min_memory negative or not finite");
+  // Settings >= 0 given for all submodels (value) or per submodel (values: one each, or none).
+  const auto check_non_negative = [&](double value, const std::vector<double>& values, const std::string& what) {
+    if (!values.empty() && values.size() != initial.submodels.size())
+      throw std::invalid_argument("estimator: one " + what + " per submodel (or none)");
+    for (double q : values)
+      if (!(q >= 0.0 && std::isfinite(q))) throw std::invalid_argument("estimator: " + what + " negative or not finite");
+    if (!(value >= 0.0 && std::isfinite(value)))
+      throw std::invalid_argument("estimator: " + what + " negative or not finite");
+  };
+  check_non_negative(settings.random_walk, settings.random_walks, "random walk");
+  check_non_negative(settings.stabilisation, settings.stabilisations, "stabilisation");
+  check_non_negative(settings.min_memory, settings.min_memories, "min_memory");
   if (settings.block_iterations < 1 || settings.refinements < 0 || settings.update_divisor < 1)
     throw std::invalid_argument("estimator: M_l >= 1, M_s >= 0 and the update divisor >= 1");
   if (settings.closed_loop && settings.controller.empty())
