@@ -19,6 +19,7 @@ inline EstimatorSettings settings_for(const Config& c, std::vector<double> forge
   s.forgetting = std::move(forgetting);
   s.random_walks.clear();    // the shipped random walks go with the shipped forgetting: lambda alone here
   s.stabilisations.clear();  // estimator.stabilisation for every submodel, whatever their number
+  s.min_memories.clear();    // estimator.min_memory likewise
   s.warmup_samples = warmup;
   return s;
 }

@@ -156,7 +156,7 @@ TEST(ConfigErrors, EstimatorKeysAndShape) {
       unknown,
       "test.yaml:31: key 'estimator.forgetting': unknown key for estimator (allowed: block_iterations, "
       "refinements, update_divisor, warmup, fit_on_warmup, warmup_iterations, initial_covariance_relative, "
-      "random_walk, covariance_bound, stabilisation, divergence_ratio, gap_factor, outlier_sigma, residual_window, "
+      "random_walk, covariance_bound, stabilisation, min_memory, divergence_ratio, gap_factor, outlier_sigma, residual_window, "
       "low_excitation_ratio, low_excitation_window)");
   EXPECT_EQ(parse_error(kBase + kEstimator + "  warmup: 3\n"),
             "test.yaml:31: key 'estimator.warmup': duplicate key (first at line 19)");
@@ -212,7 +212,7 @@ TEST(ConfigErrors, TransferFunctionOrders) {
             "test.yaml:4: key 'model.submodels[0].a': missing required key (kind transfer_function)");
   EXPECT_EQ(parse_error(edit(kTf, "a: [0.1, 0.01]", "wn: 3")),
             "test.yaml:6: key 'model.submodels[0].wn': unknown key for kind transfer_function (allowed: name, "
-            "kind, a, b, rigid_poles, forgetting, random_walk, stabilisation, initial_covariance)");
+            "kind, a, b, rigid_poles, forgetting, random_walk, stabilisation, min_memory, initial_covariance)");
 }
 
 TEST(ConfigErrors, UnstableTransferFunction) {
@@ -255,7 +255,7 @@ TEST(ConfigErrors, Feedthrough) {
   EXPECT_EQ(parse_error(edit(kTf, "      kind: transfer_function\n      a: [0.1, 0.01]\n      b: [1, 0.5]\n",
                              "      kind: feedthrough\n      gain: 0.25\n      rigid_poles: 1\n")),
             "test.yaml:7: key 'model.submodels[0].rigid_poles': unknown key for kind feedthrough (allowed: name, "
-            "kind, gain, forgetting, random_walk, stabilisation, initial_covariance)");
+            "kind, gain, forgetting, random_walk, stabilisation, min_memory, initial_covariance)");
 }
 
 TEST(ConfigErrors, InitialCovariance) {

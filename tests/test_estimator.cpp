@@ -418,6 +418,41 @@ TEST(RecursiveEstimator, GapsDoNotLookLikeDivergence) {
     EXPECT_NEAR(est.mode(i).value.wn / modal_parameters(truth.submodels[i]).wn, 1.0, 0.01) << "mode " << i + 1;
 }
 
+// A divergence reset goes back to the last good state with the noise level it
+// had then. The restarted filters' first residuals are their transient, not
+// noise: they neither set the noise level (which keeps its saved value while
+// the filters settle) nor count as outliers (replacing them by the model's
+// output would feed the model to its own prefilters).
+TEST(RecursiveEstimator, AResetKeepsTheSavedNoiseLevelWhileTheFiltersSettle) {
+  const SteadyBeam beam = steady_beam(20.0);
+  const Config& c = beam.config;
+  const Record& r = beam.record;
+  RecursiveEstimator est(c.model, c.estimator);
+  double noise_before = 0.0, noise_at_reset = 0.0;
+  std::uint64_t outliers_at_reset = 0;
+  Eigen::Index reset_at = -1;
+  for (Eigen::Index k = 0; k < r.size(); ++k) {
+    // From t = 10 s on, 0.3 s of an output 30 times its size: a divergence.
+    const bool damaged = r.t(k) >= 10.0 && r.t(k) < 10.3;
+    if (r.t(k) < 10.0) noise_before = est.noise_variance();
+    const unsigned flags = est.step(Sample{r.t(k), r.u(k), damaged ? 30.0 * r.y(k) : r.y(k), r.r(k)});
+    if ((flags & kReset) && reset_at < 0) {
+      reset_at = k;
+      noise_at_reset = est.noise_variance();
+      outliers_at_reset = est.status().outliers;
+    }
+    if (reset_at >= 0 && k > reset_at && k <= reset_at + 200) {
+      EXPECT_EQ(est.noise_variance(), noise_at_reset) << "sample " << k - reset_at << " after the reset";
+      EXPECT_EQ(est.status().outliers, outliers_at_reset) << "sample " << k - reset_at << " after the reset";
+    }
+  }
+  ASSERT_GE(reset_at, 0) << "no reset";
+  EXPECT_LT(r.t(reset_at), 10.3);
+  EXPECT_GT(noise_at_reset, 0.5 * noise_before);
+  EXPECT_LT(noise_at_reset, 2.0 * noise_before);
+  EXPECT_LT(est.noise_variance(), 2.0 * noise_before);  // the level of before the damage again at the end
+}
+
 // ------------------------------------------------------------------ step kernels
 
 // step() runs one of two compilations of the same source (portable x86-64, and
@@ -522,6 +557,12 @@ TEST(RecursiveEstimator, RejectsInconsistentSettings) {
   s.random_walks = {1e-4, -1e-4, 1e-4};
   EXPECT_THROW(RecursiveEstimator(c.model, s), std::invalid_argument);
   s.random_walks = {1e-4, 1e-4, 1e-4};
+  EXPECT_NO_THROW(RecursiveEstimator(c.model, s));
+  s.min_memories = {6.0, 6.0};  // one per submodel, or none
+  EXPECT_THROW(RecursiveEstimator(c.model, s), std::invalid_argument);
+  s.min_memories = {6.0, -1.0, 6.0};
+  EXPECT_THROW(RecursiveEstimator(c.model, s), std::invalid_argument);
+  s.min_memories = {6.0, 0.0, 6.0};
   EXPECT_NO_THROW(RecursiveEstimator(c.model, s));
 }
 

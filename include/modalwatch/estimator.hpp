@@ -83,6 +83,21 @@ struct EstimatorSettings {
   double stabilisation = 0.2;
   // Per submodel (empty: stabilisation for every one), as random_walks.
   std::vector<double> stabilisations;
+  // The shortest memory, in decay times of the submodel's slowest pole. The
+  // recursion filters the data with the current A_i as if it were fixed, but the
+  // prefilters' states hold the data filtered over about one decay time
+  // 1/(zeta_i wn_i) of A_i, with the theta_i of that time. Forgetting at a pace
+  // comparable to that decay closes a loop theta -> prefilter -> regressor ->
+  // theta that the update does not model: on a lightly damped mode its damping
+  // and gain wind up together until the output error diverges. The memory
+  // update_divisor / (1 - lambda_i) is therefore held at min_memory or more
+  // decay times of the current A_i (lambda_i raised where it is shorter), which
+  // restores the separation of time scales the recursion assumes. First- and
+  // second-order submodels without rigid poles (the modes); other submodels
+  // keep lambda_i. 0: lambda_i as configured.
+  double min_memory = 6.0;
+  // Per submodel (empty: min_memory for every one), as random_walks.
+  std::vector<double> min_memories;
   double divergence_ratio = 10.0;      // residual RMS this many times its last good value: reset
   double gap_factor = 1.5;             // a time step above gap_factor T is a gap: filter states reset
   double outlier_sigma = 10.0;         // |y - y_hat| above this many residual std: sample replaced

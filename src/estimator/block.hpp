@@ -1,6 +1,8 @@
 #pragma once
 // A block (one submodel of the additive model) as the recursive estimator
 // keeps it: theta-bar and P-bar in normalised time, and its four prefilters.
+#include <cmath>
+
 #include <Eigen/Core>
 
 #include "hot_path.hpp"
@@ -90,6 +92,9 @@ struct Block {
   bool biproper = false;  // m = n + l: the output has a direct feedthrough
   double ws = 1.0, lambda = 1.0;
   double random_walk = 0.0;  // relative std of theta's drift per update (Q, CONTSID's Kalman-filter adaptation)
+  // update_divisor T / min_memory (s): 1 - lambda may not exceed this times
+  // decay_rate() (EstimatorSettings::min_memory); 0: lambda as configured.
+  double forget_per_decay = 0.0;
   ThetaVec scale;            // theta' = scale .* theta (physical)
   ThetaVec theta;            // theta-bar, normalised
   ThetaMat P;                // P-bar, normalised
@@ -109,6 +114,17 @@ struct Block {
   ThetaMat good_P;
   ThetaVec phi, psi;
 
+  // Decay rate (1/s) of the slowest pole of A when A is of first or second
+  // order, stable, and the submodel has no rigid poles; else 0 (no such bound).
+  // In normalised time A = 1 + theta_0 p' (+ theta_1 p'^2), p' = p / ws.
+  MODALWATCH_HOT double decay_rate() const {
+    if (l != 0 || !(theta(0) > 0.0)) return 0.0;
+    if (n == 1) return ws / theta(0);
+    if (n != 2 || !(theta(1) > 0.0)) return 0.0;
+    const double a1 = theta(0), a2 = theta(1);
+    const double disc = a1 * a1 - 4.0 * a2;  // real poles: the slower one
+    return ws * (disc < 0.0 ? a1 : a1 - std::sqrt(disc)) / (2.0 * a2);
+  }
   FilterVector a_poly() const {
     FilterVector c(n + 1);
     c(0) = 1.0;

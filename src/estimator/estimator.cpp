@@ -44,7 +44,8 @@ bool EstimatorSettings::operator==(const EstimatorSettings& o) const {
          defer_warmup_fit == o.defer_warmup_fit && same_covariances() &&
          initial_covariance_relative == o.initial_covariance_relative && random_walk == o.random_walk &&
          random_walks == o.random_walks && covariance_bound == o.covariance_bound && stabilisation == o.stabilisation &&
-         stabilisations == o.stabilisations && divergence_ratio == o.divergence_ratio && gap_factor == o.gap_factor &&
+         stabilisations == o.stabilisations && min_memory == o.min_memory && min_memories == o.min_memories &&
+         divergence_ratio == o.divergence_ratio && gap_factor == o.gap_factor &&
          outlier_sigma == o.outlier_sigma && residual_window == o.residual_window &&
          low_excitation_ratio == o.low_excitation_ratio && low_excitation_window == o.low_excitation_window;
 }
@@ -64,6 +65,8 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.ws = time_scale(s);
     b.lambda = cfg.forgetting.empty() ? 1.0 : cfg.forgetting[i];
     b.random_walk = cfg.random_walks.empty() ? cfg.random_walk : cfg.random_walks[i];
+    const double min_memory = cfg.min_memories.empty() ? cfg.min_memory : cfg.min_memories[i];
+    b.forget_per_decay = min_memory > 0.0 ? cfg.update_divisor * T / min_memory : 0.0;
     b.scale.resize(b.nt);
     for (int j = 1; j <= b.n; ++j) b.scale(j - 1) = std::pow(b.ws, j);
     for (int k = 0; k <= b.m; ++k) b.scale(b.n + k) = std::pow(b.ws, k - b.l);
@@ -138,16 +141,18 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
     throw std::invalid_argument("estimator: one forgetting factor per submodel");
   for (double l : settings.forgetting)
     if (!(l > 0.0 && l <= 1.0)) throw std::invalid_argument("estimator: forgetting factor outside (0, 1]");
-  if (!settings.random_walks.empty() && settings.random_walks.size() != initial.submodels.size())
-    throw std::invalid_argument("estimator: one random walk per submodel (or none)");
-  for (double q : settings.random_walks)
-    if (!(q >= 0.0 && std::isfinite(q))) throw std::invalid_argument("estimator: random walk negative or not finite");
-  if (!settings.stabilisations.empty() && settings.stabilisations.size() != initial.submodels.size())
-    throw std::invalid_argument("estimator: one stabilisation per submodel (or none)");
-  for (double q : settings.stabilisations)
-    if (!(q >= 0.0 && std::isfinite(q))) throw std::invalid_argument("estimator: stabilisation negative or not finite");
-  if (!(settings.stabilisation >= 0.0 && std::isfinite(settings.stabilisation)))
-    throw std::invalid_argument("estimator: stabilisation negative or not finite");
+  // Settings >= 0 given for all submodels (value) or per submodel (values: one each, or none).
+  const auto check_non_negative = [&](double value, const std::vector<double>& values, const std::string& what) {
+    if (!values.empty() && values.size() != initial.submodels.size())
+      throw std::invalid_argument("estimator: one " + what + " per submodel (or none)");
+    for (double q : values)
+      if (!(q >= 0.0 && std::isfinite(q))) throw std::invalid_argument("estimator: " + what + " negative or not finite");
+    if (!(value >= 0.0 && std::isfinite(value)))
+      throw std::invalid_argument("estimator: " + what + " negative or not finite");
+  };
+  check_non_negative(settings.random_walk, settings.random_walks, "random walk");
+  check_non_negative(settings.stabilisation, settings.stabilisations, "stabilisation");
+  check_non_negative(settings.min_memory, settings.min_memories, "min_memory");
   if (settings.block_iterations < 1 || settings.refinements < 0 || settings.update_divisor < 1)
     throw std::invalid_argument("estimator: M_l >= 1, M_s >= 0 and the update divisor >= 1");
   if (settings.closed_loop && settings.controller.empty())

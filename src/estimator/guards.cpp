@@ -55,13 +55,8 @@ std::uint64_t RecursiveEstimator::Impl::transient_samples() const {
   constexpr double kTransientDecay = 0.1;
   double rate = std::numeric_limits<double>::infinity();  // slowest decay rate, 1/s
   for (const auto& b : blocks) {
-    if (b.l != 0) continue;
-    if (b.n == 1 && b.theta(0) > 0.0) rate = std::min(rate, b.scale(0) / b.theta(0));  // A = 1 + a1 p
-    if (b.n != 2) continue;
-    const double a1 = b.theta(0) / b.scale(0), a2 = b.theta(1) / b.scale(1);  // A = 1 + a1 p + a2 p^2
-    if (!(a1 > 0.0 && a2 > 0.0)) continue;
-    const double disc = a1 * a1 - 4.0 * a2;  // real poles: the slower one
-    rate = std::min(rate, (disc < 0.0 ? a1 : a1 - std::sqrt(disc)) / (2.0 * a2));
+    const double r = b.decay_rate();
+    if (r > 0.0) rate = std::min(rate, r);
   }
   if (!std::isfinite(rate) || !(rate > 0.0)) return 0;
   const double samples = std::ceil(-std::log(kTransientDecay) / (rate * cfg.sample_time));
@@ -83,8 +78,12 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
     b.P = b.good_P;
     rediscretise(b);
   }
+  // The noise level goes back with the state. The first residuals on the
+  // restarted filters are their transient, not noise: they must not set e_var
+  // again (as the very first residual does), only the outlier test restarts
+  // (after a hundred residuals, as at the start).
   e_var = e_var_good;
-  e_count = 0;  // outlier statistics restart with the filters
+  e_count = 1;
   restart_filters();
   // Give the restored state one residual window before judging it again.
   rearm = static_cast<std::uint64_t>(1.0 / (1.0 - e_alpha));

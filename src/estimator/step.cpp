@@ -1,6 +1,7 @@
 // The per-sample path of the recursive estimator (Algorithm 1): one sample
 // through the instrument, the guards' checks and the block updates, compiled
 // once per instruction set (hot_path.hpp).
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 
@@ -145,9 +146,12 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   // While the restarted filters settle (settling > 0), the output error is
   // mostly their transient, not noise: e_var (and with it every std) keeps its
   // value, and e_short follows the error to tell when the transient has died out.
+  // An outlier is then one far outside that transient (e_short) too: replacing
+  // the transient itself by y_hat would feed the model to its own prefilters.
   if (!std::isfinite(s.y)) {
     y = y_hat;
-  } else if (e_count > 100 && outlier_run < kOutlierRun && e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var &&
+  } else if (e_count > 100 && outlier_run < kOutlierRun &&
+             e * e > cfg.outlier_sigma * cfg.outlier_sigma * (settling > 0 ? std::max(e_var, e_short) : e_var) &&
              above_round_off()) {
     y = y_hat;
     ++outlier_run;

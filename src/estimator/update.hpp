@@ -2,6 +2,7 @@
 // The parameter update of one block, eqs. (23)-(25), with the guards that act
 // on its result (stability projection, random walk, covariance bound). Part of
 // the per-sample path: included by step.cpp only (hot_path.hpp).
+#include <algorithm>
 #include <cmath>
 
 #include <Eigen/Core>
@@ -133,7 +134,13 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
   // In place: on a false return the caller goes back to the last good state.
   double* P = b.P.data();  // nt x nt, column-major
   double* theta = b.theta.data();
-  if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), b.lambda, y_f)) return false;
+  // Forgetting no faster than min_memory decay times of A (EstimatorSettings::min_memory).
+  double lambda = b.lambda;
+  if (b.forget_per_decay > 0.0) {
+    const double rate = b.decay_rate();
+    if (rate > 0.0) lambda = std::max(lambda, 1.0 - b.forget_per_decay * rate);
+  }
+  if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), lambda, y_f)) return false;
   // Stabilised forgetting on one block per update and one of its coordinates
   // per round, in turn (the same for every refinement of a sample), with K nt
   // times the information per update (set_reference_variance). P_ref needs
@@ -144,7 +151,9 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
     if (b.stabilisation == Stabilisation::pending && e_var > 0.0) set_reference_variance(b);
     if (b.stabilisation == Stabilisation::on) {
       const int j = static_cast<int>(stabilise_round % static_cast<unsigned>(nt));
-      stabilise<N>(nt, P, theta, j, b.theta_ref[j], b.ref_var[j]);
+      // ref_var gives back what lambda forgets: less when the memory is held longer.
+      const double ref_var = lambda == b.lambda ? b.ref_var[j] : b.ref_var[j] * (1.0 - b.lambda) / (1.0 - lambda);
+      stabilise<N>(nt, P, theta, j, b.theta_ref[j], ref_var);
     }
   }
   // A mode with a_1, a_2 > 0 is stable: the common case, decided here.

@@ -24,7 +24,8 @@ inline Config paper_subset(int K) {
   c.plant->modes.resize(static_cast<std::size_t>(K));
   // load_config fills the estimator's per-submodel lists: one entry per submodel.
   c.estimator.forgetting.resize(static_cast<std::size_t>(K));
-  if (!c.estimator.random_walks.empty()) c.estimator.random_walks.resize(static_cast<std::size_t>(K));
+  for (auto* per_submodel : {&c.estimator.random_walks, &c.estimator.stabilisations, &c.estimator.min_memories})
+    if (!per_submodel->empty()) per_submodel->resize(static_cast<std::size_t>(K));
   if (c.estimator.initial_covariance.size() > static_cast<std::size_t>(K))
     c.estimator.initial_covariance.resize(static_cast<std::size_t>(K));
   return c;

@@ -21,6 +21,7 @@ struct SubmodelSettings {
   double forgetting = 1.0;              // lambda in (0, 1], eq. (13)
   std::optional<double> random_walk;    // this submodel's Q (else estimator.random_walk)
   std::optional<double> stabilisation;  // this submodel's stabilised forgetting (else estimator.stabilisation)
+  std::optional<double> min_memory;     // this submodel's shortest memory (else estimator.min_memory)
   bool operator==(const SubmodelSettings&) const = default;
 };
 

@@ -55,6 +55,8 @@ void complete_estimator(Config& config) {
   for (const auto& s : config.submodel_settings) e.random_walks.push_back(s.random_walk.value_or(e.random_walk));
   e.stabilisations.clear();
   for (const auto& s : config.submodel_settings) e.stabilisations.push_back(s.stabilisation.value_or(e.stabilisation));
+  e.min_memories.clear();
+  for (const auto& s : config.submodel_settings) e.min_memories.push_back(s.min_memory.value_or(e.min_memory));
 }
 
 YAML::Node load_yaml(const std::string& text, const std::string& source) {

@@ -160,6 +160,8 @@ void write_model(YamlWriter& w, const Config& config, const AdditiveModel& model
       w.number(3, "random_walk", *config.submodel_settings[c].random_walk);
     if (c < config.submodel_settings.size() && config.submodel_settings[c].stabilisation)
       w.number(3, "stabilisation", *config.submodel_settings[c].stabilisation);
+    if (c < config.submodel_settings.size() && config.submodel_settings[c].min_memory)
+      w.number(3, "min_memory", *config.submodel_settings[c].min_memory);
     // Only when it still fits theta_i (a written model of another order would not load).
     if (c < covariances.size() && covariances[c].size() > 0 && covariances[c].size() == s.n_theta())
       w.key(3, "initial_covariance", flow_list(covariances[c]));
@@ -252,6 +254,7 @@ void write_estimator(YamlWriter& w, const EstimatorSettings& e, double sample_ti
   w.number(1, "random_walk", e.random_walk);
   w.number(1, "covariance_bound", e.covariance_bound);
   w.number(1, "stabilisation", e.stabilisation);
+  w.number(1, "min_memory", e.min_memory);
   w.number(1, "divergence_ratio", e.divergence_ratio);
   w.number(1, "gap_factor", e.gap_factor);
   w.number(1, "outlier_sigma", e.outlier_sigma);

@@ -152,7 +152,7 @@ void parse_model(const Map& model, Config& config) {
   std::vector<SubmodelEntry> entries;
   for (const auto& item : items) {
     const Map m(item);
-    entries.push_back(parse_submodel(m, {"forgetting", "random_walk", "stabilisation", "initial_covariance"}));
+    entries.push_back(parse_submodel(m, {"forgetting", "random_walk", "stabilisation", "min_memory", "initial_covariance"}));
     SubmodelSettings settings;
     if (const auto f = m.get("forgetting")) {
       settings.forgetting = f->number();
@@ -160,6 +160,7 @@ void parse_model(const Map& model, Config& config) {
     }
     if (const auto q = m.get("random_walk")) settings.random_walk = q->at_least(0.0);
     if (const auto q = m.get("stabilisation")) settings.stabilisation = q->at_least(0.0);
+    if (const auto q = m.get("min_memory")) settings.min_memory = q->at_least(0.0);
     const auto cov = m.get("initial_covariance");
     config.estimator.initial_covariance.push_back(cov ? parse_initial_covariance(*cov, entries.back().submodel)
                                                       : Eigen::VectorXd());

@@ -22,8 +22,8 @@ namespace {
 // The `estimator:` keys; every one is optional and defaults to EstimatorSettings'.
 void parse_estimator(const Map& est, double sample_time, EstimatorSettings& e) {
   est.allow({"block_iterations", "refinements", "update_divisor", "warmup", "fit_on_warmup", "warmup_iterations",
-             "initial_covariance_relative", "random_walk", "covariance_bound", "stabilisation", "divergence_ratio",
-             "gap_factor", "outlier_sigma", "residual_window", "low_excitation_ratio", "low_excitation_window"},
+             "initial_covariance_relative", "random_walk", "covariance_bound", "stabilisation", "min_memory",
+             "divergence_ratio", "gap_factor", "outlier_sigma", "residual_window", "low_excitation_ratio", "low_excitation_window"},
             "estimator");
   constexpr long long kIntMax = std::numeric_limits<int>::max();
   const auto count = [&](std::string_view key, long long lo, int& out) {
@@ -45,6 +45,7 @@ void parse_estimator(const Map& est, double sample_time, EstimatorSettings& e) {
   if (const auto v = est.get("random_walk")) e.random_walk = v->at_least(0.0);
   if (const auto v = est.get("covariance_bound")) e.covariance_bound = v->above(1.0);
   if (const auto v = est.get("stabilisation")) e.stabilisation = v->at_least(0.0);
+  if (const auto v = est.get("min_memory")) e.min_memory = v->at_least(0.0);
   if (const auto v = est.get("divergence_ratio")) e.divergence_ratio = v->above(1.0);
   if (const auto v = est.get("gap_factor")) e.gap_factor = v->above(1.0);
   if (const auto v = est.get("outlier_sigma")) e.outlier_sigma = v->positive();
