@@ -227,7 +227,7 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
       flags |= kGap;
       if (m.status.warming_up)
         m.buffered = 0;
-      else
+      else if (restarted || bad_values || !m.bridge(sample, dt))
         m.restart_filters();
     }
   }

@@ -22,9 +22,9 @@ void RecursiveEstimator::Impl::reset_filters() {
   controller.reset();
 }
 
-// After a gap (or a reset) the filters restart from rest, and the model output
-// needs a few time constants of the slowest mode to catch up with the data. That
-// transient is neither a divergence nor information about theta: as in the
+// After a gap that is not bridged (or a reset) the filters restart from rest,
+// and the model output needs a few time constants of the slowest mode to catch
+// up with the data. That transient is neither a divergence nor information about theta: as in the
 // warm-up (section 4.7), the filters run without updating theta, first until
 // the modes' free response has died out (transient_samples()), then until the
 // output error is back near the noise level (at most kSettleWindows residual
@@ -33,14 +33,78 @@ void RecursiveEstimator::Impl::reset_filters() {
 // meanwhile. A gap within that time starts the wait again: a cluster of gaps
 // is missing information, never new information.
 void RecursiveEstimator::Impl::restart_filters() {
-  constexpr double kSettleWindows = 4.0;
   reset_filters();
   // Unsettled until the short-term error, started at the divergence level, has
   // come down to near the noise level on the restarted filters' own output.
   e_short = cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
   transient = transient_samples();
-  settling = transient + static_cast<std::uint64_t>(kSettleWindows / (1.0 - e_alpha));
+  bridged = 0;
+  settling = transient + settle_samples();
   outlier_run = 0;
+}
+
+// In closed loop a gap short against the modes' decay times is bridged
+// instead: over the missing samples the model's noise-free loop (the
+// instrument's, eq. 29, with r interpolated linearly) stands in for the plant's
+// input and output, and the filters run through them without updating theta.
+// What the stand-in misses (the loop's response to noise, the model's error)
+// disturbs the filter states by its response over the gap, against all of
+// their content when they restart from rest; and the restart's wait (the
+// slowest mode's decay, then the output error's) would hold every update for
+// that long after each of the gaps a lossy link makes about once a second. In
+// open loop nothing stands in for an unknown input, and the filters restart.
+// false: not bridged, the filters must restart.
+bool RecursiveEstimator::Impl::bridge(const Sample& next, double dt) {
+  constexpr double kBridgeFraction = 0.25;  // of the shortest decay time
+  const double T = cfg.sample_time;
+  const double missing = std::round(dt / T) - 1.0;
+  if (!cfg.closed_loop || !(missing >= 1.0) || inputs_lost) return false;
+  if (dt > kBridgeFraction * shortest_decay_time()) return false;
+  bridging = true;
+  const auto n = static_cast<int>(missing);
+  for (int k = 1; k <= n; ++k) {
+    const double w = static_cast<double>(k) / (n + 1);
+    Sample s;
+    s.t = t_prev + w * dt;
+    s.r = last_r + w * (next.r - last_r);
+    s.u = last_u;                                   // not used while bridging
+    s.y = std::numeric_limits<double>::quiet_NaN();  // the model stands in (advance())
+    advance(s, false);
+  }
+  bridging = false;
+  // The output error then holds the modes' response to what the stand-in
+  // missed, dying out with their free response: not noise, nor outliers, nor a
+  // divergence, while the updates go on (their regressors, filtered by each
+  // mode's own denominator, carry its free response only in the direction the
+  // regression does not see).
+  bridged = std::max(bridged, transient_samples());
+  rearm = std::max(rearm, bridged);
+  return true;
+}
+
+// The shortest time constant of the current model's free response (s): the
+// fastest-decaying pole of any mode or first-order submodel. Submodels with
+// poles at the origin or of other orders give none; without any, infinity.
+double RecursiveEstimator::Impl::shortest_decay_time() const {
+  double rate = 0.0;  // fastest decay rate, 1/s
+  for (const auto& b : blocks) {
+    if (b.l != 0) continue;
+    if (b.n == 1 && b.theta(0) > 0.0) rate = std::max(rate, b.scale(0) / b.theta(0));
+    if (b.n != 2) continue;
+    const double a1 = b.theta(0) / b.scale(0), a2 = b.theta(1) / b.scale(1);
+    if (!(a1 > 0.0 && a2 > 0.0)) continue;
+    const double disc = a1 * a1 - 4.0 * a2;  // real poles: the faster one
+    rate = std::max(rate, (disc < 0.0 ? a1 : a1 + std::sqrt(disc)) / (2.0 * a2));
+  }
+  return rate > 0.0 ? 1.0 / rate : std::numeric_limits<double>::infinity();
+}
+
+// The longest wait for the output error to come back near the noise level
+// (kSettleWindows residual windows), after which updates resume so that a
+// plant that changed during the gap can still be followed.
+std::uint64_t RecursiveEstimator::Impl::settle_samples() const {
+  constexpr double kSettleWindows = 4.0;
+  return static_cast<std::uint64_t>(kSettleWindows / (1.0 - e_alpha));
 }
 
 // Samples until the free response of the slowest mode (and first-order

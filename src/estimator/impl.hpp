@@ -3,6 +3,7 @@
 // sources: estimator.cpp (construction, step(), the accessors), step.cpp (the
 // per-sample path), guards.cpp, warmup_fit.cpp and state.cpp.
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -50,6 +51,7 @@ struct RecursiveEstimator::Impl {
   bool have_prev = false;
   bool just_restored = false;         // restore() ran and no sample has come since
   double last_u = 0.0, last_r = 0.0;  // the last finite inputs (r held in place of a non-finite one in open loop)
+  bool bridging = false;  // advance() runs the model's loop across a gap (bridge())
   std::uint64_t since_update = 0;
   std::uint64_t updates_since_good = 0;
 
@@ -62,6 +64,7 @@ struct RecursiveEstimator::Impl {
   std::uint64_t rearm = 0;      // samples until the divergence detector is armed again
   std::uint64_t settling = 0;   // after a filter restart: samples left to catch up (no update meanwhile)
   std::uint64_t transient = 0;  // ... of which the first ones, while the modes' free response dies out
+  std::uint64_t bridged = 0;    // after a bridged gap: samples while the modes' response to it dies out
   // Stabilised forgetting's turn (update.hpp): one block per update, and one of
   // its coordinates per round over the blocks; status.updates = K round + block.
   std::size_t stabilise_block = 0;
@@ -88,7 +91,10 @@ struct RecursiveEstimator::Impl {
   void set_reference_variance(detail::Block& b) const;
   void reset_filters();
   void restart_filters();
+  bool bridge(const Sample& next, double dt);
   std::uint64_t transient_samples() const;
+  std::uint64_t settle_samples() const;
+  double shortest_decay_time() const;
   void save_good();
   void restore_good(const char* reason);
   unsigned advance(const Sample& s, bool allow_update) { return (this->*kernel)(s, allow_update); }

@@ -104,7 +104,8 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
       const double* dz = b.filters.complete_input(kZ, z);
       // Strictly proper (m < n + l): the output uses the state alone, not z_k.
       if (b.biproper) b.xz = b.output(dz);
-      b.xu = b.output(b.filters.take_input(kU, s.u));
+      // Across a bridged gap the noise-free loop stands in for the plant's input.
+      b.xu = b.output(b.filters.take_input(kU, bridging ? z : s.u));
       y_hat += b.xu;
     }
   } else {
@@ -148,10 +149,14 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   // value, and e_short follows the error to tell when the transient has died out.
   // An outlier is then one far outside that transient (e_short) too: replacing
   // the transient itself by y_hat would feed the model to its own prefilters.
+  // So also after a bridged gap (bridged > 0), while the modes' response to
+  // what the stand-in missed dies out.
+  if (bridged > 0 && !bridging) --bridged;
+  const bool in_transient = settling > 0 || bridged > 0;
   if (!std::isfinite(s.y)) {
     y = y_hat;
   } else if (e_count > 100 && outlier_run < kOutlierRun &&
-             e * e > cfg.outlier_sigma * cfg.outlier_sigma * (settling > 0 ? std::max(e_var, e_short) : e_var) &&
+             e * e > cfg.outlier_sigma * cfg.outlier_sigma * (in_transient ? std::max(e_var, e_short) : e_var) &&
              above_round_off()) {
     y = y_hat;
     ++outlier_run;
@@ -162,7 +167,7 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     outlier_run = 0;
     if (e_count == 0)
       e_var = e * e;
-    else if (settling == 0)
+    else if (settling == 0 && bridged == 0)
       e_var = e_alpha * e_var + (1.0 - e_alpha) * e * e;
     e_short = e_count == 0 ? e * e : e_short_alpha * e_short + (1.0 - e_short_alpha) * e * e;
     ++e_count;
