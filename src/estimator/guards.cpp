@@ -39,6 +39,7 @@ void RecursiveEstimator::Impl::restart_filters() {
   e_short = cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
   transient = transient_samples();
   bridged = 0;
+  for (auto& b : blocks) b.hold = 0;
   settling = transient + settle_samples();
   outlier_run = 0;
 }
@@ -77,6 +78,7 @@ bool RecursiveEstimator::Impl::bridge(const Sample& next, double dt) {
   // divergence, while the updates go on (their regressors, filtered by each
   // mode's own denominator, carry its free response only in the direction the
   // regression does not see).
+  for (auto& b : blocks) b.hold = std::max(b.hold, decay_samples(b.decay_rate()));
   bridged = std::max(bridged, transient_samples());
   rearm = std::max(rearm, bridged);
   return true;
@@ -116,12 +118,18 @@ std::uint64_t RecursiveEstimator::Impl::settle_samples() const {
 // with poles at the origin or of other orders have no such bound (the output
 // error alone decides for them).
 std::uint64_t RecursiveEstimator::Impl::transient_samples() const {
-  constexpr double kTransientDecay = 0.1;
   double rate = std::numeric_limits<double>::infinity();  // slowest decay rate, 1/s
   for (const auto& b : blocks) {
     const double r = b.decay_rate();
     if (r > 0.0) rate = std::min(rate, r);
   }
+  return decay_samples(rate);
+}
+
+// Samples for a free response decaying at rate (1/s) to kTransientDecay of its
+// start; 0 without a decay (rate 0 or infinite).
+std::uint64_t RecursiveEstimator::Impl::decay_samples(double rate) const {
+  constexpr double kTransientDecay = 0.1;
   if (!std::isfinite(rate) || !(rate > 0.0)) return 0;
   const double samples = std::ceil(-std::log(kTransientDecay) / (rate * cfg.sample_time));
   return samples < 1e12 ? static_cast<std::uint64_t>(samples) : std::uint64_t{1000000000000};

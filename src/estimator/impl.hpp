@@ -93,6 +93,7 @@ struct RecursiveEstimator::Impl {
   void restart_filters();
   bool bridge(const Sample& next, double dt);
   std::uint64_t transient_samples() const;
+  std::uint64_t decay_samples(double rate) const;
   std::uint64_t settle_samples() const;
   double shortest_decay_time() const;
   void save_good();

@@ -82,7 +82,10 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   if (refine && allow_update) {
     for (std::size_t i = 0; i < blocks.size(); ++i) snapshot[i] = blocks[i].filters;
   }
-  for (auto& b : blocks) b.filters.begin_sample();
+  for (auto& b : blocks) {
+    b.filters.begin_sample();
+    if (b.hold > 0) --b.hold;
+  }
   // 1. Instrument input z_k = S_uo(q, t_k) r_k: the noise-free loop with the
   //    known controller and the current model (eq. 29), solved for a biproper
   //    controller. In open loop z = u.
@@ -227,6 +230,7 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
       const double y_tilde = y - (xu_sum - b.xu);
       const double* dy = b.filters.take(kY, y_tilde);
       const double* dx = b.filters.take(kX, b.xz);
+      if (b.hold > 0) continue;  // its filters still carry a bridged gap
       const double* du = b.filters.derivatives(kU);
       const double* dz = cfg.closed_loop ? b.filters.derivatives(kZ) : du;
       b.fill(dy, dx, du, dz);
@@ -244,6 +248,13 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   for (int l = 0; l < cfg.block_iterations && healthy; ++l) {
     for (std::size_t i = 0; i < blocks.size() && healthy; ++i) {
       Block& b = blocks[i];
+      if (b.hold > 0) {  // its filters still carry a bridged gap: they take the sample once, no update
+        if (l == 0) {
+          b.filters.take(kY, y - (xu_sum - b.xu));
+          b.filters.take(kX, b.xz);
+        }
+        continue;
+      }
       const ThetaVec theta_bar = b.theta;
       const ThetaMat P_bar = b.P;
       ThetaVec theta_iter = theta_bar;
