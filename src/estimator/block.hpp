@@ -110,9 +110,6 @@ struct Block {
   ThetaVec ref_var;
   BlockFilters filters;
   double xu = 0.0, xz = 0.0;  // B/(p^l A) driven by u and by z, at t_k
-  // After a bridged gap: samples until this block's own free response (its
-  // filters' error from the bridge) has died out; no update meanwhile.
-  std::uint64_t hold = 0;
   ThetaVec good_theta;
   ThetaMat good_P;
   ThetaVec phi, psi;

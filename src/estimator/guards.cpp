@@ -39,16 +39,16 @@ void RecursiveEstimator::Impl::restart_filters() {
   e_short = cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
   transient = transient_samples();
   bridged = 0;
-  for (auto& b : blocks) b.hold = 0;
   settling = transient + settle_samples();
   outlier_run = 0;
 }
 
 // In closed loop a gap short against the modes' decay times is bridged
-// instead: over the missing samples the model's noise-free loop (the
-// instrument's, eq. 29, with r interpolated linearly) stands in for the plant's
-// input and output, and the filters run through them without updating theta.
-// What the stand-in misses (the loop's response to noise, the model's error)
+// instead: over the missing samples the plant's own loop goes on, the
+// controller from its state at the last sample (known from the last u and
+// r - y) and the model standing in for the plant, with r interpolated
+// linearly; the filters run through them without updating theta. What the
+// stand-in misses (the noise over the gap, the model's error)
 // disturbs the filter states by its response over the gap, against all of
 // their content when they restart from rest; and the restart's wait (the
 // slowest mode's decay, then the output error's) would hold every update for
@@ -59,8 +59,23 @@ bool RecursiveEstimator::Impl::bridge(const Sample& next, double dt) {
   constexpr double kBridgeFraction = 0.25;  // of the shortest decay time
   const double T = cfg.sample_time;
   const double missing = std::round(dt / T) - 1.0;
-  if (!cfg.closed_loop || !(missing >= 1.0) || inputs_lost) return false;
+  const std::size_t order = loop_u.size();
+  if (!cfg.closed_loop || !(missing >= 1.0) || inputs_lost || loop_known < order) return false;
   if (dt > kBridgeFraction * shortest_decay_time()) return false;
+  // C_d's state (direct form II transposed) after the last sample, from the
+  // last inputs e = r - y and outputs u: z_i = sum_{j > i} b_j e_{k+i+1-j} - a_j u_{k+i+1-j}.
+  const std::vector<double>& num = plant_loop.numerator();
+  const std::vector<double>& den = plant_loop.denominator();
+  for (std::size_t i = 0; i < order; ++i) {
+    double zi = 0.0;
+    for (std::size_t j = i + 1; j <= order; ++j) {
+      const std::size_t back = j - i - 1;  // samples before the newest
+      const std::size_t at = (loop_at + order - back) % order;
+      zi += (num[j] * loop_e[at] - den[j] * loop_u[at]) / den[0];
+    }
+    loop_state[i] = zi;
+  }
+  plant_loop.set_state(loop_state);
   bridging = true;
   const auto n = static_cast<int>(missing);
   for (int k = 1; k <= n; ++k) {
@@ -73,15 +88,32 @@ bool RecursiveEstimator::Impl::bridge(const Sample& next, double dt) {
     advance(s, false);
   }
   bridging = false;
-  // The output error then holds the modes' response to what the stand-in
-  // missed, dying out with their free response: not noise, nor outliers, nor a
-  // divergence, while the updates go on (their regressors, filtered by each
-  // mode's own denominator, carry its free response only in the direction the
-  // regression does not see).
-  for (auto& b : blocks) b.hold = std::max(b.hold, decay_samples(b.decay_rate()));
+  // Updates go on at once. For the slowest mode's decay time the residual is
+  // on probation (advance()): what the stand-in missed would show there.
   bridged = std::max(bridged, transient_samples());
-  rearm = std::max(rearm, bridged);
   return true;
+}
+
+// One bridged sample of the plant's own loop (the instrument's z_k already
+// solved): u_k = C_d(q)(r_k - y_k), y_k the model's output, solved as eq. (29)
+// is for a biproper controller.
+void RecursiveEstimator::Impl::bridge_plant_loop(double r, double z) {
+  using detail::kU;
+  using detail::kZ;
+  double free = 0.0, D = 0.0;
+  for (auto& b : blocks) {
+    const double* dz = b.filters.complete_input(kZ, z);
+    if (b.biproper) b.xz = b.output(dz);
+    b.filters.advance_held(kU);
+    free += b.output(b.filters.complete_input(kU, 0.0));
+    D += b.feedthrough();
+  }
+  const double c0 = plant_loop.feedthrough();
+  const double u = (c0 * (r - free) + plant_loop.peek(0.0)) / (1.0 + c0 * D);
+  const double y = free + D * u;
+  plant_loop.step(r - y);
+  for (auto& b : blocks) b.xu = b.output(b.filters.complete_input(kU, u));
+  record_loop(u, r - y);
 }
 
 // The shortest time constant of the current model's free response (s): the

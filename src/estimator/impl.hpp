@@ -38,6 +38,21 @@ struct RecursiveEstimator::Impl {
   std::vector<detail::Block> blocks;
   std::vector<detail::BlockFilters> snapshot;  // filters at t_{k-1}, for refinements
   DiscreteTransferFunction controller;         // C_d(q) of the instrument's loop (eqs. 9, 29)
+  // The plant's own loop u = C_d(q)(r - y), on the measured samples: the last
+  // (controller order) values of u and of r - y, newest at loop_at, give C_d's
+  // state from which a bridged gap continues that loop, the model standing in
+  // for y (bridge()). Sized once at construction.
+  DiscreteTransferFunction plant_loop;
+  std::vector<double> loop_u, loop_e, loop_state;
+  std::size_t loop_at = 0;
+  std::size_t loop_known = 0;  // consecutive samples recorded (up to the order)
+  void record_loop(double u, double e) {
+    if (loop_u.empty()) return;
+    loop_at = loop_at + 1 == loop_u.size() ? 0 : loop_at + 1;
+    loop_u[loop_at] = u;
+    loop_e[loop_at] = e;
+    if (loop_known < loop_u.size()) ++loop_known;
+  }
   EstimatorStatus status;
 
   // Warm-up window, preallocated; a WarmupFit job holds it while it runs.
@@ -92,6 +107,7 @@ struct RecursiveEstimator::Impl {
   void reset_filters();
   void restart_filters();
   bool bridge(const Sample& next, double dt);
+  void bridge_plant_loop(double r, double z);
   std::uint64_t transient_samples() const;
   std::uint64_t decay_samples(double rate) const;
   std::uint64_t settle_samples() const;

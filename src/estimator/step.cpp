@@ -82,10 +82,7 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   if (refine && allow_update) {
     for (std::size_t i = 0; i < blocks.size(); ++i) snapshot[i] = blocks[i].filters;
   }
-  for (auto& b : blocks) {
-    b.filters.begin_sample();
-    if (b.hold > 0) --b.hold;
-  }
+  for (auto& b : blocks) b.filters.begin_sample();
   // 1. Instrument input z_k = S_uo(q, t_k) r_k: the noise-free loop with the
   //    known controller and the current model (eq. 29), solved for a biproper
   //    controller. In open loop z = u.
@@ -103,13 +100,17 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     const double c0 = controller.feedthrough();
     z = (c0 * (s.r - free) + controller.peek(0.0)) / (1.0 + c0 * D);
     controller.step(s.r - (free + D * z));
-    for (auto& b : blocks) {
-      const double* dz = b.filters.complete_input(kZ, z);
-      // Strictly proper (m < n + l): the output uses the state alone, not z_k.
-      if (b.biproper) b.xz = b.output(dz);
-      // Across a bridged gap the noise-free loop stands in for the plant's input.
-      b.xu = b.output(b.filters.take_input(kU, bridging ? z : s.u));
-      y_hat += b.xu;
+    if (bridging) {
+      bridge_plant_loop(s.r, z);
+      for (auto& b : blocks) y_hat += b.xu;
+    } else {
+      for (auto& b : blocks) {
+        const double* dz = b.filters.complete_input(kZ, z);
+        // Strictly proper (m < n + l): the output uses the state alone, not z_k.
+        if (b.biproper) b.xz = b.output(dz);
+        b.xu = b.output(b.filters.take_input(kU, s.u));
+        y_hat += b.xu;
+      }
     }
   } else {
     for (auto& b : blocks) {
@@ -152,10 +153,14 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   // value, and e_short follows the error to tell when the transient has died out.
   // An outlier is then one far outside that transient (e_short) too: replacing
   // the transient itself by y_hat would feed the model to its own prefilters.
-  // So also after a bridged gap (bridged > 0), while the modes' response to
-  // what the stand-in missed dies out.
-  if (bridged > 0 && !bridging) --bridged;
-  const bool in_transient = settling > 0 || bridged > 0;
+  // After a bridged gap (bridged > 0) the residual is on probation: one beyond
+  // the outlier level says the stand-in missed what happened in the gap (a
+  // setpoint step, a plant change), and the filters restart as after any gap.
+  if (bridged > 0 && !bridging) {
+    --bridged;
+    if (std::isfinite(s.y) && e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var) restart_filters();
+  }
+  const bool in_transient = settling > 0;
   if (!std::isfinite(s.y)) {
     y = y_hat;
   } else if (e_count > 100 && outlier_run < kOutlierRun &&
@@ -170,7 +175,7 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     outlier_run = 0;
     if (e_count == 0)
       e_var = e * e;
-    else if (settling == 0 && bridged == 0)
+    else if (settling == 0)
       e_var = e_alpha * e_var + (1.0 - e_alpha) * e * e;
     e_short = e_count == 0 ? e * e : e_short_alpha * e_short + (1.0 - e_short_alpha) * e * e;
     ++e_count;
@@ -230,7 +235,6 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
       const double y_tilde = y - (xu_sum - b.xu);
       const double* dy = b.filters.take(kY, y_tilde);
       const double* dx = b.filters.take(kX, b.xz);
-      if (b.hold > 0) continue;  // its filters still carry a bridged gap
       const double* du = b.filters.derivatives(kU);
       const double* dz = cfg.closed_loop ? b.filters.derivatives(kZ) : du;
       b.fill(dy, dx, du, dz);
@@ -248,13 +252,6 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   for (int l = 0; l < cfg.block_iterations && healthy; ++l) {
     for (std::size_t i = 0; i < blocks.size() && healthy; ++i) {
       Block& b = blocks[i];
-      if (b.hold > 0) {  // its filters still carry a bridged gap: they take the sample once, no update
-        if (l == 0) {
-          b.filters.take(kY, y - (xu_sum - b.xu));
-          b.filters.take(kX, b.xz);
-        }
-        continue;
-      }
       const ThetaVec theta_bar = b.theta;
       const ThetaMat P_bar = b.P;
       ThetaVec theta_iter = theta_bar;
