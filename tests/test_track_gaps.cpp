@@ -150,8 +150,8 @@ TEST_F(TrackMissingData, RunsOfNonFiniteSamplesAreSkippedWithoutAReset) {
 // The flexible beam whose flex mode loses 15 % stiffness over t = 30..32 s, at
 // 4096 Hz in closed loop: one lost packet of 64 samples (16 ms) during the
 // drift. Restarting the filters held every update for the slowest mode's
-// decay and then the output error's (2.2 s), and the flag came 2.0 s late;
-// bridged by the model's loop, the updates go on.
+// decay and then the output error's, and the flag came 1.4-2.0 s late;
+// bridged by the plant's loop with the model standing in, the updates go on.
 class TrackGapDuringADrift : public test_support::ScratchDir {
  protected:
   static std::string drift_config() {
@@ -194,8 +194,10 @@ TEST_F(TrackGapDuringADrift, ALostPacketDuringTheDriftBarelyDelaysItsFlag) {
   ASSERT_GT(clean, 32.0);  // the flag comes once the drift is past the threshold
   ASSERT_LT(clean, 34.0);
   // At the start of the drift, and in its middle, where the model lags most.
+  // (Between the square-wave setpoint's steps: a gap that holds a step is not
+  // bridged, as the setpoint's path through it is not known.)
   EXPECT_NEAR(flex_wn_flag(30.15), clean, 0.25);
-  EXPECT_NEAR(flex_wn_flag(31.0), clean, 1.0);
+  EXPECT_NEAR(flex_wn_flag(31.1), clean, 0.25);
 }
 
 }  // namespace
