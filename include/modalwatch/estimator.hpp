@@ -99,7 +99,12 @@ struct EstimatorSettings {
   // Per submodel (empty: min_memory for every one), as random_walks.
   std::vector<double> min_memories;
   double divergence_ratio = 10.0;      // residual RMS this many times its last good value: reset
-  double gap_factor = 1.5;             // a time step above gap_factor T is a gap: filter states reset
+  // A time step above gap_factor T is a gap. In closed loop, one shorter than
+  // a quarter of the model's shortest decay time is bridged: the controller
+  // and the model run the loop over the missing samples, and updates go on
+  // unless a residual after it leaves the noise. Any other gap restarts the
+  // filter states, and updates wait for them to settle.
+  double gap_factor = 1.5;
   double outlier_sigma = 10.0;         // |y - y_hat| above this many residual std: sample replaced
   double residual_window = 0.0;        // s, residual RMS window (0: 1/(1 - min lambda) samples)
   double low_excitation_ratio = 0.05;  // input power below this fraction of its reference: no update

@@ -96,6 +96,12 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
   snapshot.resize(blocks.size());
   controller = cfg.controller;
   controller.reset();
+  plant_loop = cfg.controller;
+  plant_loop.reset();
+  const std::size_t order = cfg.controller.empty() ? 0 : cfg.controller.denominator().size() - 1;
+  loop_u.assign(order, 0.0);
+  loop_e.assign(order, 0.0);
+  loop_state.assign(order, 0.0);
   save_good();
 }
 
@@ -227,7 +233,7 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
       flags |= kGap;
       if (m.status.warming_up)
         m.buffered = 0;
-      else
+      else if (restarted || bad_values || !m.bridge(sample, dt))
         m.restart_filters();
     }
   }
@@ -245,6 +251,12 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
   }
   m.last_u = sample.u;
   m.last_r = sample.r;
+  if (m.cfg.closed_loop) {
+    if (bad_values)
+      m.loop_known = 0;  // the controller saw a y we do not know
+    else
+      m.record_loop(sample.u, sample.r - sample.y);
+  }
   ++m.status.samples;
   if (m.status.warming_up) {
     m.wt(m.buffered) = s.t;

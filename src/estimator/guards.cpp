@@ -22,9 +22,9 @@ void RecursiveEstimator::Impl::reset_filters() {
   controller.reset();
 }
 
-// After a gap (or a reset) the filters restart from rest, and the model output
-// needs a few time constants of the slowest mode to catch up with the data. That
-// transient is neither a divergence nor information about theta: as in the
+// After a gap that is not bridged (or a reset) the filters restart from rest,
+// and the model output needs a few time constants of the slowest mode to catch
+// up with the data. That transient is neither a divergence nor information about theta: as in the
 // warm-up (section 4.7), the filters run without updating theta, first until
 // the modes' free response has died out (transient_samples()), then until the
 // output error is back near the noise level (at most kSettleWindows residual
@@ -33,14 +33,112 @@ void RecursiveEstimator::Impl::reset_filters() {
 // meanwhile. A gap within that time starts the wait again: a cluster of gaps
 // is missing information, never new information.
 void RecursiveEstimator::Impl::restart_filters() {
-  constexpr double kSettleWindows = 4.0;
   reset_filters();
   // Unsettled until the short-term error, started at the divergence level, has
   // come down to near the noise level on the restarted filters' own output.
   e_short = cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
   transient = transient_samples();
-  settling = transient + static_cast<std::uint64_t>(kSettleWindows / (1.0 - e_alpha));
+  bridged = 0;
+  settling = transient + settle_samples();
   outlier_run = 0;
+}
+
+// In closed loop a gap short against the modes' decay times is bridged
+// instead: over the missing samples the plant's own loop goes on, the
+// controller from its state at the last sample (known from the last u and
+// r - y) and the model standing in for the plant, with r interpolated
+// linearly; the filters run through them without updating theta. What the
+// stand-in misses (the noise over the gap, the model's error)
+// disturbs the filter states by its response over the gap, against all of
+// their content when they restart from rest; and the restart's wait (the
+// slowest mode's decay, then the output error's) would hold every update for
+// that long after each of the gaps a lossy link makes about once a second. In
+// open loop nothing stands in for an unknown input, and the filters restart.
+// false: not bridged, the filters must restart.
+bool RecursiveEstimator::Impl::bridge(const Sample& next, double dt) {
+  constexpr double kBridgeFraction = 0.25;  // of the shortest decay time
+  const double T = cfg.sample_time;
+  const double missing = std::round(dt / T) - 1.0;
+  const std::size_t order = loop_u.size();
+  if (!cfg.closed_loop || !(missing >= 1.0) || inputs_lost || loop_known < order) return false;
+  if (dt > kBridgeFraction * shortest_decay_time()) return false;
+  // C_d's state (direct form II transposed) after the last sample, from the
+  // last inputs e = r - y and outputs u: z_i = sum_{j > i} b_j e_{k+i+1-j} - a_j u_{k+i+1-j}.
+  const std::vector<double>& num = plant_loop.numerator();
+  const std::vector<double>& den = plant_loop.denominator();
+  for (std::size_t i = 0; i < order; ++i) {
+    double zi = 0.0;
+    for (std::size_t j = i + 1; j <= order; ++j) {
+      const std::size_t back = j - i - 1;  // samples before the newest
+      const std::size_t at = (loop_at + order - back) % order;
+      zi += (num[j] * loop_e[at] - den[j] * loop_u[at]) / den[0];
+    }
+    loop_state[i] = zi;
+  }
+  plant_loop.set_state(loop_state);
+  bridging = true;
+  const auto n = static_cast<int>(missing);
+  for (int k = 1; k <= n; ++k) {
+    const double w = static_cast<double>(k) / (n + 1);
+    Sample s;
+    s.t = t_prev + w * dt;
+    s.r = last_r + w * (next.r - last_r);
+    s.u = last_u;                                   // not used while bridging
+    s.y = std::numeric_limits<double>::quiet_NaN();  // the model stands in (advance())
+    advance(s, false);
+  }
+  bridging = false;
+  // Updates go on at once. For the slowest mode's decay time the residual is
+  // on probation (advance()): what the stand-in missed would show there.
+  bridged = std::max(bridged, transient_samples());
+  return true;
+}
+
+// One bridged sample of the plant's own loop (the instrument's z_k already
+// solved): u_k = C_d(q)(r_k - y_k), y_k the model's output, solved as eq. (29)
+// is for a biproper controller.
+void RecursiveEstimator::Impl::bridge_plant_loop(double r, double z) {
+  using detail::kU;
+  using detail::kZ;
+  double free = 0.0, D = 0.0;
+  for (auto& b : blocks) {
+    const double* dz = b.filters.complete_input(kZ, z);
+    if (b.biproper) b.xz = b.output(dz);
+    b.filters.advance_held(kU);
+    free += b.output(b.filters.complete_input(kU, 0.0));
+    D += b.feedthrough();
+  }
+  const double c0 = plant_loop.feedthrough();
+  const double u = (c0 * (r - free) + plant_loop.peek(0.0)) / (1.0 + c0 * D);
+  const double y = free + D * u;
+  plant_loop.step(r - y);
+  for (auto& b : blocks) b.xu = b.output(b.filters.complete_input(kU, u));
+  record_loop(u, r - y);
+}
+
+// The shortest time constant of the current model's free response (s): the
+// fastest-decaying pole of any mode or first-order submodel. Submodels with
+// poles at the origin or of other orders give none; without any, infinity.
+double RecursiveEstimator::Impl::shortest_decay_time() const {
+  double rate = 0.0;  // fastest decay rate, 1/s
+  for (const auto& b : blocks) {
+    if (b.l != 0) continue;
+    if (b.n == 1 && b.theta(0) > 0.0) rate = std::max(rate, b.scale(0) / b.theta(0));
+    if (b.n != 2) continue;
+    const double a1 = b.theta(0) / b.scale(0), a2 = b.theta(1) / b.scale(1);
+    if (!(a1 > 0.0 && a2 > 0.0)) continue;
+    const double disc = a1 * a1 - 4.0 * a2;  // real poles: the faster one
+    rate = std::max(rate, (disc < 0.0 ? a1 : a1 + std::sqrt(disc)) / (2.0 * a2));
+  }
+  return rate > 0.0 ? 1.0 / rate : std::numeric_limits<double>::infinity();
+}
+
+// The longest wait for the output error to come back near the noise level
+// (kSettleWindows residual windows), after which updates resume so that a
+// plant that changed during the gap can still be followed.
+std::uint64_t RecursiveEstimator::Impl::settle_samples() const {
+  constexpr double kSettleWindows = 4.0;
+  return static_cast<std::uint64_t>(kSettleWindows / (1.0 - e_alpha));
 }
 
 // Samples until the free response of the slowest mode (and first-order
@@ -52,12 +150,18 @@ void RecursiveEstimator::Impl::restart_filters() {
 // with poles at the origin or of other orders have no such bound (the output
 // error alone decides for them).
 std::uint64_t RecursiveEstimator::Impl::transient_samples() const {
-  constexpr double kTransientDecay = 0.1;
   double rate = std::numeric_limits<double>::infinity();  // slowest decay rate, 1/s
   for (const auto& b : blocks) {
     const double r = b.decay_rate();
     if (r > 0.0) rate = std::min(rate, r);
   }
+  return decay_samples(rate);
+}
+
+// Samples for a free response decaying at rate (1/s) to kTransientDecay of its
+// start; 0 without a decay (rate 0 or infinite).
+std::uint64_t RecursiveEstimator::Impl::decay_samples(double rate) const {
+  constexpr double kTransientDecay = 0.1;
   if (!std::isfinite(rate) || !(rate > 0.0)) return 0;
   const double samples = std::ceil(-std::log(kTransientDecay) / (rate * cfg.sample_time));
   return samples < 1e12 ? static_cast<std::uint64_t>(samples) : std::uint64_t{1000000000000};

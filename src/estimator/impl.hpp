@@ -3,6 +3,7 @@
 // sources: estimator.cpp (construction, step(), the accessors), step.cpp (the
 // per-sample path), guards.cpp, warmup_fit.cpp and state.cpp.
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <vector>
 
@@ -37,6 +38,21 @@ struct RecursiveEstimator::Impl {
   std::vector<detail::Block> blocks;
   std::vector<detail::BlockFilters> snapshot;  // filters at t_{k-1}, for refinements
   DiscreteTransferFunction controller;         // C_d(q) of the instrument's loop (eqs. 9, 29)
+  // The plant's own loop u = C_d(q)(r - y), on the measured samples: the last
+  // (controller order) values of u and of r - y, newest at loop_at, give C_d's
+  // state from which a bridged gap continues that loop, the model standing in
+  // for y (bridge()). Sized once at construction.
+  DiscreteTransferFunction plant_loop;
+  std::vector<double> loop_u, loop_e, loop_state;
+  std::size_t loop_at = 0;
+  std::size_t loop_known = 0;  // consecutive samples recorded (up to the order)
+  void record_loop(double u, double e) {
+    if (loop_u.empty()) return;
+    loop_at = loop_at + 1 == loop_u.size() ? 0 : loop_at + 1;
+    loop_u[loop_at] = u;
+    loop_e[loop_at] = e;
+    if (loop_known < loop_u.size()) ++loop_known;
+  }
   EstimatorStatus status;
 
   // Warm-up window, preallocated; a WarmupFit job holds it while it runs.
@@ -50,6 +66,7 @@ struct RecursiveEstimator::Impl {
   bool have_prev = false;
   bool just_restored = false;         // restore() ran and no sample has come since
   double last_u = 0.0, last_r = 0.0;  // the last finite inputs (r held in place of a non-finite one in open loop)
+  bool bridging = false;  // advance() runs the model's loop across a gap (bridge())
   std::uint64_t since_update = 0;
   std::uint64_t updates_since_good = 0;
 
@@ -62,6 +79,7 @@ struct RecursiveEstimator::Impl {
   std::uint64_t rearm = 0;      // samples until the divergence detector is armed again
   std::uint64_t settling = 0;   // after a filter restart: samples left to catch up (no update meanwhile)
   std::uint64_t transient = 0;  // ... of which the first ones, while the modes' free response dies out
+  std::uint64_t bridged = 0;    // after a bridged gap: samples while the modes' response to it dies out
   // Stabilised forgetting's turn (update.hpp): one block per update, and one of
   // its coordinates per round over the blocks; status.updates = K round + block.
   std::size_t stabilise_block = 0;
@@ -88,7 +106,12 @@ struct RecursiveEstimator::Impl {
   void set_reference_variance(detail::Block& b) const;
   void reset_filters();
   void restart_filters();
+  bool bridge(const Sample& next, double dt);
+  void bridge_plant_loop(double r, double z);
   std::uint64_t transient_samples() const;
+  std::uint64_t decay_samples(double rate) const;
+  std::uint64_t settle_samples() const;
+  double shortest_decay_time() const;
   void save_good();
   void restore_good(const char* reason);
   unsigned advance(const Sample& s, bool allow_update) { return (this->*kernel)(s, allow_update); }

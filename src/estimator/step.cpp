@@ -100,12 +100,17 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     const double c0 = controller.feedthrough();
     z = (c0 * (s.r - free) + controller.peek(0.0)) / (1.0 + c0 * D);
     controller.step(s.r - (free + D * z));
-    for (auto& b : blocks) {
-      const double* dz = b.filters.complete_input(kZ, z);
-      // Strictly proper (m < n + l): the output uses the state alone, not z_k.
-      if (b.biproper) b.xz = b.output(dz);
-      b.xu = b.output(b.filters.take_input(kU, s.u));
-      y_hat += b.xu;
+    if (bridging) {
+      bridge_plant_loop(s.r, z);
+      for (auto& b : blocks) y_hat += b.xu;
+    } else {
+      for (auto& b : blocks) {
+        const double* dz = b.filters.complete_input(kZ, z);
+        // Strictly proper (m < n + l): the output uses the state alone, not z_k.
+        if (b.biproper) b.xz = b.output(dz);
+        b.xu = b.output(b.filters.take_input(kU, s.u));
+        y_hat += b.xu;
+      }
     }
   } else {
     for (auto& b : blocks) {
@@ -148,10 +153,18 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   // value, and e_short follows the error to tell when the transient has died out.
   // An outlier is then one far outside that transient (e_short) too: replacing
   // the transient itself by y_hat would feed the model to its own prefilters.
+  // After a bridged gap (bridged > 0) the residual is on probation: one beyond
+  // the outlier level says the stand-in missed what happened in the gap (a
+  // setpoint step, a plant change), and the filters restart as after any gap.
+  if (bridged > 0 && !bridging) {
+    --bridged;
+    if (std::isfinite(s.y) && e * e > cfg.outlier_sigma * cfg.outlier_sigma * e_var) restart_filters();
+  }
+  const bool in_transient = settling > 0;
   if (!std::isfinite(s.y)) {
     y = y_hat;
   } else if (e_count > 100 && outlier_run < kOutlierRun &&
-             e * e > cfg.outlier_sigma * cfg.outlier_sigma * (settling > 0 ? std::max(e_var, e_short) : e_var) &&
+             e * e > cfg.outlier_sigma * cfg.outlier_sigma * (in_transient ? std::max(e_var, e_short) : e_var) &&
              above_round_off()) {
     y = y_hat;
     ++outlier_run;
