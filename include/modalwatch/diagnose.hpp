@@ -172,6 +172,10 @@ struct DiagnoseStep {
   // Verdicts of the physical check (physical.hpp) on this step's fit, other
   // than physical: the model above is the corrected one.
   std::vector<ModeFinding> physical;
+  // Standard deviations of (wn, zeta, gain) of each submodel of model.linear,
+  // first order from the output-error covariance on the estimation part
+  // (zeros when unknown): what tells two close modes apart.
+  std::vector<ModalParameters> modal_std;
 };
 
 // The rule that ended the augmentation.

@@ -38,11 +38,13 @@ void write_test(JsonWriter& j, const ResidualTest& t) {
   j.end_object();
 }
 
-void write_submodel(JsonWriter& j, const Submodel& s) {
+// sd: standard deviations of (wn, zeta, gain), zeros when unknown.
+void write_submodel(JsonWriter& j, const Submodel& s, const ModalParameters& sd) {
   j.begin_object().key("name").value(s.name);
   if (s.is_mode()) {
     const ModalParameters p = modal_parameters(s);
     j.key("kind").value("mode").key("wn").value(p.wn).key("zeta").value(p.zeta).key("gain").value(p.gain);
+    j.key("wn_std").value(sd.wn).key("zeta_std").value(sd.zeta).key("gain_std").value(sd.gain);
   } else {
     j.key("kind").value("transfer_function").key("rigid_poles").value(s.rigid_poles);
     for (const auto& [name, c] : {std::pair{"a", &s.a}, std::pair{"b", &s.b}}) {
@@ -101,7 +103,15 @@ void write_step(JsonWriter& j, const DiagnoseStep& s) {
   write_test(j.key("independence"), s.residual.independence);
   write_test(j.key("coherence"), s.residual.coherence);
   j.key("submodels").begin_array();
-  for (const Submodel& sm : s.model.linear.submodels) write_submodel(j, sm);
+  const auto& subs = s.model.linear.submodels;
+  for (std::size_t i = 0; i < subs.size(); ++i)
+    write_submodel(j, subs[i], i < s.modal_std.size() ? s.modal_std[i] : ModalParameters{});
+  j.end_array();
+  j.key("physical").begin_array();
+  for (const ModeFinding& f : s.physical) {
+    j.begin_object().key("submodel").value(f.submodel).key("verdict").value(verdict_name(f.verdict));
+    j.key("into").value(f.into).key("reason").value(f.reason).end_object();
+  }
   j.end_array();
   write_effects(j.key("effects"), s.model.effects);
   if (!s.ranking.empty() || s.refit.valid) write_candidates(j, s);

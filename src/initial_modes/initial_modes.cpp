@@ -80,7 +80,7 @@ std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int cou
   const double excited = options.excited_fraction * h.excitation.tail(F - 1).maxCoeff();
   Eigen::Index first = -1, last = -1;
   for (Eigen::Index k = 1; k < F; ++k)
-    if (h.excitation(k) > excited) {
+    if (h.excitation(k) > excited || h.coherence(k) >= options.coherent) {
       if (first < 0) first = k;
       last = k;
     }
