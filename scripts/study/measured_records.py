@@ -196,8 +196,8 @@ def row(name, report, fs, seconds, error):
         samples_of(report),
         modes_text(last) + unit,
         ", ".join(effect_text(s) for s in steps[1:]) or "-",
-        f"{first['validation_rms']:.4g} / {first['fit_percent']:.1f} %",
-        f"{last['validation_rms']:.4g} / {last['fit_percent']:.1f} %",
+        f"{first['validation_rms']:.4g} / {first['fit_percent']:.2f} %",
+        f"{last['validation_rms']:.4g} / {last['fit_percent']:.2f} %",
         f"{seconds:.0f} s",
         "; ".join(bad) or "none",
         ", ".join(f"{n} {v}" for v, n in sorted(fixed.items())) or "-",
@@ -237,15 +237,17 @@ def main():
             cmd = [binary, "diagnose", "--config", config_path(name, config, args.out), "--data",
                    os.path.join(data, file), "--report", report] + options.format(data=data).split()
             print("+ " + " ".join(cmd), file=sys.stderr, flush=True)
-            start = time.monotonic()
-            run = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-            times[name] = time.monotonic() - start
             os.makedirs(args.out, exist_ok=True)
-            with open(os.path.join(args.out, name + ".log"), "w") as f:
-                f.write(run.stderr + run.stdout)
-            if run.returncode != 0:
-                lines = [l for l in run.stderr.splitlines() if l.strip()]
-                error = lines[-1] if lines else f"exit status {run.returncode}"
+            log = os.path.join(args.out, name + ".log")  # the progress lines as they come
+            start = time.monotonic()
+            with open(log, "w") as f:
+                code = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT).returncode
+            times[name] = time.monotonic() - start
+            if code != 0:
+                with open(log) as f:
+                    lines = [l.strip() for l in f if l.strip()]
+                error = lines[-1] if lines else f"exit status {code}"
+                error = error.replace("modalwatch diagnose: ", "").replace(os.path.join(data, ""), "")
             with open(times_file, "w") as f:
                 json.dump(times, f)
         elif not os.path.exists(os.path.join(report, "summary.json")):
