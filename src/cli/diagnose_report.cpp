@@ -7,12 +7,14 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <complex>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <numbers>
 #include <sstream>
 #include <vector>
@@ -335,7 +337,13 @@ void write_tables(const std::string& dir, const DiagnoseResult& r, const Record&
   }
   {
     Eigen::MatrixXd t(val.size(), 4);
-    t << val.t, val.y, first.validation_output.tail(val.size()), last.validation_output.tail(val.size());
+    // A step whose model diverged on validation has no simulated output: NaN.
+    const auto simulated = [&](const DiagnoseStep& s) -> Eigen::VectorXd {
+      if (s.validation_output.size() < val.size())
+        return Eigen::VectorXd::Constant(val.size(), std::numeric_limits<double>::quiet_NaN());
+      return s.validation_output.tail(val.size());
+    };
+    t << val.t, val.y, simulated(first), simulated(last);
     write_table(dir + "/validation.csv", {"t", "y", "y_before", "y_after"}, t);
   }
   {
@@ -352,11 +360,15 @@ void write_tables(const std::string& dir, const DiagnoseResult& r, const Record&
     write_table(dir + "/bode.csv", {"f_hz", "mag_before", "phase_before_deg", "mag_after", "phase_after_deg"}, t);
   }
   {
-    const Eigen::Index M = first.residual.autocorrelation.size();
+    // A step whose model diverged on validation has no residual: NaN.
+    const auto at = [](const Eigen::VectorXd& v, Eigen::Index k) {
+      return k < v.size() ? v(k) : std::numeric_limits<double>::quiet_NaN();
+    };
+    const Eigen::Index M = std::max(first.residual.autocorrelation.size(), last.residual.autocorrelation.size());
     Eigen::MatrixXd t(M, 5);
     for (Eigen::Index k = 0; k < M; ++k)
-      t.row(k) << double(k), first.residual.autocorrelation(k), last.residual.autocorrelation(k),
-          first.residual.cross_correlation(k), last.residual.cross_correlation(k);
+      t.row(k) << double(k), at(first.residual.autocorrelation, k), at(last.residual.autocorrelation, k),
+          at(first.residual.cross_correlation, k), at(last.residual.cross_correlation, k);
     write_table(dir + "/correlations.csv", {"lag", "acf_before", "acf_after", "ccf_before", "ccf_after"}, t);
   }
 }

@@ -26,6 +26,7 @@
 #include <cstdio>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -702,16 +703,42 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
         stop(rule, why);
       break;
     }
-    const Candidate& best = candidates.front();
-    findings.clear();
-    const double cost = best.estimation_rms * best.estimation_rms * static_cast<double>(estimation.size());
-    const Refined chosen = make_physical({best.model, cost, {}}, est, options, findings, modal_std);
-    result.steps.push_back(
-        make_step(effect_name(best.kind), best.params, chosen.model, chosen.cost, est, val, options));
-    result.steps.back().physical = findings;
-    result.steps.back().modal_std = modal_std;
-    result.steps.back().refit_validation_rms = base_rms;
-    result.steps.back().credit = best.credit;
+    // The physical check can change a candidate's model (an unstable mode
+    // projected) so that it no longer simulates: such a candidate is not added,
+    // and the next one the rules admit is.
+    std::optional<DiagnoseStep> next;
+    for (Candidate& c : candidates) {
+      if (!c.valid) continue;
+      if (!(c.credit > options.min_improvement * base_rms)) break;
+      if (!(c.bic < base_bic)) continue;
+      findings.clear();
+      const double cost = c.estimation_rms * c.estimation_rms * static_cast<double>(estimation.size());
+      const Refined chosen = make_physical({c.model, cost, {}}, est, options, findings, modal_std);
+      DiagnoseStep s = make_step(effect_name(c.kind), c.params, chosen.model, chosen.cost, est, val, options);
+      if (!std::isfinite(s.estimation_rms) || !std::isfinite(s.validation_rms)) {
+        c.valid = false;
+        c.credit = std::numeric_limits<double>::quiet_NaN();
+        c.note = "diverges once made physical (" +
+                 (findings.empty() ? std::string("refitted") : findings.front().reason) + ")";
+        continue;
+      }
+      s.physical = findings;
+      s.modal_std = modal_std;
+      s.refit_validation_rms = base_rms;
+      s.credit = c.credit;
+      next = std::move(s);
+      break;
+    }
+    now.ranking = candidates;
+    if (!next) {
+      std::string diverged;
+      for (const Candidate& c : candidates)
+        if (!c.note.empty() && c.note.starts_with("diverges once"))
+          diverged += std::string(diverged.empty() ? ": " : ", ") + effect_name(c.kind) + " (" + c.note + ")";
+      stop(DiagnoseStop::not_fitted, "no candidate the rules admit simulates once made physical" + diverged);
+      break;
+    }
+    result.steps.push_back(std::move(*next));
   }
   return result;
 }
