@@ -49,6 +49,7 @@ import argparse
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -60,7 +61,7 @@ REPO = os.path.dirname(os.path.dirname(HERE))
 # config/ or a dict {fs, loop} written for the run. Long records last.
 RECORDS = [
     ("robot_arm", "daisy_robot_arm.csv", "--t-column n --modes 2", {"fs": 1}),
-    ("flutter", "daisy_flutter.csv", "--t-column n --split 0.5 --modes 3", {"fs": 1}),
+    ("flutter", "daisy_flutter.csv", "--t-column n --split 0.6 --modes 3", {"fs": 1}),
     ("cd_player_arm", "daisy_cd_player_arm.csv", "--t-column n --u-column u1 --y-column y1 --modes 3", {"fs": 1}),
     ("ballbeam", "daisy_ballbeam.csv", "--modes 1", {"fs": 10}),
     ("cascaded_tanks", "cascaded_tanks_est.csv", "--validate {data}/cascaded_tanks_val.csv --modes 1", {"fs": 0.25}),
@@ -158,10 +159,13 @@ def effect_text(step):
 
 def modes_text(step):
     out = []
+    modes = sorted((s for s in step["submodels"] if s["kind"] == "mode"), key=lambda s: s["wn"])
+    for s in modes:
+        out.append(f"{s['wn'] / (2 * math.pi):.4g} ({s['zeta']:.3g})")
     for s in step["submodels"]:
         if s["kind"] == "mode":
-            out.append(f"{s['wn'] / (2 * math.pi):.4g} ({s['zeta']:.3g})")
-        elif not s["a"]:
+            continue
+        if not s["a"]:
             out.append("feedthrough")
         else:
             out.append("rigid body" if s["rigid_poles"] else "transfer function")
@@ -232,26 +236,27 @@ def main():
         if wanted and name not in wanted:
             continue
         report = os.path.join(args.out, name)
+        log = os.path.join(args.out, name + ".log")  # the progress lines as they come
         error = ""
         if not args.check_only:
+            shutil.rmtree(report, ignore_errors=True)
             cmd = [binary, "diagnose", "--config", config_path(name, config, args.out), "--data",
                    os.path.join(data, file), "--report", report] + options.format(data=data).split()
             print("+ " + " ".join(cmd), file=sys.stderr, flush=True)
             os.makedirs(args.out, exist_ok=True)
-            log = os.path.join(args.out, name + ".log")  # the progress lines as they come
             start = time.monotonic()
             with open(log, "w") as f:
                 code = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT).returncode
             times[name] = time.monotonic() - start
-            if code != 0:
-                with open(log) as f:
-                    lines = [l.strip() for l in f if l.strip()]
-                error = lines[-1] if lines else f"exit status {code}"
-                error = error.replace("modalwatch diagnose: ", "").replace(os.path.join(data, ""), "")
             with open(times_file, "w") as f:
                 json.dump(times, f)
-        elif not os.path.exists(os.path.join(report, "summary.json")):
-            error = "no report"
+        if not os.path.exists(os.path.join(report, "summary.json")):
+            lines = []
+            if os.path.exists(log):
+                with open(log) as f:
+                    lines = [l.strip() for l in f if l.strip()]
+            error = lines[-1] if lines else "no report"
+            error = error.replace("modalwatch diagnose: ", "").replace(os.path.join(data, ""), "")
         r = row(name, report, sample_rate(config), times.get(name, float("nan")), error)
         failed |= r[7] != "none"
         if args.min_fit is not None and not r[7].startswith("error"):
