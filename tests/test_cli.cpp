@@ -232,8 +232,8 @@ TEST_F(Cli, RecordWithMissingColumnIsRejectedNamingIt) {
 }
 
 // A measured record names its columns its own way: fit and diagnose read the
-// ones --t-column and --y-column name, and a missing one is named with the
-// option that picks another.
+// ones --t-column, --u-column and --y-column name, and a missing one is named
+// with the option that picks another.
 TEST_F(Cli, FitAndDiagnoseReadTheNamedColumnsAndNameTheOptionForAMissingOne) {
   ASSERT_EQ(run("simulate --config " + config("paper-sim.yaml") + " --out " + path("d.csv") + " --duration 100").code,
             0);
@@ -264,12 +264,17 @@ TEST_F(Cli, FitAndDiagnoseReadTheNamedColumnsAndNameTheOptionForAMissingOne) {
   EXPECT_EQ(no_y_diagnose.code, 2) << no_y_diagnose.output;
   EXPECT_TRUE(contains(no_y_diagnose.output, "run.csv: missing column 't'")) << no_y_diagnose.output;
   EXPECT_FALSE(fs::exists(path("report/report.md")));
-  // A column no option picks keeps the reader's message.
+  // The input column too: a record whose input is u1 (of a shaker pair, say).
   write_table(path("no_u.csv"), {"t", "r", "y"}, table.leftCols(3));
   const Outcome no_u = run("fit --config " + config("paper-sim.yaml") + " --data " + path("no_u.csv"));
   EXPECT_EQ(no_u.code, 2) << no_u.output;
   EXPECT_TRUE(contains(no_u.output, "missing column 'u'")) << no_u.output;
-  EXPECT_FALSE(contains(no_u.output, "pick one")) << no_u.output;
+  EXPECT_TRUE(contains(no_u.output, "pick one with --u-column")) << no_u.output;
+  write_table(path("u1.csv"), {"time", "r", "u1", "y1", "y2"}, table);
+  const Outcome u1 = run("fit --config " + config("paper-sim.yaml") + " --data " + path("u1.csv") +
+                         " --to 90 --t-column time --u-column u1 --y-column y2");
+  ASSERT_EQ(u1.code, 0) << u1.output;
+  EXPECT_EQ(u1.output, plain.output);
 }
 
 // A record without a sample rate: its time column n counts samples, the config

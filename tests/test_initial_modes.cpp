@@ -117,6 +117,37 @@ TEST(InitialModes, FewerPeaksThanAskedWhenTheDataShowFewer) {
   EXPECT_NEAR(modal_parameters(m.submodels[0]).wn, truth[0].wn, 0.02 * truth[0].wn);
 }
 
+// A coloured input (its power 60 dB below its maximum at the resonance, as
+// through a steep low-pass) still excites the mode when the output follows it
+// closely all the way from the excited band: the coherence puts the resonance
+// in the searched band; without it, or with it only around the resonance
+// (beyond a band-limited input), the resonance stays outside.
+TEST(InitialModes, ACoherentResonanceWhereAColouredInputIsWeakIsSearched) {
+  const int F = 257;
+  const double wn = 2 * kPi * 0.25, zeta = 0.02, gain = 1.5;  // cycles/sample: T = 1
+  FrequencyResponse h;
+  h.frequency_hz = Eigen::VectorXd::LinSpaced(F, 0.0, 0.5);
+  h.response.resize(F);
+  h.excitation.resize(F);
+  h.coherence.resize(F);
+  h.segments = 10;
+  for (int k = 0; k < F; ++k) {
+    const double x = 2 * kPi * h.frequency_hz(k) / wn;
+    h.response(k) = gain / std::complex<double>(1.0 - x * x, 2.0 * zeta * x);
+    h.excitation(k) = std::pow(10.0, -6.0 * h.frequency_hz(k) / 0.25);  // -60 dB at the mode
+    h.coherence(k) = 0.95;
+  }
+  const std::vector<ModalParameters> peaks = resonance_peaks(h, 1);
+  ASSERT_EQ(peaks.size(), 1u);
+  EXPECT_NEAR(peaks[0].wn, wn, 0.01 * wn);
+  EXPECT_NEAR(peaks[0].zeta, zeta, 0.5 * zeta);
+  h.coherence.setConstant(0.1);
+  EXPECT_TRUE(resonance_peaks(h, 1).empty());
+  // Coherent around the peak only, apart from the excited band: not searched.
+  for (int k = 0; k < F; ++k) h.coherence(k) = std::abs(h.frequency_hz(k) - 0.25) < 0.03 ? 0.95 : 0.1;
+  EXPECT_TRUE(resonance_peaks(h, 1).empty());
+}
+
 TEST(InitialModes, RandomPlantsIdentifiedWithoutAStartingGuessInOpenLoop) {
   const double T = 0.01;
   for (std::uint64_t seed = 1; seed <= 8; ++seed) {

@@ -172,6 +172,10 @@ struct DiagnoseStep {
   // Verdicts of the physical check (physical.hpp) on this step's fit, other
   // than physical: the model above is the corrected one.
   std::vector<ModeFinding> physical;
+  // Standard deviations of (wn, zeta, gain) of each submodel of model.linear,
+  // first order from the output-error covariance on the estimation part
+  // (zeros when unknown): what tells two close modes apart.
+  std::vector<ModalParameters> modal_std;
 };
 
 // The rule that ended the augmentation.
@@ -182,7 +186,8 @@ enum class DiagnoseStop {
   min_improvement,  // the best candidate's credit is less than options.min_improvement of the refit's validation RMS
   bic,              // the best candidate does not lower the BIC of the refit without it
   mode_cap,         // options.max_modes_added modes added, and no other effect qualifies
-  not_fitted,       // no candidate could be fitted (stop_reason names each and why)
+  not_fitted,       // no candidate could be fitted, or none the rules admit simulates once made physical
+                    // (stop_reason names each and why)
 };
 const char* stop_name(DiagnoseStop stop);
 

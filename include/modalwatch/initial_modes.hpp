@@ -39,7 +39,14 @@ FrequencyResponse frequency_response(const Record& data, bool closed_loop, int s
 
 struct PeakOptions {
   double default_zeta = 0.02;      // when the half-power bandwidth is not resolved
-  double excited_fraction = 1e-3;  // frequencies with less excitation power than this share of the maximum are not searched
+  // The searched band runs from the first to the last frequency with at least
+  // this share of the largest excitation power, widened on each side over the
+  // adjacent frequencies whose squared coherence is at least `coherent`, up to
+  // the first that falls below it: a coloured input that rolls off can lie
+  // decades below its maximum where the output still follows it closely, while
+  // coherence in scattered bins beyond a band-limited input is no excitation.
+  double excited_fraction = 1e-3;
+  double coherent = 0.5;
   // A peak must rise above the higher of its two flanking minima by this many
   // relative standard deviations of |H| (from the coherence and the number of
   // segments), by min_prominence of its height at least, and by min_share of

@@ -7,12 +7,14 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <complex>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <numbers>
 #include <sstream>
 #include <vector>
@@ -38,11 +40,13 @@ void write_test(JsonWriter& j, const ResidualTest& t) {
   j.end_object();
 }
 
-void write_submodel(JsonWriter& j, const Submodel& s) {
+// sd: standard deviations of (wn, zeta, gain), zeros when unknown.
+void write_submodel(JsonWriter& j, const Submodel& s, const ModalParameters& sd) {
   j.begin_object().key("name").value(s.name);
   if (s.is_mode()) {
     const ModalParameters p = modal_parameters(s);
     j.key("kind").value("mode").key("wn").value(p.wn).key("zeta").value(p.zeta).key("gain").value(p.gain);
+    j.key("wn_std").value(sd.wn).key("zeta_std").value(sd.zeta).key("gain_std").value(sd.gain);
   } else {
     j.key("kind").value("transfer_function").key("rigid_poles").value(s.rigid_poles);
     for (const auto& [name, c] : {std::pair{"a", &s.a}, std::pair{"b", &s.b}}) {
@@ -101,7 +105,15 @@ void write_step(JsonWriter& j, const DiagnoseStep& s) {
   write_test(j.key("independence"), s.residual.independence);
   write_test(j.key("coherence"), s.residual.coherence);
   j.key("submodels").begin_array();
-  for (const Submodel& sm : s.model.linear.submodels) write_submodel(j, sm);
+  const auto& subs = s.model.linear.submodels;
+  for (std::size_t i = 0; i < subs.size(); ++i)
+    write_submodel(j, subs[i], i < s.modal_std.size() ? s.modal_std[i] : ModalParameters{});
+  j.end_array();
+  j.key("physical").begin_array();
+  for (const ModeFinding& f : s.physical) {
+    j.begin_object().key("submodel").value(f.submodel).key("verdict").value(verdict_name(f.verdict));
+    j.key("into").value(f.into).key("reason").value(f.reason).end_object();
+  }
   j.end_array();
   write_effects(j.key("effects"), s.model.effects);
   if (!s.ranking.empty() || s.refit.valid) write_candidates(j, s);
@@ -325,7 +337,13 @@ void write_tables(const std::string& dir, const DiagnoseResult& r, const Record&
   }
   {
     Eigen::MatrixXd t(val.size(), 4);
-    t << val.t, val.y, first.validation_output.tail(val.size()), last.validation_output.tail(val.size());
+    // A step whose model diverged on validation has no simulated output: NaN.
+    const auto simulated = [&](const DiagnoseStep& s) -> Eigen::VectorXd {
+      if (s.validation_output.size() < val.size())
+        return Eigen::VectorXd::Constant(val.size(), std::numeric_limits<double>::quiet_NaN());
+      return s.validation_output.tail(val.size());
+    };
+    t << val.t, val.y, simulated(first), simulated(last);
     write_table(dir + "/validation.csv", {"t", "y", "y_before", "y_after"}, t);
   }
   {
@@ -342,11 +360,15 @@ void write_tables(const std::string& dir, const DiagnoseResult& r, const Record&
     write_table(dir + "/bode.csv", {"f_hz", "mag_before", "phase_before_deg", "mag_after", "phase_after_deg"}, t);
   }
   {
-    const Eigen::Index M = first.residual.autocorrelation.size();
+    // A step whose model diverged on validation has no residual: NaN.
+    const auto at = [](const Eigen::VectorXd& v, Eigen::Index k) {
+      return k < v.size() ? v(k) : std::numeric_limits<double>::quiet_NaN();
+    };
+    const Eigen::Index M = std::max(first.residual.autocorrelation.size(), last.residual.autocorrelation.size());
     Eigen::MatrixXd t(M, 5);
     for (Eigen::Index k = 0; k < M; ++k)
-      t.row(k) << double(k), first.residual.autocorrelation(k), last.residual.autocorrelation(k),
-          first.residual.cross_correlation(k), last.residual.cross_correlation(k);
+      t.row(k) << double(k), at(first.residual.autocorrelation, k), at(last.residual.autocorrelation, k),
+          at(first.residual.cross_correlation, k), at(last.residual.cross_correlation, k);
     write_table(dir + "/correlations.csv", {"lag", "acf_before", "acf_after", "ccf_before", "ccf_after"}, t);
   }
 }

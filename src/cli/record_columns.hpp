@@ -1,7 +1,7 @@
 #pragma once
-// The CSV columns the offline commands (fit, diagnose) read as t and y, chosen
-// with --t-column and --y-column, and the reader that names those options when
-// a record lacks the column.
+// The CSV columns the offline commands (fit, diagnose) read as t, u and y,
+// chosen with --t-column, --u-column and --y-column, and the reader that names
+// those options when a record lacks the column.
 #include <string>
 
 #include "modalwatch/error.hpp"
@@ -11,12 +11,13 @@
 namespace modalwatch::cli {
 
 struct ColumnArgs {
-  std::string t = "t", y = "y";  // e.g. n (sample index), y2
+  std::string t = "t", u = "u", y = "y";  // e.g. n (sample index), u1, y2
 };
 
 inline RecordColumns record_columns(const ColumnArgs& args) {
   RecordColumns columns;
   columns.t = args.t;
+  columns.u = args.u;
   columns.y = args.y;
   return columns;
 }
@@ -26,6 +27,7 @@ inline Record read_record_with_columns(const RecordSource& source) {
     return read_record(source);
   } catch (const MissingColumnError& e) {
     const char* option = e.column() == source.columns.t   ? "--t-column"
+                         : e.column() == source.columns.u ? "--u-column"
                          : e.column() == source.columns.y ? "--y-column"
                                                           : nullptr;
     if (!option) throw;

@@ -26,6 +26,7 @@
 #include <cstdio>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -215,17 +216,27 @@ Refined fit_structure(const AugmentedModel& start, const Problem& pb, const Diag
   return best;
 }
 
+// Covariance of the linear part's beta at the model (empty when unknown).
+Eigen::MatrixXd beta_covariance(const AugmentedModel& m, const Problem& pb) {
+  const int nb = m.linear.n_beta();
+  const Eigen::MatrixXd all = refine(m, pb, 0, true).covariance;
+  return all.rows() >= nb ? Eigen::MatrixXd(all.topLeftCorner(nb, nb)) : Eigen::MatrixXd();
+}
+
 // The physical check (physical.hpp) on a fitted structure: its verdicts
-// recorded, the projected model rescored, and a refit when the structure changed.
-Refined make_physical(Refined r, const Problem& pb, const DiagnoseOptions& options, std::vector<ModeFinding>& findings) {
+// recorded, the projected model rescored, and a refit when the structure
+// changed. stds: the modal standard deviations of the returned model's submodels.
+Refined make_physical(Refined r, const Problem& pb, const DiagnoseOptions& options, std::vector<ModeFinding>& findings,
+                      std::vector<ModalParameters>& stds) {
+  stds.clear();
   for (std::size_t round = 0; round <= r.model.linear.submodels.size(); ++round) {
-    const int nb = r.model.linear.n_beta();
-    const Eigen::MatrixXd all = refine(r.model, pb, 0, true).covariance;
-    const Eigen::MatrixXd cov = all.rows() >= nb ? Eigen::MatrixXd(all.topLeftCorner(nb, nb)) : Eigen::MatrixXd();
-    const PhysicalCheck check = check_physical(r.model.linear, cov, pb.data.sample_time());
+    const PhysicalCheck check = check_physical(r.model.linear, beta_covariance(r.model, pb), pb.data.sample_time());
     for (const auto& f : check.findings)
       if (f.verdict != ModeVerdict::physical) findings.push_back(f);
-    if (!check.changed()) break;
+    if (!check.changed()) {
+      for (const auto& f : check.findings) stds.push_back(f.fitted_std);
+      break;
+    }
     AugmentedModel m = r.model;
     m.linear = check.model;
     if (check.refit) {
@@ -235,6 +246,15 @@ Refined make_physical(Refined r, const Problem& pb, const DiagnoseOptions& optio
     r.model = m;
     r.cost = cost_of(output(m, pb), pb.data.y);
     break;
+  }
+  if (stds.empty()) {  // the model changed after its last check
+    const Eigen::MatrixXd cov = beta_covariance(r.model, pb);
+    const AdditiveModel& lin = r.model.linear;
+    for (std::size_t i = 0; i < lin.submodels.size(); ++i) {
+      const int o = lin.offset(static_cast<int>(i)), n = lin.submodels[i].n_theta();
+      stds.push_back(cov.rows() == lin.n_beta() ? modal_std(lin.submodels[i], cov.block(o, o, n, n))
+                                                     : ModalParameters{});
+    }
   }
   return r;
 }
@@ -588,10 +608,13 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
   AugmentedModel configured;
   configured.linear = initial;
   std::vector<ModeFinding> findings;
-  Refined current = make_physical(fit_structure(configured, est, options, true), est, options, findings);
+  std::vector<ModalParameters> modal_std;
+  Refined current =
+      make_physical(fit_structure(configured, est, options, true), est, options, findings, modal_std);
   if (!std::isfinite(current.cost)) throw std::runtime_error("diagnose: the configured model cannot be fitted");
   result.steps.push_back(make_step("none", {}, current.model, current.cost, est, val, options));
   result.steps.back().physical = findings;
+  result.steps.back().modal_std = modal_std;
   if (options.progress) options.progress({0, "none", result.steps.back().validation_rms, true, {}});
 
   auto enabled = [&](EffectKind k) {
@@ -680,15 +703,42 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
         stop(rule, why);
       break;
     }
-    const Candidate& best = candidates.front();
-    findings.clear();
-    const double cost = best.estimation_rms * best.estimation_rms * static_cast<double>(estimation.size());
-    const Refined chosen = make_physical({best.model, cost, {}}, est, options, findings);
-    result.steps.push_back(
-        make_step(effect_name(best.kind), best.params, chosen.model, chosen.cost, est, val, options));
-    result.steps.back().physical = findings;
-    result.steps.back().refit_validation_rms = base_rms;
-    result.steps.back().credit = best.credit;
+    // The physical check can change a candidate's model (an unstable mode
+    // projected) so that it no longer simulates: such a candidate is not added,
+    // and the next one the rules admit is.
+    std::optional<DiagnoseStep> next;
+    for (Candidate& c : candidates) {
+      if (!c.valid) continue;
+      if (!(c.credit > options.min_improvement * base_rms)) break;
+      if (!(c.bic < base_bic)) continue;
+      findings.clear();
+      const double cost = c.estimation_rms * c.estimation_rms * static_cast<double>(estimation.size());
+      const Refined chosen = make_physical({c.model, cost, {}}, est, options, findings, modal_std);
+      DiagnoseStep s = make_step(effect_name(c.kind), c.params, chosen.model, chosen.cost, est, val, options);
+      if (!std::isfinite(s.estimation_rms) || !std::isfinite(s.validation_rms)) {
+        c.valid = false;
+        c.credit = std::numeric_limits<double>::quiet_NaN();
+        c.note = "diverges once made physical (" +
+                 (findings.empty() ? std::string("refitted") : findings.front().reason) + ")";
+        continue;
+      }
+      s.physical = findings;
+      s.modal_std = modal_std;
+      s.refit_validation_rms = base_rms;
+      s.credit = c.credit;
+      next = std::move(s);
+      break;
+    }
+    now.ranking = candidates;
+    if (!next) {
+      std::string diverged;
+      for (const Candidate& c : candidates)
+        if (!c.note.empty() && c.note.starts_with("diverges once"))
+          diverged += std::string(diverged.empty() ? ": " : ", ") + effect_name(c.kind) + " (" + c.note + ")";
+      stop(DiagnoseStop::not_fitted, "no candidate the rules admit simulates once made physical" + diverged);
+      break;
+    }
+    result.steps.push_back(std::move(*next));
   }
   return result;
 }

@@ -84,7 +84,11 @@ std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int cou
       if (first < 0) first = k;
       last = k;
     }
-  if (first < 0 || last - first < 2) return out;
+  if (first < 0) return out;
+  // A coloured input that rolls off: the output follows it on, without a gap.
+  while (first > 1 && h.coherence(first - 1) >= options.coherent) --first;
+  while (last + 1 < F && h.coherence(last + 1) >= options.coherent) ++last;
+  if (last - first < 2) return out;
   Eigen::VectorXd logh(F);
   for (Eigen::Index k = 0; k < F; ++k) logh(k) = std::log(std::max(std::abs(h.response(k)), 1e-300));
 
