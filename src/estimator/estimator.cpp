@@ -231,10 +231,12 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
       // The prefilter states no longer describe the signals: restart them, keep theta and P.
       ++m.status.gaps;
       flags |= kGap;
-      if (m.status.warming_up)
+      if (m.status.warming_up) {
         m.buffered = 0;
-      else if (restarted || bad_values || !m.bridge(sample, dt))
+        m.loop_known = 0;
+      } else if (restarted || bad_values || !m.bridge(sample, dt)) {
         m.restart_filters();
+      }
     }
   }
   m.t_prev = s.t;

@@ -34,6 +34,7 @@ void RecursiveEstimator::Impl::reset_filters() {
 // is missing information, never new information.
 void RecursiveEstimator::Impl::restart_filters() {
   reset_filters();
+  loop_known = 0;  // the plant loop's history no longer runs up to the next sample
   // Unsettled until the short-term error, started at the divergence level, has
   // come down to near the noise level on the restarted filters' own output.
   e_short = cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
