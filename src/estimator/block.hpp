@@ -117,13 +117,17 @@ struct Block {
   // Decay rate (1/s) of the slowest pole of A when A is of first or second
   // order, stable, and the submodel has no rigid poles; else 0 (no such bound).
   // In normalised time A = 1 + theta_0 p' (+ theta_1 p'^2), p' = p / ws.
-  MODALWATCH_HOT double decay_rate() const {
+  // Pole::fastest: the faster of two real poles instead (a pair decays as one).
+  enum class Pole : unsigned char { slowest, fastest };
+  MODALWATCH_HOT double decay_rate(Pole which = Pole::slowest) const {
     if (l != 0 || !(theta(0) > 0.0)) return 0.0;
     if (n == 1) return ws / theta(0);
     if (n != 2 || !(theta(1) > 0.0)) return 0.0;
     const double a1 = theta(0), a2 = theta(1);
-    const double disc = a1 * a1 - 4.0 * a2;  // real poles: the slower one
-    return ws * (disc < 0.0 ? a1 : a1 - std::sqrt(disc)) / (2.0 * a2);
+    const double disc = a1 * a1 - 4.0 * a2;
+    if (disc < 0.0) return ws * a1 / (2.0 * a2);
+    const double root = std::sqrt(disc);
+    return ws * (which == Pole::slowest ? a1 - root : a1 + root) / (2.0 * a2);
   }
   FilterVector a_poly() const {
     FilterVector c(n + 1);

@@ -24,8 +24,8 @@ void RecursiveEstimator::Impl::reset_filters() {
 
 // After a gap that is not bridged (or a reset) the filters restart from rest,
 // and the model output needs a few time constants of the slowest mode to catch
-// up with the data. That transient is neither a divergence nor information about theta: as in the
-// warm-up (section 4.7), the filters run without updating theta, first until
+// up with the data. That transient is neither a divergence nor information
+// about theta: as in the warm-up (section 4.7), the filters run without updating theta, first until
 // the modes' free response has died out (transient_samples()), then until the
 // output error is back near the noise level (at most kSettleWindows residual
 // windows more, after which updates resume so that a plant that changed during
@@ -38,9 +38,10 @@ void RecursiveEstimator::Impl::restart_filters() {
   // Unsettled until the short-term error, started at the divergence level, has
   // come down to near the noise level on the restarted filters' own output.
   e_short = cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
+  constexpr double kSettleWindows = 4.0;
   transient = transient_samples();
   bridged = 0;
-  settling = transient + settle_samples();
+  settling = transient + static_cast<std::uint64_t>(kSettleWindows / (1.0 - e_alpha));
   outlier_run = 0;
 }
 
@@ -118,28 +119,11 @@ void RecursiveEstimator::Impl::bridge_plant_loop(double r, double z) {
 }
 
 // The shortest time constant of the current model's free response (s): the
-// fastest-decaying pole of any mode or first-order submodel. Submodels with
-// poles at the origin or of other orders give none; without any, infinity.
+// fastest-decaying pole of any mode or first-order submodel; infinity without.
 double RecursiveEstimator::Impl::shortest_decay_time() const {
   double rate = 0.0;  // fastest decay rate, 1/s
-  for (const auto& b : blocks) {
-    if (b.l != 0) continue;
-    if (b.n == 1 && b.theta(0) > 0.0) rate = std::max(rate, b.scale(0) / b.theta(0));
-    if (b.n != 2) continue;
-    const double a1 = b.theta(0) / b.scale(0), a2 = b.theta(1) / b.scale(1);
-    if (!(a1 > 0.0 && a2 > 0.0)) continue;
-    const double disc = a1 * a1 - 4.0 * a2;  // real poles: the faster one
-    rate = std::max(rate, (disc < 0.0 ? a1 : a1 + std::sqrt(disc)) / (2.0 * a2));
-  }
+  for (const auto& b : blocks) rate = std::max(rate, b.decay_rate(detail::Block::Pole::fastest));
   return rate > 0.0 ? 1.0 / rate : std::numeric_limits<double>::infinity();
-}
-
-// The longest wait for the output error to come back near the noise level
-// (kSettleWindows residual windows), after which updates resume so that a
-// plant that changed during the gap can still be followed.
-std::uint64_t RecursiveEstimator::Impl::settle_samples() const {
-  constexpr double kSettleWindows = 4.0;
-  return static_cast<std::uint64_t>(kSettleWindows / (1.0 - e_alpha));
 }
 
 // Samples until the free response of the slowest mode (and first-order
@@ -156,12 +140,6 @@ std::uint64_t RecursiveEstimator::Impl::transient_samples() const {
     const double r = b.decay_rate();
     if (r > 0.0) rate = std::min(rate, r);
   }
-  return decay_samples(rate);
-}
-
-// Samples for a free response decaying at rate (1/s) to kTransientDecay of its
-// start; 0 without a decay (rate 0 or infinite).
-std::uint64_t RecursiveEstimator::Impl::decay_samples(double rate) const {
   constexpr double kTransientDecay = 0.1;
   if (!std::isfinite(rate) || !(rate > 0.0)) return 0;
   const double samples = std::ceil(-std::log(kTransientDecay) / (rate * cfg.sample_time));

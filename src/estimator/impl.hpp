@@ -109,8 +109,6 @@ struct RecursiveEstimator::Impl {
   bool bridge(const Sample& next, double dt);
   void bridge_plant_loop(double r, double z);
   std::uint64_t transient_samples() const;
-  std::uint64_t decay_samples(double rate) const;
-  std::uint64_t settle_samples() const;
   double shortest_decay_time() const;
   void save_good();
   void restore_good(const char* reason);
