@@ -279,8 +279,9 @@ TEST_F(Cli, FitAndDiagnoseReadTheNamedColumnsAndNameTheOptionForAMissingOne) {
 
 // A record without a sample rate: its time column n counts samples, the config
 // says sample_rate_hz: 1 (modes in rad/sample). The report says so, and the
-// plots' axes are in samples and cycles/sample; a record in seconds keeps s and Hz.
-TEST_F(Cli, DiagnoseOfASampleIndexRecordLabelsTimeInSamples) {
+// plots' axes are in samples and cycles/sample, and so are the frequencies fit
+// prints; a record in seconds keeps s and Hz.
+TEST_F(Cli, FitAndDiagnoseOfASampleIndexRecordLabelTimeInSamples) {
   const std::string cfg = write("plant.yaml", R"(sample_rate_hz: 1
 model:
   submodels:
@@ -310,6 +311,12 @@ simulation:
     return read ? std::string(line) : std::string();
   };
   for (const bool samples : {true, false}) {
+    const Outcome f = run("fit --config " + cfg + " --data " + path(samples ? "n.csv" : "t.csv") +
+                          (samples ? " --t-column n" : ""));
+    ASSERT_EQ(f.code, 0) << f.output;
+    EXPECT_EQ(contains(f.output, " Hz, open loop"), !samples) << f.output;
+    EXPECT_EQ(contains(f.output, "f [1/sample]"), samples) << f.output;
+    EXPECT_EQ(contains(f.output, "f [Hz]"), !samples) << f.output;
     const std::string report = path(samples ? "samples" : "seconds");
     const Outcome d = run("diagnose --config " + cfg + " --data " + path(samples ? "n.csv" : "t.csv") +
                           (samples ? " --t-column n" : "") + " --max-steps 0 --report " + report +

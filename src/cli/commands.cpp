@@ -129,13 +129,17 @@ int fit(const FitArgs& args) {
     options.output_hold = config.output_hold;
     options.max_iterations = args.max_iterations;
     options.settle_samples = settle;
+    const bool in_samples = time_in_samples(full, args.columns, config.sample_time);
     const AdditiveModel start =
-        modes ? modes_from_data(data.segment(settle, used), *modes, config.closed_loop, args.data) : config.model;
+        modes ? modes_from_data(data.segment(settle, used), *modes, config.closed_loop, args.data, in_samples)
+              : config.model;
     std::vector<ModeFinding> findings;
     const FitResult result = fit_physical(data, start, options, findings);
 
-    std::printf("modalwatch fit: %lld samples at %g Hz, %s loop, %zu submodels, %d parameters\n",
-                static_cast<long long>(used), 1.0 / T, config.closed_loop ? "closed" : "open",
+    char rate[48] = "";
+    if (!in_samples) std::snprintf(rate, sizeof rate, " at %g Hz", 1.0 / T);
+    std::printf("modalwatch fit: %lld samples%s, %s loop, %zu submodels, %d parameters\n",
+                static_cast<long long>(used), rate, config.closed_loop ? "closed" : "open",
                 result.model.submodels.size(), result.model.n_beta());
     if (settle > 0)
       std::printf("(the %lld samples before --from run the filters and the model only)\n",
@@ -146,7 +150,7 @@ int fit(const FitArgs& args) {
     std::vector<Eigen::MatrixXd> covariances;
     for (int i = 0; i < static_cast<int>(result.model.submodels.size()); ++i)
       covariances.push_back(result.theta_covariance(i));
-    print_modal_table(result.model, covariances);
+    print_modal_table(result.model, covariances, in_samples);
     std::printf("\nfit on the data: %.2f %%   output-error std: %.4g\n", result.fit_percent,
                 std::sqrt(result.noise_variance));
     print_identifiability(result);

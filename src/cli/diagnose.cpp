@@ -58,13 +58,6 @@ std::vector<EffectKind> parse_effects(const std::string& list) {
   return out;
 }
 
-// A record without a sample rate: its time column, named otherwise than t, counts
-// samples (whole numbers one apart, as sample_rate_hz: 1 checks).
-bool time_in_samples(const Record& r, const DiagnoseArgs& args, const Config& config) {
-  if (args.columns.t == "t" || config.sample_time != 1.0) return false;
-  return (r.t.array() == r.t.array().round()).all();
-}
-
 // The option that sets the rule which stopped the augmentation.
 const char* stop_option(DiagnoseStop stop) {
   switch (stop) {
@@ -148,11 +141,13 @@ int diagnose(const DiagnoseArgs& args) {
 
     // Modes from the data: --modes, or model.modes without submodels.
     const std::optional<int> modes = args.modes ? args.modes : config.model_modes;
-    const AdditiveModel initial = modes ? modes_from_data(est, *modes, config.closed_loop, args.data) : config.model;
+    const bool in_samples = time_in_samples(full, args.columns, config.sample_time);
+    const AdditiveModel initial =
+        modes ? modes_from_data(est, *modes, config.closed_loop, args.data, in_samples) : config.model;
     DiagnoseResult r = diagnose(est, val, initial, loop, options);
     r.stop_reason += stop_option(r.stop);
 
-    write_diagnose_report({args, config, r, val, lead_in, est, time_in_samples(full, args, config)});
+    write_diagnose_report({args, config, r, val, lead_in, est, in_samples});
     for (const auto& step : r.steps) print_physical_findings(step.physical);
     return 0;
   });
