@@ -51,9 +51,11 @@ std::vector<EffectKind> parse_effects(const std::string& list) {
         out.push_back(k);
         found = true;
       }
-    if (!found)
-      throw InputError("--effects", "unknown effect '" + item +
-                                        "' (allowed: mode, rigid_body, offset, drift, delay, coulomb, cubic)");
+    if (!found) {
+      std::string allowed;
+      for (EffectKind k : all_effects()) allowed += std::string(allowed.empty() ? "" : ", ") + effect_name(k);
+      throw InputError("--effects", "unknown effect '" + item + "' (allowed: " + allowed + ")");
+    }
   }
   return out;
 }

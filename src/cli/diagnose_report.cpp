@@ -32,6 +32,10 @@ std::string format_number(double v, int precision) { return json_number(v, preci
 
 namespace {
 
+// A mode, with a real residue (b0) or a complex one (b0 + b1 p): reported by
+// its wn, zeta and DC gain.
+bool is_resonance(const Submodel& s) { return s.n == 2 && s.m <= 1 && s.rigid_poles == 0; }
+
 // ------------------------------------------------------------ summary.json
 
 void write_test(JsonWriter& j, const ResidualTest& t) {
@@ -43,10 +47,11 @@ void write_test(JsonWriter& j, const ResidualTest& t) {
 // sd: standard deviations of (wn, zeta, gain), zeros when unknown.
 void write_submodel(JsonWriter& j, const Submodel& s, const ModalParameters& sd) {
   j.begin_object().key("name").value(s.name);
-  if (s.is_mode()) {
+  if (is_resonance(s)) {
     const ModalParameters p = modal_parameters(s);
     j.key("kind").value("mode").key("wn").value(p.wn).key("zeta").value(p.zeta).key("gain").value(p.gain);
     j.key("wn_std").value(sd.wn).key("zeta_std").value(sd.zeta).key("gain_std").value(sd.gain);
+    if (s.m == 1) j.key("b1").value(s.b(1));
   } else {
     j.key("kind").value("transfer_function").key("rigid_poles").value(s.rigid_poles);
     for (const auto& [name, c] : {std::pair{"a", &s.a}, std::pair{"b", &s.b}}) {
@@ -196,10 +201,11 @@ std::string effects_comment(const ModelEffects& e) {
 std::string model_table(const AdditiveModel& m) {
   std::string s = "| submodel | kind | f [Hz] | wn [rad/s] | zeta | gain / coefficients |\n|---|---|---|---|---|---|\n";
   for (const Submodel& sm : m.submodels) {
-    if (sm.is_mode()) {
+    if (is_resonance(sm)) {
       const ModalParameters p = modal_parameters(sm);
-      s += "| " + sm.name + " | mode | " + format_number(p.hz(), 6) + " | " + format_number(p.wn, 6) + " | " +
-           format_number(p.zeta, 4) + " | " + format_number(p.gain, 5) + " |\n";
+      s += "| " + sm.name + (sm.m == 1 ? " | mode, b0 + b1 p | " : " | mode | ") + format_number(p.hz(), 6) + " | " +
+           format_number(p.wn, 6) + " | " + format_number(p.zeta, 4) + " | " + format_number(p.gain, 5) +
+           (sm.m == 1 ? ", b1 = " + format_number(sm.b(1), 5) : "") + " |\n";
     } else {
       std::string c;
       const Eigen::VectorXd th = sm.theta();
