@@ -187,6 +187,28 @@ TEST_F(CliThreeModes, FitWithModesOnlyStartsFromTheData) {
   EXPECT_TRUE(contains(track.output, "track needs the submodels")) << track.output;
 }
 
+// --max-modes chooses the number of modes by BIC and writes the stabilisation
+// diagram's tables; it cannot go with --modes.
+TEST_F(CliThreeModes, FitWithMaxModesChoosesThreeAndWritesTheStabilisationDiagram) {
+  const std::string dir = path("stab");
+  const Outcome fit = run("fit --config " + path("plant.yaml") + " --data " + path("d.csv") +
+                          " --max-modes 5 --stabilisation " + dir + " --out " + path("fitted.yaml"));
+  ASSERT_EQ(fit.code, 0) << fit.output;
+  EXPECT_TRUE(contains(fit.output, "<- chosen")) << fit.output;
+  expect_three_modes(load_config(path("fitted.yaml")).model);
+  std::ifstream json(dir + "/summary.json");
+  std::stringstream summary;
+  summary << json.rdbuf();
+  EXPECT_TRUE(contains(summary.str(), "\"chosen\": 3")) << summary.str();
+  const Table st = read_table(dir + "/stabilisation.csv");
+  EXPECT_GE(st.data.rows(), 6);  // 1 + 2 + 3 modes found at least
+  EXPECT_GT(read_table(dir + "/frf.csv").data.rows(), 100);
+  const Outcome both = run("fit --config " + path("plant.yaml") + " --data " + path("d.csv") +
+                           " --max-modes 5 --modes 2");
+  EXPECT_EQ(both.code, 2) << both.output;
+  EXPECT_TRUE(contains(both.output, "excludes")) << both.output;
+}
+
 TEST_F(CliThreeModes, DiagnoseWithModesOnlyStartsFromTheData) {
   const Outcome diag = run("diagnose --config " + path("plant.yaml") + " --data " + path("d.csv") + " --report " +
                            path("report"));
