@@ -491,6 +491,28 @@ TEST(ResidualTests, WelchFindsASineAtItsFrequency) {
   EXPECT_NEAR(sp.frequency_hz(peak), 12.5, 100.0 / 1024);
 }
 
+// e = u - 0.5 u delayed one sample: S_eu / S_uu is that filter's response
+// 1 - 0.5 exp(-j w T), magnitude and phase, with coherence 1.
+TEST(ResidualTests, WelchCrossSpectrumOfAKnownFilterIsItsResponse) {
+  const int N = 1 << 15;
+  const double T = 0.001;
+  std::mt19937_64 rng(4);
+  std::normal_distribution<double> z;
+  Eigen::VectorXd u(N), e(N);
+  for (int k = 0; k < N; ++k) u(k) = z(rng);
+  e(0) = u(0);
+  for (int k = 1; k < N; ++k) e(k) = u(k) - 0.5 * u(k - 1);
+  const Spectra sp = welch_spectra(e, u, T, 1024);
+  ASSERT_EQ(sp.frequency_hz.size(), 513);
+  EXPECT_EQ(sp.segments, 63);
+  for (Eigen::Index f = 1; f < sp.frequency_hz.size() - 1; f += 16) {
+    const std::complex<double> h =
+        1.0 - 0.5 * std::exp(std::complex<double>(0.0, -2.0 * std::numbers::pi * sp.frequency_hz(f) * T));
+    EXPECT_NEAR(std::abs(sp.cross(f) - h), 0.0, 0.01) << sp.frequency_hz(f) << " Hz";
+    EXPECT_NEAR(sp.coherence(f), 1.0, 1e-3) << sp.frequency_hz(f) << " Hz";
+  }
+}
+
 // ------------------------------------------------------------ measured records
 
 const std::string kShared = MODALWATCH_SHARED_DATA;
