@@ -38,148 +38,14 @@
 #include "modalwatch/diagnose.hpp"
 #include "modalwatch/physical.hpp"
 #include "modalwatch/srivc.hpp"
+#include "output_error.hpp"
 
 namespace modalwatch {
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
+using namespace diagnose_detail;
 
 double rms(const Eigen::VectorXd& x) { return x.size() ? std::sqrt(x.squaredNorm() / x.size()) : 0.0; }
-
-// ------------------------------------------------------------ parameters
-
-// p = [beta; effect parameters that are on], in physical units.
-Eigen::VectorXd pack(const AugmentedModel& m) {
-  const ModelEffects& e = m.effects;
-  std::vector<double> extra;
-  if (e.output_offset_on) extra.push_back(e.output_offset);
-  if (e.input_offset_on) extra.push_back(e.input_offset);
-  if (e.drift_on) extra.push_back(e.drift);
-  if (e.coulomb_on) extra.push_back(e.coulomb);
-  if (e.cubic_on) extra.push_back(e.cubic);
-  const int nb = m.linear.n_beta();
-  Eigen::VectorXd p(nb + static_cast<int>(extra.size()));
-  p.head(nb) = m.linear.beta();
-  for (std::size_t i = 0; i < extra.size(); ++i) p(nb + static_cast<int>(i)) = extra[i];
-  return p;
-}
-
-void unpack(const Eigen::VectorXd& p, AugmentedModel& m) {
-  const int nb = m.linear.n_beta();
-  m.linear.set_beta(p.head(nb));
-  int i = nb;
-  ModelEffects& e = m.effects;
-  if (e.output_offset_on) e.output_offset = p(i++);
-  if (e.input_offset_on) e.input_offset = p(i++);
-  if (e.drift_on) e.drift = p(i++);
-  if (e.coulomb_on) e.coulomb = p(i++);
-  if (e.cubic_on) e.cubic = p(i++);
-}
-
-// ------------------------------------------------------------ output error
-
-struct Problem {
-  const Record& data;
-  const LoopSpec& loop;
-};
-
-// Simulated output, or empty when the model cannot be simulated or diverges.
-Eigen::VectorXd output(const AugmentedModel& m, const Problem& pb) {
-  try {
-    Eigen::VectorXd y = simulate_augmented(m, pb.data, pb.loop);
-    if (!y.allFinite()) return {};
-    return y;
-  } catch (const std::exception&) {
-    return {};
-  }
-}
-
-double cost_of(const Eigen::VectorXd& y_hat, const Eigen::VectorXd& y) {
-  if (y_hat.size() != y.size()) return kInf;
-  const double c = (y - y_hat).squaredNorm();
-  return std::isfinite(c) ? c : kInf;
-}
-
-struct Refined {
-  AugmentedModel model;
-  double cost = kInf;  // sum of squared output errors on the estimation part
-  // Of pack(model): sigma^2 (J^T J)^{-1} at the model (refine's with_covariance); else empty.
-  Eigen::MatrixXd covariance;
-};
-
-// Levenberg-Marquardt on the output error with a forward-difference Jacobian,
-// in parameters scaled by their start values (p = p0 (1 + delta)); with
-// iterations = 0 and with_covariance the model stays and gets its covariance.
-Refined refine(const AugmentedModel& start, const Problem& pb, int iterations, bool with_covariance = false) {
-  Refined best{start, kInf, {}};
-  const Eigen::VectorXd p0 = pack(start);
-  const int P = static_cast<int>(p0.size());
-  Eigen::VectorXd scale(P);
-  const double typical = p0.size() ? p0.cwiseAbs().maxCoeff() : 1.0;
-  for (int j = 0; j < P; ++j) scale(j) = p0(j) != 0.0 ? std::abs(p0(j)) : 1e-6 * std::max(typical, 1e-12);
-  auto model_at = [&](const Eigen::VectorXd& delta) {
-    AugmentedModel m = start;
-    unpack(p0 + scale.cwiseProduct(delta), m);
-    return m;
-  };
-  Eigen::VectorXd delta = Eigen::VectorXd::Zero(P);
-  Eigen::VectorXd y_hat = output(start, pb);
-  double cost = cost_of(y_hat, pb.data.y);
-  if (!std::isfinite(cost)) return best;
-  best.cost = cost;
-  double lambda = 1e-3;
-  const double h = 1e-6;
-  Eigen::MatrixXd J(pb.data.size(), P);
-  auto jacobian = [&] {
-    for (int j = 0; j < P; ++j) {
-      Eigen::VectorXd d = delta;
-      d(j) += h;
-      const Eigen::VectorXd yj = output(model_at(d), pb);
-      J.col(j) = yj.size() == y_hat.size() ? Eigen::VectorXd((yj - y_hat) / h) : Eigen::VectorXd::Zero(y_hat.size());
-    }
-  };
-  for (int it = 0; it < iterations && P > 0; ++it) {
-    jacobian();
-    const Eigen::VectorXd r = pb.data.y - y_hat;
-    const Eigen::MatrixXd A = J.transpose() * J;
-    const Eigen::VectorXd g = J.transpose() * r;
-    bool accepted = false;
-    for (int tries = 0; tries < 12; ++tries) {
-      Eigen::MatrixXd M = A;
-      for (int j = 0; j < P; ++j) M(j, j) += lambda * std::max(A(j, j), 1e-12);
-      const Eigen::VectorXd step = M.ldlt().solve(g);
-      if (!step.allFinite()) {
-        lambda *= 4.0;
-        continue;
-      }
-      const Eigen::VectorXd trial = delta + step;
-      const Eigen::VectorXd y_trial = output(model_at(trial), pb);
-      const double c = cost_of(y_trial, pb.data.y);
-      if (c < cost) {
-        const double drop = (cost - c) / cost;
-        delta = trial;
-        y_hat = y_trial;
-        cost = c;
-        lambda = std::max(lambda / 3.0, 1e-9);
-        accepted = true;
-        if (drop < 1e-10) it = iterations;  // converged
-        break;
-      }
-      lambda *= 4.0;
-    }
-    if (!accepted) break;
-  }
-  best.model = model_at(delta);
-  best.cost = cost;
-  const Eigen::Index N = pb.data.size();
-  if (with_covariance && iterations == 0 && P > 0 && N > P) {
-    jacobian();
-    const Eigen::MatrixXd Js = J * scale.cwiseInverse().asDiagonal();  // d y / d p
-    const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(Js.transpose() * Js);
-    best.covariance = cost / static_cast<double>(N - P) * cod.pseudoInverse();
-  }
-  return best;
-}
 
 // ------------------------------------------------------------ starts
 
@@ -254,7 +120,7 @@ Refined make_physical(Refined r, const Problem& pb, const DiagnoseOptions& optio
     for (std::size_t i = 0; i < lin.submodels.size(); ++i) {
       const int o = lin.offset(static_cast<int>(i)), n = lin.submodels[i].n_theta();
       stds.push_back(cov.rows() == lin.n_beta() ? modal_std(lin.submodels[i], cov.block(o, o, n, n))
-                                                     : ModalParameters{});
+                                                : ModalParameters{});
     }
   }
   return r;
@@ -641,8 +507,7 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
   configured.linear = initial;
   std::vector<ModeFinding> findings;
   std::vector<ModalParameters> modal_std;
-  Refined current =
-      make_physical(fit_structure(configured, est, options, true), est, options, findings, modal_std);
+  Refined current = make_physical(fit_structure(configured, est, options, true), est, options, findings, modal_std);
   if (!std::isfinite(current.cost)) throw std::runtime_error("diagnose: the configured model cannot be fitted");
   result.steps.push_back(make_step("none", {}, current.model, current.cost, est, val, options));
   result.steps.back().physical = findings;
@@ -731,8 +596,8 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
         stop(DiagnoseStop::mode_cap,
              std::to_string(options.max_modes_added) + " modes added, the most allowed, and no other effect to try");
       else if (mode_capped)
-        stop(DiagnoseStop::mode_cap, std::to_string(options.max_modes_added) +
-                                         " modes added, the most allowed; of the other effects, " + why);
+        stop(DiagnoseStop::mode_cap,
+             std::to_string(options.max_modes_added) + " modes added, the most allowed; of the other effects, " + why);
       else
         stop(rule, why);
       break;
