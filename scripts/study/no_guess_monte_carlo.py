@@ -48,8 +48,9 @@ noise at 30 dB SNR; 12000 samples of PRBS (14-bit register, one sample per bit,
 amplitude 1) as the input (open loop) or the setpoint (closed loop). The closed
 loop is a proportional controller at half the gain that would reach 1 at the
 largest peak of |G| (stable by the small-gain theorem for these stable plants,
-and active at the modes). The model's output_hold is the config's default
-unless --output-hold says otherwise. --start truth fits every run from the
+and active at the modes). The model's output_hold is left unset (fit then
+takes foh when a starting mode lies above 0.25 fs, else zoh) unless
+--output-hold sets it. --start truth fits every run from the
 true modes (a study of the estimator apart from the start); --runs-csv writes
 one row per run and tool (rate, highest mode's fraction of it, errors, time).
 """

@@ -126,11 +126,11 @@ int fit(const FitArgs& args) {
     SrivcOptions options;
     options.closed_loop = config.closed_loop;
     options.controller = config.controller;
-    options.output_hold = config.output_hold;
     options.max_iterations = args.max_iterations;
     options.settle_samples = settle;
     const AdditiveModel start =
         modes ? modes_from_data(data.segment(settle, used), *modes, config.closed_loop, args.data) : config.model;
+    options.output_hold = output_hold(config, start, T);
     std::vector<ModeFinding> findings;
     const FitResult result = fit_physical(data, start, options, findings);
 
