@@ -1,6 +1,8 @@
 #pragma once
 // Experiments shared by the suites that fit simulated plants.
 #include <cstdint>
+#include <string>
+#include <vector>
 
 #include "modalwatch/simulator.hpp"
 
@@ -18,6 +20,19 @@ inline ExperimentSpec open_loop_prbs(double T, double duration, std::uint64_t se
   e.excitation.clock_period = clock;
   e.excitation.amplitude = 1.0;
   return e;
+}
+
+// A plant of plain modes named mode1, mode2, ..., with output noise at snr_db.
+inline PlantSpec plant_of(const std::vector<ModalParameters>& modes, double snr_db) {
+  PlantSpec p;
+  for (std::size_t i = 0; i < modes.size(); ++i) {
+    PlantMode pm;
+    pm.modal = modes[i];
+    pm.submodel = make_mode("mode" + std::to_string(i + 1), modes[i]);
+    p.modes.push_back(pm);
+  }
+  p.snr_db = snr_db;
+  return p;
 }
 
 }  // namespace modalwatch::test_support

@@ -187,6 +187,28 @@ TEST_F(CliThreeModes, FitWithModesOnlyStartsFromTheData) {
   EXPECT_TRUE(contains(track.output, "track needs the submodels")) << track.output;
 }
 
+// --max-modes chooses the number of modes by BIC and writes the stabilisation
+// diagram's tables; it cannot go with --modes.
+TEST_F(CliThreeModes, FitWithMaxModesChoosesThreeAndWritesTheStabilisationDiagram) {
+  const std::string dir = path("stab");
+  const Outcome fit = run("fit --config " + path("plant.yaml") + " --data " + path("d.csv") +
+                          " --max-modes 5 --stabilisation " + dir + " --out " + path("fitted.yaml"));
+  ASSERT_EQ(fit.code, 0) << fit.output;
+  EXPECT_TRUE(contains(fit.output, "<- chosen")) << fit.output;
+  expect_three_modes(load_config(path("fitted.yaml")).model);
+  std::ifstream json(dir + "/summary.json");
+  std::stringstream summary;
+  summary << json.rdbuf();
+  EXPECT_TRUE(contains(summary.str(), "\"chosen\": 3")) << summary.str();
+  const Table st = read_table(dir + "/stabilisation.csv");
+  EXPECT_GE(st.data.rows(), 6);  // 1 + 2 + 3 modes found at least
+  EXPECT_GT(read_table(dir + "/frf.csv").data.rows(), 100);
+  const Outcome both = run("fit --config " + path("plant.yaml") + " --data " + path("d.csv") +
+                           " --max-modes 5 --modes 2");
+  EXPECT_EQ(both.code, 2) << both.output;
+  EXPECT_TRUE(contains(both.output, "excludes")) << both.output;
+}
+
 TEST_F(CliThreeModes, DiagnoseWithModesOnlyStartsFromTheData) {
   const Outcome diag = run("diagnose --config " + path("plant.yaml") + " --data " + path("d.csv") + " --report " +
                            path("report"));
@@ -327,8 +349,9 @@ TEST_F(Cli, FitAndDiagnoseReadTheNamedColumnsAndNameTheOptionForAMissingOne) {
 
 // A record without a sample rate: its time column n counts samples, the config
 // says sample_rate_hz: 1 (modes in rad/sample). The report says so, and the
-// plots' axes are in samples and cycles/sample; a record in seconds keeps s and Hz.
-TEST_F(Cli, DiagnoseOfASampleIndexRecordLabelsTimeInSamples) {
+// plots' axes are in samples and cycles/sample, and so are the frequencies fit
+// prints; a record in seconds keeps s and Hz.
+TEST_F(Cli, FitAndDiagnoseOfASampleIndexRecordLabelTimeInSamples) {
   const std::string cfg = write("plant.yaml", R"(sample_rate_hz: 1
 model:
   submodels:
@@ -358,6 +381,12 @@ simulation:
     return read ? std::string(line) : std::string();
   };
   for (const bool samples : {true, false}) {
+    const Outcome f = run("fit --config " + cfg + " --data " + path(samples ? "n.csv" : "t.csv") +
+                          (samples ? " --t-column n" : ""));
+    ASSERT_EQ(f.code, 0) << f.output;
+    EXPECT_EQ(contains(f.output, " Hz, open loop"), !samples) << f.output;
+    EXPECT_EQ(contains(f.output, "f [1/sample]"), samples) << f.output;
+    EXPECT_EQ(contains(f.output, "f [Hz]"), !samples) << f.output;
     const std::string report = path(samples ? "samples" : "seconds");
     const Outcome d = run("diagnose --config " + cfg + " --data " + path(samples ? "n.csv" : "t.csv") +
                           (samples ? " --t-column n" : "") + " --max-steps 0 --report " + report +

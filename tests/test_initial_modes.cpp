@@ -46,17 +46,7 @@ std::vector<ModalParameters> random_modes(int K, double T, std::mt19937_64& rng)
   return modes;
 }
 
-PlantSpec plant_of(const std::vector<ModalParameters>& modes, double snr_db) {
-  PlantSpec p;
-  for (std::size_t i = 0; i < modes.size(); ++i) {
-    PlantMode pm;
-    pm.modal = modes[i];
-    pm.submodel = make_mode("mode" + std::to_string(i + 1), modes[i]);
-    p.modes.push_back(pm);
-  }
-  p.snr_db = snr_db;
-  return p;
-}
+using test_support::plant_of;
 
 ExperimentSpec experiment(double T, double duration, std::uint64_t seed) {
   return test_support::open_loop_prbs(T, duration, seed, 1, 14);

@@ -30,7 +30,11 @@
 
 namespace modalwatch {
 
-enum class EffectKind { mode, rigid_body, offset, drift, delay, coulomb, cubic };
+// complex_modes: every mode's numerator b0 + b1 p (complex residues: damping
+// that is not proportional, a sensor not collocated with the actuator, a lag
+// the band sees as phase); feedthrough: a constant beside the modes (the modes
+// above the band seen as their static gain, modal analysis' upper residual).
+enum class EffectKind { mode, rigid_body, offset, drift, delay, coulomb, cubic, complex_modes, feedthrough };
 const char* effect_name(EffectKind kind);
 std::vector<EffectKind> all_effects();
 

@@ -1,6 +1,7 @@
 #include "commands.hpp"
 #include "guarded.hpp"
 #include "modalwatch/io/records.hpp"
+#include "stabilisation.hpp"
 #include "table.hpp"
 
 #include <cmath>
@@ -11,6 +12,7 @@
 #include <stdexcept>
 
 #include "modalwatch/error.hpp"
+#include "modalwatch/initial_modes.hpp"
 #include "modalwatch/io/atomic_file.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
@@ -112,12 +114,13 @@ void set_baselines(Config& config, const AdditiveModel& fitted, const std::vecto
 int fit(const FitArgs& args) {
   return guarded("fit", [&] {
     const Config config = load_config(args.config);
-    const Record full = read_record_with_columns(RecordSource(args.data, record_columns(args.columns), args.channel, config.closed_loop));
+    const Record full = read_record_with_columns(
+        RecordSource(args.data, record_columns(args.columns), args.channel, config.closed_loop));
     const auto [data, settle] = window(full, args);
     const Eigen::Index used = data.size() - settle;
     // Modes from the data: --modes, or model.modes without submodels.
     const std::optional<int> modes = args.modes ? args.modes : config.model_modes;
-    const int nb = modes ? 3 * *modes : config.model.n_beta();
+    const int nb = args.max_modes ? 3 : modes ? 3 * *modes : config.model.n_beta();
     if (used < 2 * nb + 2)
       throw InputError(args.data, std::to_string(used) + " samples (rows) for " + std::to_string(nb) +
                                       " parameters: need at least " + std::to_string(2 * nb + 2));
@@ -128,15 +131,39 @@ int fit(const FitArgs& args) {
     options.controller = config.controller;
     options.max_iterations = args.max_iterations;
     options.settle_samples = settle;
-    const AdditiveModel start =
-        modes ? modes_from_data(data.segment(settle, used), *modes, config.closed_loop, args.data) : config.model;
-    options.output_hold = output_hold(config, start, T);
+    const bool in_samples = time_in_samples(full, args.columns, config.sample_time);
     std::vector<ModeFinding> findings;
-    const FitResult result = fit_physical(data, start, options, findings);
+    FitResult result;
+    if (args.max_modes) {
+      OrderOptions order;
+      order.max_modes = *args.max_modes;
+      // One hold for every order: the one of the largest start.
+      options.output_hold = output_hold(
+          config, initial_modes(data.segment(settle, used), order.max_modes, config.closed_loop, order.peaks), T);
+      OrderSelection selection = select_order(data, options, order);
+      print_order_selection(selection, in_samples);
+      if (!args.stabilisation.empty())
+        write_stabilisation(args.stabilisation, selection, data.segment(settle, used), config.closed_loop, in_samples,
+                            args.plot_script);
+      if (selection.chosen < 0)
+        throw InputError(args.data, "no fit of 1 to " + std::to_string(*args.max_modes) +
+                                        " modes from the resonance peaks of the data");
+      OrderFit& chosen = selection.orders[static_cast<std::size_t>(selection.chosen)];
+      result = std::move(chosen.fit);
+      findings = std::move(chosen.findings);
+      std::printf("\n");
+    } else {
+      const AdditiveModel start =
+          modes ? modes_from_data(data.segment(settle, used), *modes, config.closed_loop, args.data, in_samples)
+                : config.model;
+      options.output_hold = output_hold(config, start, T);
+      result = fit_physical(data, start, options, findings);
+    }
 
-    std::printf("modalwatch fit: %lld samples at %g Hz, %s loop, %zu submodels, %d parameters\n",
-                static_cast<long long>(used), 1.0 / T, config.closed_loop ? "closed" : "open",
-                result.model.submodels.size(), result.model.n_beta());
+    char rate[48] = "";
+    if (!in_samples) std::snprintf(rate, sizeof rate, " at %g Hz", 1.0 / T);
+    std::printf("modalwatch fit: %lld samples%s, %s loop, %zu submodels, %d parameters\n", static_cast<long long>(used),
+                rate, config.closed_loop ? "closed" : "open", result.model.submodels.size(), result.model.n_beta());
     if (settle > 0)
       std::printf("(the %lld samples before --from run the filters and the model only)\n",
                   static_cast<long long>(settle));
@@ -146,7 +173,7 @@ int fit(const FitArgs& args) {
     std::vector<Eigen::MatrixXd> covariances;
     for (int i = 0; i < static_cast<int>(result.model.submodels.size()); ++i)
       covariances.push_back(result.theta_covariance(i));
-    print_modal_table(result.model, covariances);
+    print_modal_table(result.model, covariances, in_samples);
     std::printf("\nfit on the data: %.2f %%   output-error std: %.4g\n", result.fit_percent,
                 std::sqrt(result.noise_variance));
     print_identifiability(result);

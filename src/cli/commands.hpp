@@ -26,6 +26,9 @@ struct FitArgs {
   std::optional<double> from, to;  // time window of the record to use, s
   int max_iterations = 200;
   std::optional<int> modes;        // start this many modes from the data (else model.modes or the submodels)
+  std::optional<int> max_modes;    // choose the number of modes from the data, up to this
+  std::string stabilisation;       // with max_modes: the stabilisation diagram's tables here
+  std::string plot_script;         // scripts/plot/plot_stabilisation.py, run on them when given
   ColumnArgs columns;
 };
 

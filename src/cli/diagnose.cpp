@@ -51,18 +51,13 @@ std::vector<EffectKind> parse_effects(const std::string& list) {
         out.push_back(k);
         found = true;
       }
-    if (!found)
-      throw InputError("--effects", "unknown effect '" + item +
-                                        "' (allowed: mode, rigid_body, offset, drift, delay, coulomb, cubic)");
+    if (!found) {
+      std::string allowed;
+      for (EffectKind k : all_effects()) allowed += std::string(allowed.empty() ? "" : ", ") + effect_name(k);
+      throw InputError("--effects", "unknown effect '" + item + "' (allowed: " + allowed + ")");
+    }
   }
   return out;
-}
-
-// A record without a sample rate: its time column, named otherwise than t, counts
-// samples (whole numbers one apart, as sample_rate_hz: 1 checks).
-bool time_in_samples(const Record& r, const DiagnoseArgs& args, const Config& config) {
-  if (args.columns.t == "t" || config.sample_time != 1.0) return false;
-  return (r.t.array() == r.t.array().round()).all();
 }
 
 // The option that sets the rule which stopped the augmentation.
@@ -147,12 +142,14 @@ int diagnose(const DiagnoseArgs& args) {
 
     // Modes from the data: --modes, or model.modes without submodels.
     const std::optional<int> modes = args.modes ? args.modes : config.model_modes;
-    const AdditiveModel initial = modes ? modes_from_data(est, *modes, config.closed_loop, args.data) : config.model;
+    const bool in_samples = time_in_samples(full, args.columns, config.sample_time);
+    const AdditiveModel initial =
+        modes ? modes_from_data(est, *modes, config.closed_loop, args.data, in_samples) : config.model;
     options.output_hold = output_hold(config, initial, est.sample_time());
     DiagnoseResult r = diagnose(est, val, initial, loop, options);
     r.stop_reason += stop_option(r.stop);
 
-    write_diagnose_report({args, config, r, val, lead_in, est, time_in_samples(full, args, config)});
+    write_diagnose_report({args, config, r, val, lead_in, est, in_samples});
     for (const auto& step : r.steps) print_physical_findings(step.physical);
     return 0;
   });

@@ -2,11 +2,6 @@
 // script run on them, and the steps on stdout.
 #include "diagnose_report.hpp"
 
-#include <fcntl.h>
-#include <spawn.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
@@ -20,17 +15,20 @@
 #include <vector>
 
 #include "json_writer.hpp"
+#include "plot_script.hpp"
 #include "modalwatch/io/atomic_file.hpp"
 #include "modalwatch/initial_modes.hpp"
 #include "modalwatch/io/csv.hpp"
-
-extern char** environ;
 
 namespace modalwatch::cli {
 
 std::string format_number(double v, int precision) { return json_number(v, precision); }
 
 namespace {
+
+// A mode, with a real residue (b0) or a complex one (b0 + b1 p): reported by
+// its wn, zeta and DC gain.
+bool is_resonance(const Submodel& s) { return s.n == 2 && s.m <= 1 && s.rigid_poles == 0; }
 
 // ------------------------------------------------------------ summary.json
 
@@ -43,10 +41,11 @@ void write_test(JsonWriter& j, const ResidualTest& t) {
 // sd: standard deviations of (wn, zeta, gain), zeros when unknown.
 void write_submodel(JsonWriter& j, const Submodel& s, const ModalParameters& sd) {
   j.begin_object().key("name").value(s.name);
-  if (s.is_mode()) {
+  if (is_resonance(s)) {
     const ModalParameters p = modal_parameters(s);
     j.key("kind").value("mode").key("wn").value(p.wn).key("zeta").value(p.zeta).key("gain").value(p.gain);
     j.key("wn_std").value(sd.wn).key("zeta_std").value(sd.zeta).key("gain_std").value(sd.gain);
+    if (s.m == 1) j.key("b1").value(s.b(1));
   } else {
     j.key("kind").value("transfer_function").key("rigid_poles").value(s.rigid_poles);
     for (const auto& [name, c] : {std::pair{"a", &s.a}, std::pair{"b", &s.b}}) {
@@ -120,55 +119,6 @@ void write_step(JsonWriter& j, const DiagnoseStep& s) {
   j.end_object();
 }
 
-// ------------------------------------------------------------ plots
-
-struct PlotOutcome {
-  bool made = false;
-  std::string failure;  // why not, when the script was given
-};
-
-// python3 SCRIPT DIR, without a shell: the paths are arguments, never parsed.
-// The script's stderr is collected and shown; its stdout is the command's.
-PlotOutcome run_plot_script(const std::string& script, const std::string& dir) {
-  static const std::string python = "/usr/bin/python3";  // the script's interpreter (Debian's matplotlib)
-  std::vector<std::string> args{python, script, dir};
-  std::vector<char*> argv;
-  for (std::string& a : args) argv.push_back(a.data());
-  argv.push_back(nullptr);
-  int err[2];
-  if (pipe2(err, O_CLOEXEC) != 0) return {false, std::string("cannot make a pipe: ") + std::strerror(errno)};
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_adddup2(&actions, err[1], STDERR_FILENO);
-  std::fflush(stdout);
-  pid_t pid = 0;
-  const int spawned = posix_spawn(&pid, python.c_str(), &actions, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  close(err[1]);
-  if (spawned != 0) {
-    close(err[0]);
-    return {false, "cannot run " + python + ": " + std::strerror(spawned)};
-  }
-  std::string text;
-  char buf[4096];
-  for (;;) {
-    const ssize_t n = read(err[0], buf, sizeof buf);
-    if (n > 0)
-      text.append(buf, static_cast<std::size_t>(n));
-    else if (n == 0 || errno != EINTR)
-      break;
-  }
-  close(err[0]);
-  int status = 0;
-  while (waitpid(pid, &status, 0) < 0)
-    if (errno != EINTR) return {false, std::string("waitpid: ") + std::strerror(errno)};
-  if (!text.empty()) std::fprintf(stderr, "%s%s", text.c_str(), text.back() == '\n' ? "" : "\n");
-  if (WIFEXITED(status) && WEXITSTATUS(status) == 0) return {true, ""};
-  const std::string how = WIFEXITED(status) ? "exited with status " + std::to_string(WEXITSTATUS(status))
-                                            : "killed by signal " + std::to_string(WTERMSIG(status));
-  return {false, python + " " + script + " " + how};
-}
-
 // ------------------------------------------------------------ report.md, model.yaml, tables
 
 std::string params_text(const EffectParams& params) {
@@ -196,10 +146,11 @@ std::string effects_comment(const ModelEffects& e) {
 std::string model_table(const AdditiveModel& m) {
   std::string s = "| submodel | kind | f [Hz] | wn [rad/s] | zeta | gain / coefficients |\n|---|---|---|---|---|---|\n";
   for (const Submodel& sm : m.submodels) {
-    if (sm.is_mode()) {
+    if (is_resonance(sm)) {
       const ModalParameters p = modal_parameters(sm);
-      s += "| " + sm.name + " | mode | " + format_number(p.hz(), 6) + " | " + format_number(p.wn, 6) + " | " +
-           format_number(p.zeta, 4) + " | " + format_number(p.gain, 5) + " |\n";
+      s += "| " + sm.name + (sm.m == 1 ? " | mode, b0 + b1 p | " : " | mode | ") + format_number(p.hz(), 6) + " | " +
+           format_number(p.wn, 6) + " | " + format_number(p.zeta, 4) + " | " + format_number(p.gain, 5) +
+           (sm.m == 1 ? ", b1 = " + format_number(sm.b(1), 5) : "") + " |\n";
     } else {
       std::string c;
       const Eigen::VectorXd th = sm.theta();

@@ -51,8 +51,23 @@ int main(int argc, char** argv) {
   fit_cmd->add_option("--to", fit_args.to, "use samples up to this time [s]");
   fit_cmd->add_option("--max-iterations", fit_args.max_iterations, "block-coordinate cycles")
       ->check(CLI::PositiveNumber);
-  fit_cmd->add_option("--modes", fit_args.modes, "start this many modes from the data (overrides model:)")
-      ->check(CLI::Range(1, 64));
+  auto* fit_modes =
+      fit_cmd->add_option("--modes", fit_args.modes, "start this many modes from the data (overrides model:)")
+          ->check(CLI::Range(1, 64));
+  fit_cmd
+      ->add_option("--max-modes", fit_args.max_modes,
+                   "choose the number of modes from the data: fits of 1..N modes compared by BIC, with a "
+                   "stabilisation diagram")
+      ->check(CLI::Range(1, 64))
+      ->excludes(fit_modes);
+  fit_cmd
+      ->add_option("--stabilisation", fit_args.stabilisation,
+                   "with --max-modes: write stabilisation.csv and frf.csv into this directory")
+      ->needs("--max-modes");
+  fit_cmd
+      ->add_option("--plot-script", fit_args.plot_script,
+                   "with --stabilisation: run this scripts/plot/plot_stabilisation.py on it")
+      ->needs("--stabilisation");
   add_column_options(fit_cmd, fit_args.columns);
 
   TrackArgs track_args;

@@ -22,6 +22,16 @@ inline RecordColumns record_columns(const ColumnArgs& args) {
   return columns;
 }
 
+// A record without a sample rate: its time column, named otherwise than t, counts
+// samples (whole numbers one apart, as sample_rate_hz: 1 checks), and its
+// frequencies are in cycles/sample rather than Hz.
+inline bool time_in_samples(const Record& r, const ColumnArgs& columns, double sample_time) {
+  if (columns.t == "t" || sample_time != 1.0) return false;
+  return (r.t.array() == r.t.array().round()).all();
+}
+
+inline const char* frequency_unit(bool in_samples) { return in_samples ? "cycles/sample" : "Hz"; }
+
 inline Record read_record_with_columns(const RecordSource& source) {
   try {
     return read_record(source);

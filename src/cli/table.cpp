@@ -8,6 +8,7 @@
 #include "modalwatch/error.hpp"
 #include "modalwatch/initial_modes.hpp"
 #include "modalwatch/srivc.hpp"
+#include "record_columns.hpp"
 
 namespace modalwatch::cli {
 
@@ -19,12 +20,14 @@ void print_physical_findings(const std::vector<ModeFinding>& findings) {
   }
 }
 
-AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name) {
+AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name,
+                              bool in_samples) {
   const AdditiveModel start = initial_modes(data, count, closed_loop);
   if (start.submodels.empty())
     throw InputError(data_name, "no resonance peak in the frequency response estimate: no mode to start from");
   std::printf("initial modes from the data (peaks of %s):", closed_loop ? "S_yr/S_ur" : "H1 = S_yu/S_uu");
-  for (const auto& s : start.submodels) std::printf(" %.5g Hz (zeta %.3g)", modal_parameters(s).hz(), modal_parameters(s).zeta);
+  for (const auto& s : start.submodels)
+    std::printf(" %.5g %s (zeta %.3g)", modal_parameters(s).hz(), frequency_unit(in_samples), modal_parameters(s).zeta);
   std::printf("\n");
   if (static_cast<int>(start.submodels.size()) < count)
     std::printf("WARNING: %d modes asked, the data show %zu resonance peaks above the noise: fitting %zu\n", count,
@@ -40,9 +43,9 @@ Hold output_hold(const Config& config, const AdditiveModel& start, double sample
   return hold;
 }
 
-void print_modal_table(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>& covariances) {
-  std::printf("\n%-10s %11s %10s %12s %10s %9s %9s %12s %10s\n", "submodel", "f [Hz]", "+-", "wn [rad/s]", "+-", "zeta",
-              "+-", "gain", "+-");
+void print_modal_table(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>& covariances, bool in_samples) {
+  std::printf("\n%-10s %11s %10s %12s %10s %9s %9s %12s %10s\n", "submodel", in_samples ? "f [1/sample]" : "f [Hz]", "+-",
+              in_samples ? "wn [rad/smp]" : "wn [rad/s]", "+-", "zeta", "+-", "gain", "+-");
   for (std::size_t i = 0; i < model.submodels.size(); ++i) {
     const Submodel& s = model.submodels[i];
     const Eigen::MatrixXd& c = covariances[i];

@@ -15,7 +15,9 @@
 namespace modalwatch::cli {
 
 // covariances[i]: covariance of theta_i in physical units (zeros when unknown).
-void print_modal_table(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>& covariances);
+// in_samples: the record counts samples, not seconds (frequencies per sample).
+void print_modal_table(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>& covariances,
+                       bool in_samples = false);
 
 // One WARNING line per finding (verdicts other than physical), naming the submodel.
 void print_physical_findings(const std::vector<ModeFinding>& findings);
@@ -23,7 +25,8 @@ void print_physical_findings(const std::vector<ModeFinding>& findings);
 // The starting modes that `fit --modes` and `diagnose --modes` take from the
 // data (initial_modes.hpp), with a warning when the data show fewer than asked.
 // Throws InputError (naming `data`) when they show none.
-AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name);
+AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name,
+                              bool in_samples);
 
 // The output hold that `fit` and `diagnose` assume: model.output_hold when
 // given, else batch_output_hold of the start (srivc.hpp), with a line saying

@@ -10,7 +10,8 @@
 // from one Gauss-Newton step from zero on the current residual (its
 // least-squares size), an extra mode from the peak of the residual-to-input
 // spectrum (then SRIVC of the enlarged additive model), a delay by a scan of
-// whole samples with a short refit each (the cross-correlation lag is reported).
+// whole samples with a short refit each (the cross-correlation lag is reported),
+// complex modes (a numerator b0 + b1 p for every mode) from their SRIVC refit.
 //
 // Ranking. Each step refits the current model alone, from the same start and
 // with the same iterations as each candidate; a candidate's credit is the
@@ -393,6 +394,37 @@ Candidate candidate_rigid_body(const AugmentedModel& current, const Eigen::Vecto
   return c;
 }
 
+// Every plain mode with a numerator b0 + b1 p, b1 from the SRIVC refit (linear in it).
+Candidate candidate_complex_modes(const AugmentedModel& current, const Context& ctx) {
+  AugmentedModel m = current;
+  int modes = 0;
+  for (Submodel& s : m.linear.submodels) {
+    if (!s.is_mode()) continue;
+    s.m = 1;
+    s.b.conservativeResize(2);
+    s.b(1) = 0.0;
+    ++modes;
+  }
+  if (modes == 0) return invalid(EffectKind::complex_modes, "no mode with a real residue");
+  Candidate c = finish(EffectKind::complex_modes, fit_structure(m, ctx.est, ctx.options, true), ctx);
+  if (c.valid) c.params = {{"modes", static_cast<double>(modes)}};
+  return c;
+}
+
+Candidate candidate_feedthrough(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
+  for (const auto& s : current.linear.submodels)
+    if (s.is_feedthrough()) return invalid(EffectKind::feedthrough, "the model has a feedthrough");
+  const double h = 1e-3 * rms_or_one(ctx.est.data.y) / rms_or_one(ctx.est.data.u);
+  AugmentedModel m = current;
+  m.linear.submodels.push_back(make_rigid_body(next_mode_name(current.linear), h, 0));
+  const double g = gauss_newton_start(m, y0, h, ctx.est);
+  if (g == 0.0) return invalid(EffectKind::feedthrough, "no sensitivity");
+  m.linear.submodels.back().b(0) = g;
+  Candidate c = finish(EffectKind::feedthrough, fit_structure(m, ctx.est, ctx.options, true), ctx);
+  if (c.valid) c.params = {{"gain", c.model.linear.submodels.back().b(0)}};
+  return c;
+}
+
 // A scalar effect switched on at h, started by Gauss-Newton and refined with the rest.
 template <class Set>
 Refined scalar_effect(const AugmentedModel& current, const Eigen::VectorXd& y0, double h, Set set, const Context& ctx) {
@@ -664,6 +696,8 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
     if (enabled(EffectKind::delay)) tried(candidate_delay(now.model, y0, ctx));
     if (enabled(EffectKind::coulomb)) tried(candidate_coulomb(now.model, y0, ctx));
     if (enabled(EffectKind::cubic)) tried(candidate_cubic(now.model, y0, ctx));
+    if (enabled(EffectKind::complex_modes)) tried(candidate_complex_modes(now.model, ctx));
+    if (enabled(EffectKind::feedthrough)) tried(candidate_feedthrough(now.model, y0, ctx));
     for (Candidate& c : candidates)
       if (c.valid) c.credit = base_rms - c.validation_rms;
     std::stable_sort(candidates.begin(), candidates.end(), [](const Candidate& a, const Candidate& b) {

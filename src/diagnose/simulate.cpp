@@ -25,13 +25,17 @@ const char* effect_name(EffectKind kind) {
       return "coulomb";
     case EffectKind::cubic:
       return "cubic";
+    case EffectKind::complex_modes:
+      return "complex_modes";
+    case EffectKind::feedthrough:
+      return "feedthrough";
   }
   return "?";
 }
 
 std::vector<EffectKind> all_effects() {
-  return {EffectKind::mode,  EffectKind::rigid_body, EffectKind::offset, EffectKind::drift,
-          EffectKind::delay, EffectKind::coulomb,    EffectKind::cubic};
+  return {EffectKind::mode,    EffectKind::rigid_body, EffectKind::offset,        EffectKind::drift,      EffectKind::delay,
+          EffectKind::coulomb, EffectKind::cubic,      EffectKind::complex_modes, EffectKind::feedthrough};
 }
 
 int ModelEffects::n_params() const {

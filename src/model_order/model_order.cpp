@@ -1,0 +1,70 @@
+#include "modalwatch/model_order.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace modalwatch {
+namespace {
+
+// The modes of a fitted model (resonant second-order submodels), ascending in wn.
+std::vector<ModalParameters> modes_of(const AdditiveModel& m) {
+  std::vector<ModalParameters> out;
+  for (const Submodel& s : m.submodels)
+    if (s.n == 2 && s.rigid_poles == 0 && s.m <= 1) out.push_back(modal_parameters(s));
+  std::sort(out.begin(), out.end(), [](const ModalParameters& a, const ModalParameters& b) { return a.wn < b.wn; });
+  return out;
+}
+
+std::vector<StabilisedMode> stabilise(const std::vector<ModalParameters>& modes,
+                                      const std::vector<StabilisedMode>& below, const OrderOptions& o) {
+  std::vector<StabilisedMode> out;
+  for (const ModalParameters& p : modes) {
+    StabilisedMode s{p};
+    for (const StabilisedMode& q : below) {
+      if (std::abs(q.modal.wn - p.wn) > o.frequency_tolerance * p.wn) continue;
+      s.stable_frequency = true;
+      s.stable = s.stable || std::abs(q.modal.zeta - p.zeta) <= o.damping_tolerance * p.zeta;
+    }
+    out.push_back(s);
+  }
+  return out;
+}
+
+}  // namespace
+
+OrderSelection select_order(const Record& data, const SrivcOptions& options, const OrderOptions& order) {
+  if (order.max_modes < 1) throw std::invalid_argument("select_order: max_modes must be at least 1");
+  const Eigen::Index settle = std::min<Eigen::Index>(options.settle_samples, data.size());
+  const Record used = data.segment(settle, data.size() - settle);
+  OrderSelection out;
+  for (int k = 1; k <= order.max_modes; ++k) {
+    const AdditiveModel start = initial_modes(used, k, options.closed_loop, order.peaks);
+    if (static_cast<int>(start.submodels.size()) < k) break;  // the data show no further resonance
+    OrderFit f;
+    f.modes = k;
+    try {
+      f.fit = fit_physical(data, start, options, f.findings, order.physical);
+    } catch (const std::invalid_argument&) {
+      break;  // too few samples for this many parameters
+    }
+    const double N = static_cast<double>(used.size());
+    if (std::isfinite(f.fit.noise_variance) && f.fit.noise_variance > 0.0 && f.fit.model.beta().allFinite())
+      f.bic = N * std::log(f.fit.noise_variance) + f.fit.model.n_beta() * std::log(N);
+    f.diagram = stabilise(modes_of(f.fit.model),
+                          out.orders.empty() ? std::vector<StabilisedMode>{} : out.orders.back().diagram, order);
+    out.orders.push_back(std::move(f));
+  }
+  // The lowest BIC of the converged fits; of all when none converged.
+  for (const bool need_converged : {true, false}) {
+    for (int i = 0; i < static_cast<int>(out.orders.size()); ++i) {
+      const OrderFit& o = out.orders[static_cast<std::size_t>(i)];
+      if (!std::isfinite(o.bic) || (need_converged && !o.fit.converged)) continue;
+      if (out.chosen < 0 || o.bic < out.orders[static_cast<std::size_t>(out.chosen)].bic) out.chosen = i;
+    }
+    if (out.chosen >= 0) break;
+  }
+  return out;
+}
+
+}  // namespace modalwatch
