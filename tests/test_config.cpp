@@ -11,7 +11,9 @@ TEST(Config, ParsesBase) {
   EXPECT_EQ(c.source, "test.yaml");
   EXPECT_DOUBLE_EQ(c.sample_time, 0.05);
   EXPECT_FALSE(c.closed_loop);
-  EXPECT_EQ(c.output_hold, modalwatch::Hold::zoh);
+  // No output_hold given: the recursive estimator assumes zoh, the batch fits batch_output_hold.
+  EXPECT_FALSE(c.output_hold.has_value());
+  EXPECT_EQ(c.estimator.output_hold, modalwatch::Hold::zoh);
   ASSERT_EQ(c.model.submodels.size(), 2u);
   ASSERT_EQ(c.submodel_settings.size(), 2u);
   const auto& m1 = c.model.submodels[0];
@@ -67,7 +69,7 @@ TEST(Config, EstimatorSettingsFollowTheOtherSections) {
   EXPECT_DOUBLE_EQ(c.estimator.sample_time, 0.05);
   EXPECT_TRUE(c.estimator.closed_loop);
   EXPECT_EQ(c.estimator.controller.denominator(), c.controller.denominator());
-  EXPECT_EQ(c.estimator.output_hold, c.output_hold);
+  EXPECT_EQ(c.estimator.output_hold, modalwatch::Hold::zoh);
   const Config b = parse_config(kBase, "test.yaml");
   EXPECT_EQ(b.estimator.forgetting, (std::vector<double>{0.99, 1.0}));
   EXPECT_FALSE(b.estimator.closed_loop);
@@ -178,6 +180,7 @@ TEST(Config, TransferFunctionAndRigidBody) {
       "    - {name: lead, kind: transfer_function, a: [0.2], b: [1, 2, 3], rigid_poles: 2}\n";
   const Config c = parse_config(yaml, "test.yaml");
   EXPECT_EQ(c.output_hold, modalwatch::Hold::foh);
+  EXPECT_EQ(c.estimator.output_hold, modalwatch::Hold::foh);
   const auto& tf = c.model.submodels[0];
   EXPECT_EQ(tf.n, 3);
   EXPECT_EQ(tf.m, 1);

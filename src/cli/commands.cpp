@@ -12,6 +12,7 @@
 #include <stdexcept>
 
 #include "modalwatch/error.hpp"
+#include "modalwatch/initial_modes.hpp"
 #include "modalwatch/io/atomic_file.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
@@ -128,7 +129,6 @@ int fit(const FitArgs& args) {
     SrivcOptions options;
     options.closed_loop = config.closed_loop;
     options.controller = config.controller;
-    options.output_hold = config.output_hold;
     options.max_iterations = args.max_iterations;
     options.settle_samples = settle;
     const bool in_samples = time_in_samples(full, args.columns, config.sample_time);
@@ -137,6 +137,9 @@ int fit(const FitArgs& args) {
     if (args.max_modes) {
       OrderOptions order;
       order.max_modes = *args.max_modes;
+      // One hold for every order: the one of the largest start.
+      options.output_hold = output_hold(
+          config, initial_modes(data.segment(settle, used), order.max_modes, config.closed_loop, order.peaks), T);
       OrderSelection selection = select_order(data, options, order);
       print_order_selection(selection, in_samples);
       if (!args.stabilisation.empty())
@@ -153,6 +156,7 @@ int fit(const FitArgs& args) {
       const AdditiveModel start =
           modes ? modes_from_data(data.segment(settle, used), *modes, config.closed_loop, args.data, in_samples)
                 : config.model;
+      options.output_hold = output_hold(config, start, T);
       result = fit_physical(data, start, options, findings);
     }
 

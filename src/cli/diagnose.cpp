@@ -116,7 +116,6 @@ int diagnose(const DiagnoseArgs& args) {
     options.validation_lead_in = lead_in;
     options.min_improvement = args.min_improvement;
     options.max_delay = args.max_delay;
-    options.output_hold = config.output_hold;
     options.library = parse_effects(args.effects);
     // A long run is not silent: a line on stderr per fit.
     const auto start = std::chrono::steady_clock::now();
@@ -146,6 +145,7 @@ int diagnose(const DiagnoseArgs& args) {
     const bool in_samples = time_in_samples(full, args.columns, config.sample_time);
     const AdditiveModel initial =
         modes ? modes_from_data(est, *modes, config.closed_loop, args.data, in_samples) : config.model;
+    options.output_hold = output_hold(config, initial, est.sample_time());
     DiagnoseResult r = diagnose(est, val, initial, loop, options);
     r.stop_reason += stop_option(r.stop);
 

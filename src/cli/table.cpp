@@ -7,6 +7,7 @@
 
 #include "modalwatch/error.hpp"
 #include "modalwatch/initial_modes.hpp"
+#include "modalwatch/srivc.hpp"
 #include "record_columns.hpp"
 
 namespace modalwatch::cli {
@@ -32,6 +33,14 @@ AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, c
     std::printf("WARNING: %d modes asked, the data show %zu resonance peaks above the noise: fitting %zu\n", count,
                 start.submodels.size(), start.submodels.size());
   return start;
+}
+
+Hold output_hold(const Config& config, const AdditiveModel& start, double sample_time) {
+  if (config.output_hold) return *config.output_hold;
+  const Hold hold = batch_output_hold(start, sample_time);
+  if (hold == Hold::foh)
+    std::printf("output hold foh: a starting mode above %g fs (model.output_hold unset)\n", kFohFromFraction);
+  return hold;
 }
 
 void print_modal_table(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>& covariances, bool in_samples) {

@@ -2,11 +2,13 @@
 // The modal table that `fit` and `track` print: per submodel its frequency (Hz,
 // rad/s), damping and gain with standard deviations, or for rigid bodies and
 // general transfer functions their coefficients and resonances; and the
-// warnings of `fit` and `diagnose` about submodels that are no physical mode.
+// warnings of `fit` and `diagnose` about submodels that are no physical mode;
+// their starting modes from the data and the output hold of their fits.
 #include <vector>
 
 #include <Eigen/Core>
 
+#include "modalwatch/io/config.hpp"
 #include "modalwatch/model.hpp"
 #include "modalwatch/physical.hpp"
 
@@ -25,5 +27,10 @@ void print_physical_findings(const std::vector<ModeFinding>& findings);
 // Throws InputError (naming `data`) when they show none.
 AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name,
                               bool in_samples);
+
+// The output hold that `fit` and `diagnose` assume: model.output_hold when
+// given, else batch_output_hold of the start (srivc.hpp), with a line saying
+// so when that is foh.
+Hold output_hold(const Config& config, const AdditiveModel& start, double sample_time);
 
 }  // namespace modalwatch::cli

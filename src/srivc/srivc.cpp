@@ -424,4 +424,14 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
 
 }  // namespace
 
+Hold batch_output_hold(const AdditiveModel& start, double sample_time) {
+  const double fs = 1.0 / sample_time;
+  for (const Submodel& s : start.submodels) {
+    if (!s.is_mode()) continue;
+    const double f = modal_parameters(s).hz() / fs;
+    if (f >= kFohFromFraction && f < 0.5) return Hold::foh;
+  }
+  return Hold::zoh;
+}
+
 }  // namespace modalwatch

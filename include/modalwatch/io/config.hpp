@@ -81,7 +81,9 @@ struct Config {
   std::vector<SubmodelSettings> submodel_settings;  // one per submodel
   bool closed_loop = false;
   DiscreteTransferFunction controller;
-  Hold output_hold = Hold::zoh;
+  // `model.output_hold` as given; unset, the batch fits take batch_output_hold
+  // (srivc.hpp) of their start and the recursive estimator zoh.
+  std::optional<Hold> output_hold;
   std::optional<PlantSpec> plant;            // `plant:` section (simulate)
   std::optional<ExperimentSpec> experiment;  // `simulation:` section (simulate)
   // `estimator:` section (track, daemon), completed from the rest of the file:

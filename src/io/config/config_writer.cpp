@@ -144,7 +144,8 @@ std::size_t configured_index(const Config& config, const std::string& name, std:
 void write_model(YamlWriter& w, const Config& config, const AdditiveModel& model) {
   w.line(0, "model:");
   w.key(1, "loop", config.closed_loop ? "closed" : "open");
-  w.key(1, "output_hold", config.output_hold == Hold::foh ? "foh" : "zoh");
+  // Only as given: unset resolves per command (fit and track differ).
+  if (config.output_hold) w.key(1, "output_hold", *config.output_hold == Hold::foh ? "foh" : "zoh");
   if (model.submodels.empty() && config.model_modes) {
     w.key(1, "modes", std::to_string(*config.model_modes));
     return;
