@@ -38,7 +38,7 @@ FrequencyResponse frequency_response(const Record& data, bool closed_loop, int s
                                      Hold input = Hold::zoh);
 
 struct PeakOptions {
-  double default_zeta = 0.02;      // when the half-power bandwidth is not resolved
+  double default_zeta = 0.02;  // when the half-power bandwidth is not resolved
   // The searched band runs from the first to the last frequency with at least
   // this share of the largest excitation power, widened on each side over the
   // adjacent frequencies whose squared coherence is at least `coherent`, up to
@@ -60,6 +60,8 @@ struct PeakOptions {
 std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int count, const PeakOptions& options = {});
 
 // The additive model of those resonances, named mode1..modeN in ascending frequency.
+AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOptions& options = {});
+// The same from a record's frequency_response (held input, default segments).
 AdditiveModel initial_modes(const Record& data, int count, bool closed_loop, const PeakOptions& options = {});
 
 }  // namespace modalwatch

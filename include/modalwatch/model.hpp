@@ -49,6 +49,9 @@ struct Submodel {
 
   // True when this is a plain second-order mode (n = 2, m = 0, no rigid poles).
   bool is_mode() const { return n == 2 && m == 0 && rigid_poles == 0; }
+  // True for a mode with a real residue (is_mode) or a complex one, numerator
+  // b0 + b1 p: a resonance that modal_parameters describes by wn, zeta and DC gain.
+  bool is_resonance() const { return n == 2 && m <= 1 && rigid_poles == 0; }
   // True for a constant G = b0 (no poles at all): a static gain, or feedthrough.
   bool is_feedthrough() const { return n == 0 && m == 0 && rigid_poles == 0; }
   // Throws std::invalid_argument when the sizes do not match n, m.

@@ -5,8 +5,8 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
-#include <cstdio>
 #include <complex>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <limits>
@@ -15,20 +15,16 @@
 #include <vector>
 
 #include "json_writer.hpp"
-#include "plot_script.hpp"
-#include "modalwatch/io/atomic_file.hpp"
 #include "modalwatch/initial_modes.hpp"
+#include "modalwatch/io/atomic_file.hpp"
 #include "modalwatch/io/csv.hpp"
+#include "plot_script.hpp"
 
 namespace modalwatch::cli {
 
 std::string format_number(double v, int precision) { return json_number(v, precision); }
 
 namespace {
-
-// A mode, with a real residue (b0) or a complex one (b0 + b1 p): reported by
-// its wn, zeta and DC gain.
-bool is_resonance(const Submodel& s) { return s.n == 2 && s.m <= 1 && s.rigid_poles == 0; }
 
 // ------------------------------------------------------------ summary.json
 
@@ -41,7 +37,7 @@ void write_test(JsonWriter& j, const ResidualTest& t) {
 // sd: standard deviations of (wn, zeta, gain), zeros when unknown.
 void write_submodel(JsonWriter& j, const Submodel& s, const ModalParameters& sd) {
   j.begin_object().key("name").value(s.name);
-  if (is_resonance(s)) {
+  if (s.is_resonance()) {
     const ModalParameters p = modal_parameters(s);
     j.key("kind").value("mode").key("wn").value(p.wn).key("zeta").value(p.zeta).key("gain").value(p.gain);
     j.key("wn_std").value(sd.wn).key("zeta_std").value(sd.zeta).key("gain_std").value(sd.gain);
@@ -146,7 +142,7 @@ std::string effects_comment(const ModelEffects& e) {
 std::string model_table(const AdditiveModel& m) {
   std::string s = "| submodel | kind | f [Hz] | wn [rad/s] | zeta | gain / coefficients |\n|---|---|---|---|---|---|\n";
   for (const Submodel& sm : m.submodels) {
-    if (is_resonance(sm)) {
+    if (sm.is_resonance()) {
       const ModalParameters p = modal_parameters(sm);
       s += "| " + sm.name + (sm.m == 1 ? " | mode, b0 + b1 p | " : " | mode | ") + format_number(p.hz(), 6) + " | " +
            format_number(p.wn, 6) + " | " + format_number(p.zeta, 4) + " | " + format_number(p.gain, 5) +

@@ -146,7 +146,11 @@ std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int cou
 }
 
 AdditiveModel initial_modes(const Record& data, int count, bool closed_loop, const PeakOptions& options) {
-  const std::vector<ModalParameters> peaks = resonance_peaks(frequency_response(data, closed_loop), count, options);
+  return initial_modes(frequency_response(data, closed_loop), count, options);
+}
+
+AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOptions& options) {
+  const std::vector<ModalParameters> peaks = resonance_peaks(h, count, options);
   AdditiveModel model;
   for (std::size_t i = 0; i < peaks.size(); ++i)
     model.submodels.push_back(make_mode("mode" + std::to_string(i + 1), peaks[i]));

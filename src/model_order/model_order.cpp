@@ -7,11 +7,11 @@
 namespace modalwatch {
 namespace {
 
-// The modes of a fitted model (resonant second-order submodels), ascending in wn.
+// The resonances of a fitted model, ascending in wn.
 std::vector<ModalParameters> modes_of(const AdditiveModel& m) {
   std::vector<ModalParameters> out;
   for (const Submodel& s : m.submodels)
-    if (s.n == 2 && s.rigid_poles == 0 && s.m <= 1) out.push_back(modal_parameters(s));
+    if (s.is_resonance()) out.push_back(modal_parameters(s));
   std::sort(out.begin(), out.end(), [](const ModalParameters& a, const ModalParameters& b) { return a.wn < b.wn; });
   return out;
 }
@@ -37,9 +37,10 @@ OrderSelection select_order(const Record& data, const SrivcOptions& options, con
   if (order.max_modes < 1) throw std::invalid_argument("select_order: max_modes must be at least 1");
   const Eigen::Index settle = std::min<Eigen::Index>(options.settle_samples, data.size());
   const Record used = data.segment(settle, data.size() - settle);
+  const FrequencyResponse h = frequency_response(used, options.closed_loop);  // one estimate serves every order
   OrderSelection out;
   for (int k = 1; k <= order.max_modes; ++k) {
-    const AdditiveModel start = initial_modes(used, k, options.closed_loop, order.peaks);
+    const AdditiveModel start = initial_modes(h, k, order.peaks);
     if (static_cast<int>(start.submodels.size()) < k) break;  // the data show no further resonance
     OrderFit f;
     f.modes = k;
