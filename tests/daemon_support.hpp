@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <type_traits>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -99,6 +100,8 @@ struct Received {
   std::vector<modalwatch::estimates_t> estimates;
   std::vector<modalwatch::fault_status_t> status;
   std::vector<modalwatch::heartbeat_t> heartbeats;
+  // When each estimates message arrived here: the daemon's progress in wall time.
+  std::vector<std::chrono::steady_clock::time_point> estimate_arrivals;
 
   void subscribe(lcm_t* lcm, const LcmSettings& s) {
     lcm_subscribe(lcm, s.estimates_channel.c_str(), &on<modalwatch::estimates_t, &Received::estimates>, this);
@@ -115,6 +118,7 @@ struct Received {
     }
     std::lock_guard<std::mutex> lock(self->mutex);
     (self->*list).push_back(std::move(msg));
+    if constexpr (std::is_same_v<T, modalwatch::estimates_t>) self->estimate_arrivals.push_back(std::chrono::steady_clock::now());
   }
   std::size_t count_estimates() {
     std::lock_guard<std::mutex> lock(mutex);
