@@ -185,7 +185,8 @@ std::complex<double> AdditiveModel::response(double w) const {
 
 bool Submodel::operator==(const Submodel& other) const {
   return name == other.name && n == other.n && m == other.m && rigid_poles == other.rigid_poles &&
-         a.size() == other.a.size() && b.size() == other.b.size() && a == other.a && b == other.b;
+         a.size() == other.a.size() && b.size() == other.b.size() && a == other.a && b == other.b &&
+         input == other.input;
 }
 
 }  // namespace modalwatch
