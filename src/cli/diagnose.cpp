@@ -80,7 +80,7 @@ int diagnose(const DiagnoseArgs& args) {
   return guarded("diagnose", [&] {
     const Config config = load_config(args.config);
     if (!args.validate.empty() && args.split) throw InputError("--split", "give --validate or --split, not both");
-    const RecordColumns columns = record_columns(args.columns);
+    const RecordColumns columns = record_columns(args.columns, input_columns(args.columns, config.model));
     const Record full = read_record_with_columns(RecordSource(args.data, columns, args.channel, config.closed_loop));
     Record est, val;
     Eigen::Index lead_in = 0;
@@ -144,7 +144,10 @@ int diagnose(const DiagnoseArgs& args) {
     const std::optional<int> modes = args.modes ? args.modes : config.model_modes;
     const bool in_samples = time_in_samples(full, args.columns, config.sample_time);
     const AdditiveModel initial =
-        modes ? modes_from_data(est, *modes, config.closed_loop, args.data, in_samples) : config.model;
+        modes ? modes_from_data(est, *modes, config.closed_loop, args.data, in_samples,
+                                config.model.inputs.empty() ? input_columns(args.columns, config.model)
+                                                            : config.model.inputs)
+              : config.model;
     options.output_hold = output_hold(config, initial, est.sample_time());
     DiagnoseResult r = diagnose(est, val, initial, loop, options);
     r.stop_reason += stop_option(r.stop);
