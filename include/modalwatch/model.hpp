@@ -108,7 +108,10 @@ struct AdditiveModel {
   void set_beta(const Eigen::VectorXd& beta);
   // Offset of theta_i inside beta.
   int offset(int i) const;
+  // G(j w): every submodel, the response of a single-input model.
   std::complex<double> response(double w) const;
+  // From input `input` alone: the submodels it drives.
+  std::complex<double> response(double w, int input) const;
   bool operator==(const AdditiveModel&) const = default;
 };
 
