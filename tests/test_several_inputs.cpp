@@ -5,6 +5,7 @@
 #include "simulation_support.hpp"
 
 #include "modalwatch/initial_modes.hpp"
+#include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/records.hpp"
 #include "modalwatch/physical.hpp"
 #include "modalwatch/simulator.hpp"
@@ -80,19 +81,9 @@ TEST(SeveralInputsConfig, ErrorsNameTheKeyAndLine) {
 
 // ---------------------------------------------------------------- record
 
-class SeveralInputsRecord : public ::testing::Test {
+class SeveralInputsRecord : public modalwatch::test_support::ScratchDir {
  protected:
-  std::string file(const std::string& name, const std::string& text) {
-    const std::string p = (dir_ / name).string();
-    std::ofstream(p) << text;
-    return p;
-  }
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("modalwatch_miso_" + std::to_string(::getpid()));
-    fs::create_directories(dir_);
-  }
-  void TearDown() override { fs::remove_all(dir_); }
-  fs::path dir_;
+  std::string file(const std::string& name, const std::string& text) { return write(name, text); }
 };
 
 TEST_F(SeveralInputsRecord, ReadsEveryNamedInputColumnAndSegmentKeepsThem) {
@@ -315,6 +306,89 @@ TEST(SeveralInputsStart, PerInputResponseIsTheTruth) {
   EXPECT_LT(std::sqrt(e1 / g1), 0.10);
   EXPECT_LT(std::sqrt(e2 / g2), 0.10);
   EXPECT_GT(std::sqrt(e_single / g1), 0.3);
+}
+
+// ---------------------------------------------------------------- command line
+
+class SeveralInputsCli : public modalwatch::test_support::ScratchDir {
+ protected:
+  static bool contains(const std::string& text, const std::string& what) {
+    return text.find(what) != std::string::npos;
+  }
+  // The two-input record with its own column names: shakers f_a, f_b, output acc.
+  std::string record() const {
+    const Record r = two_input_record(0.0);
+    Eigen::MatrixXd table(r.size(), 4);
+    table << r.t, r.u, r.input(1), r.y;
+    modalwatch::write_table(path("shakers.csv"), {"t", "f_a", "f_b", "acc"}, table);
+    return path("shakers.csv");
+  }
+};
+
+// model.inputs names the record's input columns; `modes: 3` starts from the
+// data, one submodel per input and resonance, and the table names each input.
+TEST_F(SeveralInputsCli, FitNamesTheInputsInTheConfigAndWritesThemBack) {
+  const std::string data = record();
+  const std::string cfg = write("two.yaml", "sample_rate_hz: 100\nmodel:\n  inputs: [f_a, f_b]\n  modes: 3\n");
+  const auto fit = modalwatch::test_support::run_cli("fit --config " + cfg + " --data " + data +
+                                                     " --y-column acc --out " + path("fitted.yaml"));
+  ASSERT_EQ(fit.code, 0) << fit.output;
+  for (const char* s : {"peaks of |H|, H = S_yu S_uu^-1", "each mode is one submodel per input (2 inputs)", "  input",
+                        "mode1_f_a", "mode1_f_b", "mode3_f_b"})
+    EXPECT_TRUE(contains(fit.output, s)) << s << "\n" << fit.output;
+  const Config fitted = modalwatch::load_config(path("fitted.yaml"));
+  EXPECT_EQ(fitted.model.inputs, (std::vector<std::string>{"f_a", "f_b"}));
+  ASSERT_EQ(fitted.model.submodels.size(), 6u);
+  for (std::size_t i = 0; i < 6; ++i) EXPECT_EQ(fitted.model.submodels[i].input, static_cast<int>(i % 2));
+  // The 11 Hz mode from f_a as the fit found it, and the written model seeds the next fit.
+  EXPECT_NEAR(modalwatch::modal_parameters(fitted.model.submodels[4]).wn / kTruth[2].modal.wn, 1.0, 0.01);
+  const auto again = modalwatch::test_support::run_cli("fit --config " + path("fitted.yaml") + " --data " + data +
+                                                       " --y-column acc");
+  ASSERT_EQ(again.code, 0) << again.output;
+  EXPECT_TRUE(contains(again.output, "6 submodels")) << again.output;
+}
+
+// --u-column, repeated, names the inputs without model.inputs; a missing one is
+// named with the option, a closed loop refuses several.
+TEST_F(SeveralInputsCli, RepeatedUColumnNamesTheInputs) {
+  const std::string data = record();
+  const std::string cfg = write("modes.yaml", "sample_rate_hz: 100\nmodel:\n  modes: 3\n");
+  const auto fit = modalwatch::test_support::run_cli("fit --config " + cfg + " --data " + data +
+                                                     " --u-column f_a --u-column f_b --y-column acc");
+  ASSERT_EQ(fit.code, 0) << fit.output;
+  EXPECT_TRUE(contains(fit.output, "mode2_f_b")) << fit.output;
+  EXPECT_TRUE(contains(fit.output, "6 submodels")) << fit.output;
+  const auto missing = modalwatch::test_support::run_cli("fit --config " + cfg + " --data " + data +
+                                                         " --u-column f_a --u-column f_c --y-column acc");
+  EXPECT_EQ(missing.code, 2) << missing.output;
+  EXPECT_TRUE(contains(missing.output, "missing column 'f_c'")) << missing.output;
+  EXPECT_TRUE(contains(missing.output, "pick one with --u-column")) << missing.output;
+  const std::string closed = write("closed.yaml",
+                                   "sample_rate_hz: 100\nmodel:\n  loop: closed\n  modes: 3\n"
+                                   "controller:\n  numerator: [1]\n  denominator: [1]\n");
+  const auto refused = modalwatch::test_support::run_cli("fit --config " + closed + " --data " + data +
+                                                         " --u-column f_a --u-column f_b --y-column acc");
+  EXPECT_EQ(refused.code, 2) << refused.output;
+  EXPECT_TRUE(contains(refused.output, "a closed loop has one input")) << refused.output;
+}
+
+// diagnose simulates each submodel from its input; its model tables and
+// summary name the inputs.
+TEST_F(SeveralInputsCli, DiagnoseReportNamesEachSubmodelsInput) {
+  const std::string data = record();
+  const std::string cfg = write("two.yaml", "sample_rate_hz: 100\nmodel:\n  inputs: [f_a, f_b]\n  modes: 3\n");
+  const auto run = modalwatch::test_support::run_cli("diagnose --config " + cfg + " --data " + data +
+                                                     " --y-column acc --max-steps 0 --report " + path("report"));
+  ASSERT_EQ(run.code, 0) << run.output;
+  std::ifstream md(path("report/report.md"));
+  const std::string report((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
+  EXPECT_TRUE(contains(report, "| gain / coefficients | input |")) << report;
+  EXPECT_TRUE(contains(report, "| mode3_f_a | mode | ")) << report;
+  std::ifstream js(path("report/summary.json"));
+  const std::string summary((std::istreambuf_iterator<char>(js)), std::istreambuf_iterator<char>());
+  EXPECT_TRUE(contains(summary, "\"name\": \"mode2_f_b\", \"input\": \"f_b\"")) << summary;
+  const Config written = modalwatch::load_config(path("report/model.yaml"));
+  EXPECT_EQ(written.model.inputs, (std::vector<std::string>{"f_a", "f_b"}));
 }
 
 // ---------------------------------------------------------------- measured: flexible structure

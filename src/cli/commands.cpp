@@ -114,7 +114,7 @@ void set_baselines(Config& config, const AdditiveModel& fitted, const std::vecto
 int fit(const FitArgs& args) {
   return guarded("fit", [&] {
     const Config config = load_config(args.config);
-    const std::vector<std::string> inputs = input_columns(args.columns, config.model);
+    const std::vector<std::string> inputs = input_columns(args.columns, config.model, config.closed_loop);
     const Record full = read_record_with_columns(
         RecordSource(args.data, record_columns(args.columns, inputs), args.channel, config.closed_loop));
     const auto [data, settle] = window(full, args);
@@ -138,6 +138,7 @@ int fit(const FitArgs& args) {
     if (args.max_modes) {
       OrderOptions order;
       order.max_modes = *args.max_modes;
+      if (data.inputs() > 1) order.inputs = config.model.inputs.empty() ? inputs : config.model.inputs;
       // One hold for every order: the one of the largest start.
       options.output_hold = output_hold(
           config, initial_modes(data.segment(settle, used), order.max_modes, config.closed_loop, order.peaks), T);

@@ -20,10 +20,12 @@ struct ColumnArgs {
 };
 
 // The input columns: --u-column, else the model's inputs, else u. A model of
-// several inputs needs as many columns (taken in its order).
-inline std::vector<std::string> input_columns(const ColumnArgs& args, const AdditiveModel& model) {
+// several inputs needs as many columns (taken in its order), a closed loop has one.
+inline std::vector<std::string> input_columns(const ColumnArgs& args, const AdditiveModel& model, bool closed_loop) {
   const std::vector<std::string> names =
       !args.u.empty() ? args.u : !model.inputs.empty() ? model.inputs : std::vector<std::string>{"u"};
+  if (closed_loop && names.size() > 1)
+    throw InputError("--u-column", "a closed loop has one input (the controller's u); several inputs need loop: open");
   if (static_cast<int>(names.size()) < model.n_inputs())
     throw InputError("--u-column", "the model has " + std::to_string(model.n_inputs()) +
                                        " inputs (model.inputs); name as many input columns");

@@ -22,8 +22,6 @@ void print_physical_findings(const std::vector<ModeFinding>& findings) {
 
 AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name,
                               bool in_samples, const std::vector<std::string>& inputs) {
-  if (closed_loop && data.inputs() > 1)
-    throw InputError("--u-column", "a closed loop has one input (the controller's u); several inputs need loop: open");
   const AdditiveModel start = initial_modes(frequency_response(data, closed_loop), count, {}, inputs);
   if (start.submodels.empty())
     throw InputError(data_name, "no resonance peak in the frequency response estimate: no mode to start from");
