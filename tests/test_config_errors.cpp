@@ -173,8 +173,9 @@ TEST(ConfigErrors, NamesRequiredUniqueAndSafe) {
   EXPECT_EQ(parse_error(edit(kBase, "name: m2", "name: \"a,b\"")),
             "test.yaml:11: key 'model.submodels[1].name': names may contain only letters, digits, '_' and "
             "'-' (got \"a,b\")");
-  EXPECT_EQ(parse_error(edit(kBase, "  submodels:\n", "  submodels: []\n  old:\n")),
-            "test.yaml:5: key 'model.old': unknown key for model (allowed: loop, output_hold, inputs, submodels, modes)");
+  EXPECT_EQ(
+      parse_error(edit(kBase, "  submodels:\n", "  submodels: []\n  old:\n")),
+      "test.yaml:5: key 'model.old': unknown key for model (allowed: loop, output_hold, inputs, submodels, modes)");
 }
 
 TEST(ConfigErrors, EmptySubmodelList) {

@@ -17,20 +17,20 @@ namespace {
 // ---------------------------------------------------------------- configuration
 
 const std::string kTwoInputs =
-    "sample_rate_hz: 20\n"         // 1
-    "model:\n"                     // 2
-    "  loop: open\n"               // 3
-    "  inputs: [u1, u2]\n"         // 4
-    "  submodels:\n"               // 5
-    "    - name: m1\n"             // 6
-    "      wn: 2.0\n"              // 7
-    "      zeta: 0.25\n"           // 8
-    "      gain: 3.0\n"            // 9
-    "    - name: m2\n"             // 10
-    "      input: u2\n"            // 11
-    "      frequency_hz: 1.0\n"    // 12
-    "      zeta: 0.1\n"            // 13
-    "      gain: 1.0\n";           // 14
+    "sample_rate_hz: 20\n"       // 1
+    "model:\n"                   // 2
+    "  loop: open\n"             // 3
+    "  inputs: [u1, u2]\n"       // 4
+    "  submodels:\n"             // 5
+    "    - name: m1\n"           // 6
+    "      wn: 2.0\n"            // 7
+    "      zeta: 0.25\n"         // 8
+    "      gain: 3.0\n"          // 9
+    "    - name: m2\n"           // 10
+    "      input: u2\n"          // 11
+    "      frequency_hz: 1.0\n"  // 12
+    "      zeta: 0.1\n"          // 13
+    "      gain: 1.0\n";         // 14
 
 TEST(SeveralInputsConfig, InputsAreNamedAndEachSubmodelIndexesOne) {
   const Config c = parse_config(kTwoInputs, "test.yaml");
@@ -73,10 +73,11 @@ TEST(SeveralInputsConfig, ErrorsNameTheKeyAndLine) {
             "test.yaml:4: key 'model.inputs': must list at least one input column (got [])");
   EXPECT_EQ(parse_error(edit(kTwoInputs, "  inputs: [u1, u2]", "  inputs: u1")),
             "test.yaml:4: key 'model.inputs': expected a list (got u1)");
-  const std::string closed = edit(kTwoInputs, "  loop: open", "  loop: closed") +
-                             "controller:\n  numerator: [1]\n  denominator: [1]\n";
-  EXPECT_EQ(parse_error(closed), "test.yaml:4: key 'model.inputs': a closed loop has one input (the controller's u); "
-                                 "several inputs need loop: open (got [u1, u2])");
+  const std::string closed =
+      edit(kTwoInputs, "  loop: open", "  loop: closed") + "controller:\n  numerator: [1]\n  denominator: [1]\n";
+  EXPECT_EQ(parse_error(closed),
+            "test.yaml:4: key 'model.inputs': a closed loop has one input (the controller's u); "
+            "several inputs need loop: open (got [u1, u2])");
 }
 
 // ---------------------------------------------------------------- record
@@ -342,8 +343,8 @@ TEST_F(SeveralInputsCli, FitNamesTheInputsInTheConfigAndWritesThemBack) {
   for (std::size_t i = 0; i < 6; ++i) EXPECT_EQ(fitted.model.submodels[i].input, static_cast<int>(i % 2));
   // The 11 Hz mode from f_a as the fit found it, and the written model seeds the next fit.
   EXPECT_NEAR(modalwatch::modal_parameters(fitted.model.submodels[4]).wn / kTruth[2].modal.wn, 1.0, 0.01);
-  const auto again = modalwatch::test_support::run_cli("fit --config " + path("fitted.yaml") + " --data " + data +
-                                                       " --y-column acc");
+  const auto again =
+      modalwatch::test_support::run_cli("fit --config " + path("fitted.yaml") + " --data " + data + " --y-column acc");
   ASSERT_EQ(again.code, 0) << again.output;
   EXPECT_TRUE(contains(again.output, "6 submodels")) << again.output;
 }
@@ -414,9 +415,8 @@ FlexibleFit fit_flexible(const std::vector<std::string>& inputs) {
   const Record full = modalwatch::read_record({kFlexible, cols});
   const auto n = static_cast<Eigen::Index>(0.7 * static_cast<double>(full.size()));
   const Record est = full.segment(0, n);
-  const AdditiveModel start =
-      modalwatch::initial_modes(modalwatch::frequency_response(est, false), 8, {}, inputs.size() > 1 ? inputs
-                                                                                                      : std::vector<std::string>{});
+  const AdditiveModel start = modalwatch::initial_modes(modalwatch::frequency_response(est, false), 8, {},
+                                                        inputs.size() > 1 ? inputs : std::vector<std::string>{});
   modalwatch::SrivcOptions options;
   options.output_hold = modalwatch::batch_output_hold(start, est.sample_time());
   std::vector<modalwatch::ModeFinding> findings;

@@ -146,9 +146,10 @@ std::string effects_comment(const ModelEffects& e) {
 // Several inputs: a last column names each submodel's input.
 std::string model_table(const AdditiveModel& m) {
   const bool inputs = m.n_inputs() > 1;
-  std::string s = inputs ? "| submodel | kind | f [Hz] | wn [rad/s] | zeta | gain / coefficients | input |\n"
-                           "|---|---|---|---|---|---|---|\n"
-                         : "| submodel | kind | f [Hz] | wn [rad/s] | zeta | gain / coefficients |\n|---|---|---|---|---|---|\n";
+  std::string s =
+      inputs ? "| submodel | kind | f [Hz] | wn [rad/s] | zeta | gain / coefficients | input |\n"
+               "|---|---|---|---|---|---|---|\n"
+             : "| submodel | kind | f [Hz] | wn [rad/s] | zeta | gain / coefficients |\n|---|---|---|---|---|---|\n";
   for (const Submodel& sm : m.submodels) {
     const std::string input = inputs ? " " + m.input_name(sm.input) + " |" : "";
     if (sm.is_resonance()) {

@@ -22,8 +22,9 @@ struct ColumnArgs {
 // The input columns: --u-column, else the model's inputs, else u. A model of
 // several inputs needs as many columns (taken in its order), a closed loop has one.
 inline std::vector<std::string> input_columns(const ColumnArgs& args, const AdditiveModel& model, bool closed_loop) {
-  const std::vector<std::string> names =
-      !args.u.empty() ? args.u : !model.inputs.empty() ? model.inputs : std::vector<std::string>{"u"};
+  const std::vector<std::string> names = !args.u.empty()         ? args.u
+                                         : !model.inputs.empty() ? model.inputs
+                                                                 : std::vector<std::string>{"u"};
   if (closed_loop && names.size() > 1)
     throw InputError("--u-column", "a closed loop has one input (the controller's u); several inputs need loop: open");
   if (static_cast<int>(names.size()) < model.n_inputs())
@@ -56,10 +57,10 @@ inline Record read_record_with_columns(const RecordSource& source) {
     return read_record(source);
   } catch (const MissingColumnError& e) {
     const auto& further = source.columns.further_u;
-    const bool input = e.column() == source.columns.u ||
-                       std::find(further.begin(), further.end(), e.column()) != further.end();
-    const char* option = e.column() == source.columns.t ? "--t-column"
-                         : input                        ? "--u-column"
+    const bool input =
+        e.column() == source.columns.u || std::find(further.begin(), further.end(), e.column()) != further.end();
+    const char* option = e.column() == source.columns.t   ? "--t-column"
+                         : input                          ? "--u-column"
                          : e.column() == source.columns.y ? "--y-column"
                                                           : nullptr;
     if (!option) throw;

@@ -67,8 +67,10 @@ void several_inputs(const Record& data, double T, int segment_length, FrequencyR
     for (int j = 0; j < m; ++j) syu(j) = yu[j].cross(k) * yu[j].input_psd(k);
     const Eigen::MatrixXcd& S = suu[static_cast<std::size_t>(k)];
     // A frequency no input excites (DC of zero-mean inputs) has no estimate.
-    const Eigen::RowVectorXcd H = S.norm() > 0.0 ? Eigen::RowVectorXcd(S.transpose().completeOrthogonalDecomposition().solve(syu.transpose()).transpose())
-                                                 : Eigen::RowVectorXcd(Eigen::RowVectorXcd::Zero(m));
+    const Eigen::RowVectorXcd H =
+        S.norm() > 0.0
+            ? Eigen::RowVectorXcd(S.transpose().completeOrthogonalDecomposition().solve(syu.transpose()).transpose())
+            : Eigen::RowVectorXcd(Eigen::RowVectorXcd::Zero(m));
     out.response(k) = H(0);
     for (int j = 1; j < m; ++j) out.further_responses[static_cast<std::size_t>(j - 1)](k) = H(j);
     out.excitation(k) = S.diagonal().real().sum();
@@ -241,7 +243,7 @@ AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOpt
   }
   for (int j = 0; j < m; ++j)
     model.inputs.push_back(j < static_cast<int>(inputs.size()) ? inputs[static_cast<std::size_t>(j)]
-                                                                : "u" + std::to_string(j + 1));
+                                                               : "u" + std::to_string(j + 1));
   for (std::size_t i = 0; i < peaks.size(); ++i)
     for (int j = 0; j < m; ++j) {
       ModalParameters p = peaks[i].modal;

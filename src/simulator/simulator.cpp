@@ -309,7 +309,8 @@ AdditiveModel plant_model_at(const PlantSpec& plant, double t) {
 bool ExperimentSpec::operator==(const ExperimentSpec& other) const {
   return sample_time == other.sample_time && duration == other.duration && seed == other.seed &&
          closed_loop == other.closed_loop && controller == other.controller && excitation == other.excitation &&
-         excitation_samples.size() == other.excitation_samples.size() && excitation_samples == other.excitation_samples &&
+         excitation_samples.size() == other.excitation_samples.size() &&
+         excitation_samples == other.excitation_samples &&
          further_input_samples.size() == other.further_input_samples.size() &&
          std::equal(further_input_samples.begin(), further_input_samples.end(), other.further_input_samples.begin(),
                     [](const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return a.size() == b.size() && a == b; });

@@ -317,13 +317,13 @@ FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const Sriv
     one_input = one_input && s.input == initial.submodels[0].input;
   }
   if (options.closed_loop && !one_input)
-    throw std::invalid_argument("fit: a closed loop has the controller's one input; submodels on several inputs "
-                                "are fitted in open loop only");
+    throw std::invalid_argument(
+        "fit: a closed loop has the controller's one input; submodels on several inputs "
+        "are fitted in open loop only");
   FitResult best = fit_additive(data, initial, options);
   const std::size_t K = initial.submodels.size();
   // The unfactored start is one transfer function: from one input only.
-  bool eligible =
-      options.unfactored_start && one_input && K >= 2 && 2 * K <= static_cast<std::size_t>(kMaxFilterOrder);
+  bool eligible = options.unfactored_start && one_input && K >= 2 && 2 * K <= static_cast<std::size_t>(kMaxFilterOrder);
   for (const auto& s : initial.submodels) eligible = eligible && s.is_mode();
   if (!eligible) return best;
   AdditiveModel start;
