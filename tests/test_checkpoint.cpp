@@ -216,7 +216,7 @@ TEST(Checkpoint, EncodeRefusesWhatDecodeWouldReject) {
     EstimatorSettings s;
     s.sample_time = 0.01;
     s.warmup_samples = 10;
-    return RecursiveEstimator(AdditiveModel{{make_mode(std::string(length, 'm'), {1.0, 0.1, 1.0})}}, s).state();
+    return RecursiveEstimator(AdditiveModel{{make_mode(std::string(length, 'm'), {1.0, 0.1, 1.0})}, {}}, s).state();
   };
   Checkpoint cp;
   cp.estimator = state_named(257);

@@ -173,8 +173,9 @@ TEST(ConfigErrors, NamesRequiredUniqueAndSafe) {
   EXPECT_EQ(parse_error(edit(kBase, "name: m2", "name: \"a,b\"")),
             "test.yaml:11: key 'model.submodels[1].name': names may contain only letters, digits, '_' and "
             "'-' (got \"a,b\")");
-  EXPECT_EQ(parse_error(edit(kBase, "  submodels:\n", "  submodels: []\n  old:\n")),
-            "test.yaml:5: key 'model.old': unknown key for model (allowed: loop, output_hold, submodels, modes)");
+  EXPECT_EQ(
+      parse_error(edit(kBase, "  submodels:\n", "  submodels: []\n  old:\n")),
+      "test.yaml:5: key 'model.old': unknown key for model (allowed: loop, output_hold, inputs, submodels, modes)");
 }
 
 TEST(ConfigErrors, EmptySubmodelList) {
@@ -212,7 +213,7 @@ TEST(ConfigErrors, TransferFunctionOrders) {
             "test.yaml:4: key 'model.submodels[0].a': missing required key (kind transfer_function)");
   EXPECT_EQ(parse_error(edit(kTf, "a: [0.1, 0.01]", "wn: 3")),
             "test.yaml:6: key 'model.submodels[0].wn': unknown key for kind transfer_function (allowed: name, "
-            "kind, a, b, rigid_poles, forgetting, random_walk, stabilisation, min_memory, initial_covariance)");
+            "kind, a, b, rigid_poles, input, forgetting, random_walk, stabilisation, min_memory, initial_covariance)");
 }
 
 TEST(ConfigErrors, UnstableTransferFunction) {
@@ -255,7 +256,7 @@ TEST(ConfigErrors, Feedthrough) {
   EXPECT_EQ(parse_error(edit(kTf, "      kind: transfer_function\n      a: [0.1, 0.01]\n      b: [1, 0.5]\n",
                              "      kind: feedthrough\n      gain: 0.25\n      rigid_poles: 1\n")),
             "test.yaml:7: key 'model.submodels[0].rigid_poles': unknown key for kind feedthrough (allowed: name, "
-            "kind, gain, forgetting, random_walk, stabilisation, min_memory, initial_covariance)");
+            "kind, gain, input, forgetting, random_walk, stabilisation, min_memory, initial_covariance)");
 }
 
 TEST(ConfigErrors, InitialCovariance) {

@@ -4,7 +4,11 @@
 // configured guesses.
 //
 // The estimate is H1 = S_yu / S_uu (Welch: Hann windows, 50 % overlap) in open
-// loop. In closed loop H1 is biased by the noise fed back into u; with the
+// loop; with several measured inputs (Record::further_u) the row H = S_yu S_uu^-1
+// of one response per input, from the inputs' cross-spectral matrix S_uu at
+// each frequency (correlated inputs are separated), and the resonances are the
+// peaks of |H| = sqrt(sum_j |H_j|^2): a mode that one input hardly excites
+// still shows through the other. In closed loop H1 is biased by the noise fed back into u; with the
 // reference in the record the estimate is S_yr / S_ur, which the noise does
 // not reach (the fit's instruments correct what remains). The resonances are
 // the local maxima of |H| over the excited band that rise most above their
@@ -26,14 +30,25 @@ struct FrequencyResponse {
   Eigen::VectorXd frequency_hz;
   Eigen::VectorXcd response;   // H(j 2 pi f), with the half-sample delay of a held input removed
   Eigen::VectorXd excitation;  // power of the excitation (u in open loop, r in closed loop) per frequency
-  Eigen::VectorXd coherence;   // squared coherence of y with the excitation
+  Eigen::VectorXd coherence;   // squared coherence of y with the excitation (multiple coherence: several inputs)
   int segments = 0;
+  // Several inputs: H_2, H_3, ... of the inputs after the first (response is
+  // H_1); the excitation is then the inputs' summed power. Empty for one input.
+  std::vector<Eigen::VectorXcd> further_responses;
+
+  int inputs() const { return 1 + static_cast<int>(further_responses.size()); }
+  const Eigen::VectorXcd& input_response(int j) const {
+    return j == 0 ? response : further_responses[static_cast<std::size_t>(j - 1)];
+  }
+  // |H| at bin k: |H_1|, or sqrt(sum_j |H_j|^2) with several inputs.
+  double magnitude(Eigen::Index k) const;
 };
 
 // segment_length 0: the longest power of two that still gives 8 averaged
 // segments. A held input (Hold::zoh) lags the samples by half a sample, which
 // is removed; a band-limited input (Hold::foh, interpolated between samples)
-// does not.
+// does not. Several inputs in closed loop throw std::invalid_argument (the
+// controller gives one u).
 FrequencyResponse frequency_response(const Record& data, bool closed_loop, int segment_length = 0,
                                      Hold input = Hold::zoh);
 
@@ -59,8 +74,12 @@ struct PeakOptions {
 // The `count` most prominent resonances of H (fewer when the data show fewer), ascending in wn.
 std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int count, const PeakOptions& options = {});
 
-// The additive model of those resonances, named mode1..modeN in ascending frequency.
-AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOptions& options = {});
+// The additive model of those resonances, named mode1..modeN in ascending
+// frequency. With several inputs each resonance is one submodel per input, of
+// the same wn and zeta and that input's residue, named mode<k>_<input> after
+// `inputs` (the model's input names; u1, u2, ... when not given).
+AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOptions& options = {},
+                            const std::vector<std::string>& inputs = {});
 // The same from a record's frequency_response (held input, default segments).
 AdditiveModel initial_modes(const Record& data, int count, bool closed_loop, const PeakOptions& options = {});
 

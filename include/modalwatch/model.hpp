@@ -33,6 +33,9 @@ struct Submodel {
   int rigid_poles = 0;  // l: poles at the origin
   Eigen::VectorXd a;    // a_1 .. a_n
   Eigen::VectorXd b;    // b_0 .. b_m
+  // The measured input that drives this submodel: an index into the model's
+  // inputs (AdditiveModel::inputs). 0, the first input, for a single-input model.
+  int input = 0;
 
   int n_theta() const { return n + m + 1; }
   // eq. (7): theta_i = [a_1 .. a_n, b_0 .. b_m]
@@ -56,7 +59,7 @@ struct Submodel {
   bool is_feedthrough() const { return n == 0 && m == 0 && rigid_poles == 0; }
   // Throws std::invalid_argument when the sizes do not match n, m.
   void check() const;
-  // Same name, orders and coefficients.
+  // Same name, orders, coefficients and input.
   bool operator==(const Submodel& other) const;
 };
 
@@ -84,8 +87,20 @@ ModalParameters modal_std(const Submodel& s, const Eigen::MatrixXd& theta_covari
 // complex-conjugate root pair of A, and real roots as zeta >= 1 entries, sorted by wn.
 std::vector<ModalParameters> resonances(const Submodel& s);
 
+// Several measured inputs (actuators): the output is the sum of every
+// submodel driven by its own input, y = sum_i G_i(p) u_{input(i)}.
 struct AdditiveModel {
   std::vector<Submodel> submodels;
+  // Names of the measured inputs (record columns) the submodels' `input`
+  // indexes; empty for a single input, which is then unnamed.
+  std::vector<std::string> inputs;
+
+  // Number of measured inputs: 1 when `inputs` is empty.
+  int n_inputs() const { return inputs.empty() ? 1 : static_cast<int>(inputs.size()); }
+  // The name of input j, or `fallback` when the model names none.
+  std::string input_name(int j, const std::string& fallback = "u") const {
+    return j < static_cast<int>(inputs.size()) ? inputs[static_cast<std::size_t>(j)] : fallback;
+  }
 
   int n_beta() const;  // sum of n_theta
   // eq. (8): beta = [theta_1; ...; theta_K]
@@ -93,7 +108,10 @@ struct AdditiveModel {
   void set_beta(const Eigen::VectorXd& beta);
   // Offset of theta_i inside beta.
   int offset(int i) const;
+  // G(j w): every submodel, the response of a single-input model.
   std::complex<double> response(double w) const;
+  // From input `input` alone: the submodels it drives.
+  std::complex<double> response(double w, int input) const;
   bool operator==(const AdditiveModel&) const = default;
 };
 

@@ -12,6 +12,7 @@
 // A physical mode stays put as orders grow; a mode the noise or a neighbour
 // made moves from order to order.
 #include <limits>
+#include <string>
 #include <vector>
 
 #include "modalwatch/initial_modes.hpp"
@@ -28,6 +29,8 @@ struct OrderOptions {
   double damping_tolerance = 0.05;
   PeakOptions peaks;
   PhysicalOptions physical;
+  // Several inputs in the record: their names (initial_modes), one submodel per input and mode.
+  std::vector<std::string> inputs;
 };
 
 struct StabilisedMode {

@@ -1,6 +1,9 @@
 #pragma once
 // Sampled input/output data: one sample, and a record of many. t, u, y and, in
-// closed loop, the reference r.
+// closed loop, the reference r; with several actuators, the further inputs.
+#include <cstddef>
+#include <vector>
+
 #include <Eigen/Core>
 
 namespace modalwatch {
@@ -15,8 +18,14 @@ struct Record {
   Eigen::VectorXd u;  // plant input (controller output in closed loop)
   Eigen::VectorXd y;  // measured output
   Eigen::VectorXd r;  // reference; empty in open loop
+  // Further measured inputs u_2, u_3, ... (several actuators), each as long as
+  // u; empty for a single input. u stays the first input.
+  std::vector<Eigen::VectorXd> further_u;
 
   Eigen::Index size() const { return t.size(); }
+  int inputs() const { return 1 + static_cast<int>(further_u.size()); }
+  // Input j: u for j = 0, else further_u[j - 1].
+  const Eigen::VectorXd& input(int j) const { return j == 0 ? u : further_u[static_cast<std::size_t>(j - 1)]; }
   bool has_reference() const { return r.size() == t.size() && r.size() > 0; }
   // Mean sample interval; records are assumed equidistant (the CSV reader checks).
   double sample_time() const {
@@ -29,6 +38,7 @@ struct Record {
     s.u = u.segment(begin, count);
     s.y = y.segment(begin, count);
     if (has_reference()) s.r = r.segment(begin, count);
+    for (const auto& v : further_u) s.further_u.push_back(v.segment(begin, count));
     return s;
   }
 };

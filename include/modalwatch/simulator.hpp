@@ -56,6 +56,10 @@ struct ExperimentSpec {
   // Samples of the excitation when it comes from a file (SignalSpec::Kind::csv),
   // already on the time grid.
   Eigen::VectorXd excitation_samples;
+  // Open loop with several actuators: the samples of inputs 2, 3, ... on the
+  // time grid, which drive the modes whose submodel.input is 1, 2, ... (the
+  // effects act on the first input only). Empty for one input.
+  std::vector<Eigen::VectorXd> further_input_samples;
 
   bool operator==(const ExperimentSpec& other) const;
 };

@@ -81,13 +81,20 @@ struct FitResult {
   Eigen::MatrixXd theta_covariance(int i) const;
 };
 
-// Throws std::invalid_argument on a record too short for the number of
-// parameters, or a closed-loop fit without a reference or controller.
+// Several measured inputs: each block's prefiltered regressors and
+// instruments come from its submodel's input (Submodel::input indexes
+// Record::input), the other blocks' simulated outputs are subtracted as for one
+// input (eq. 15). Throws std::invalid_argument on a record too short for the
+// number of parameters, a closed-loop fit without a reference or controller, a
+// submodel on an input the record lacks, or a closed loop with submodels on
+// several inputs (the controller gives one u).
 FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const SrivcOptions& options);
 
 // Output of the model on the record: open loop, the simulated sum of submodels
 // driven by u (ZOH); closed loop with simulate_loop, the noise-free loop driven by r.
 Eigen::VectorXd simulate_model(const AdditiveModel& model, const Eigen::VectorXd& u, double T);
+// The same with every submodel driven by its own input of the record (open loop).
+Eigen::VectorXd simulate_model(const AdditiveModel& model, const Record& data);
 // Noise-free closed loop with the known controller: returns z = S_uo(q) r (the
 // instrument input, eq. 29) and the loop output.
 void simulate_loop(const AdditiveModel& model, const DiscreteTransferFunction& controller, const Eigen::VectorXd& r,

@@ -114,8 +114,9 @@ void set_baselines(Config& config, const AdditiveModel& fitted, const std::vecto
 int fit(const FitArgs& args) {
   return guarded("fit", [&] {
     const Config config = load_config(args.config);
+    const std::vector<std::string> inputs = input_columns(args.columns, config.model, config.closed_loop);
     const Record full = read_record_with_columns(
-        RecordSource(args.data, record_columns(args.columns), args.channel, config.closed_loop));
+        RecordSource(args.data, record_columns(args.columns, inputs), args.channel, config.closed_loop));
     const auto [data, settle] = window(full, args);
     const Eigen::Index used = data.size() - settle;
     // Modes from the data: --modes, or model.modes without submodels.
@@ -137,6 +138,7 @@ int fit(const FitArgs& args) {
     if (args.max_modes) {
       OrderOptions order;
       order.max_modes = *args.max_modes;
+      if (data.inputs() > 1) order.inputs = config.model.inputs.empty() ? inputs : config.model.inputs;
       // One hold for every order: the one of the largest start.
       options.output_hold = output_hold(
           config, initial_modes(data.segment(settle, used), order.max_modes, config.closed_loop, order.peaks), T);
@@ -154,7 +156,8 @@ int fit(const FitArgs& args) {
       std::printf("\n");
     } else {
       const AdditiveModel start =
-          modes ? modes_from_data(data.segment(settle, used), *modes, config.closed_loop, args.data, in_samples)
+          modes ? modes_from_data(data.segment(settle, used), *modes, config.closed_loop, args.data, in_samples,
+                                  config.model.inputs.empty() ? inputs : config.model.inputs)
                 : config.model;
       options.output_hold = output_hold(config, start, T);
       result = fit_physical(data, start, options, findings);

@@ -80,7 +80,8 @@ int diagnose(const DiagnoseArgs& args) {
   return guarded("diagnose", [&] {
     const Config config = load_config(args.config);
     if (!args.validate.empty() && args.split) throw InputError("--split", "give --validate or --split, not both");
-    const RecordColumns columns = record_columns(args.columns);
+    const std::vector<std::string> inputs = input_columns(args.columns, config.model, config.closed_loop);
+    const RecordColumns columns = record_columns(args.columns, inputs);
     const Record full = read_record_with_columns(RecordSource(args.data, columns, args.channel, config.closed_loop));
     Record est, val;
     Eigen::Index lead_in = 0;
@@ -143,8 +144,9 @@ int diagnose(const DiagnoseArgs& args) {
     // Modes from the data: --modes, or model.modes without submodels.
     const std::optional<int> modes = args.modes ? args.modes : config.model_modes;
     const bool in_samples = time_in_samples(full, args.columns, config.sample_time);
-    const AdditiveModel initial =
-        modes ? modes_from_data(est, *modes, config.closed_loop, args.data, in_samples) : config.model;
+    const AdditiveModel initial = modes ? modes_from_data(est, *modes, config.closed_loop, args.data, in_samples,
+                                                          config.model.inputs.empty() ? inputs : config.model.inputs)
+                                        : config.model;
     options.output_hold = output_hold(config, initial, est.sample_time());
     DiagnoseResult r = diagnose(est, val, initial, loop, options);
     r.stop_reason += stop_option(r.stop);

@@ -35,8 +35,10 @@ void write_test(JsonWriter& j, const ResidualTest& t) {
 }
 
 // sd: standard deviations of (wn, zeta, gain), zeros when unknown.
-void write_submodel(JsonWriter& j, const Submodel& s, const ModalParameters& sd) {
+// `input`: the name of the submodel's input, written only for a model of several inputs.
+void write_submodel(JsonWriter& j, const Submodel& s, const ModalParameters& sd, const std::string& input) {
   j.begin_object().key("name").value(s.name);
+  if (!input.empty()) j.key("input").value(input);
   if (s.is_resonance()) {
     const ModalParameters p = modal_parameters(s);
     j.key("kind").value("mode").key("wn").value(p.wn).key("zeta").value(p.zeta).key("gain").value(p.gain);
@@ -101,8 +103,10 @@ void write_step(JsonWriter& j, const DiagnoseStep& s) {
   write_test(j.key("coherence"), s.residual.coherence);
   j.key("submodels").begin_array();
   const auto& subs = s.model.linear.submodels;
+  const AdditiveModel& linear = s.model.linear;
   for (std::size_t i = 0; i < subs.size(); ++i)
-    write_submodel(j, subs[i], i < s.modal_std.size() ? s.modal_std[i] : ModalParameters{});
+    write_submodel(j, subs[i], i < s.modal_std.size() ? s.modal_std[i] : ModalParameters{},
+                   linear.n_inputs() > 1 ? linear.input_name(subs[i].input) : std::string());
   j.end_array();
   j.key("physical").begin_array();
   for (const ModeFinding& f : s.physical) {
@@ -139,14 +143,20 @@ std::string effects_comment(const ModelEffects& e) {
   return s;
 }
 
+// Several inputs: a last column names each submodel's input.
 std::string model_table(const AdditiveModel& m) {
-  std::string s = "| submodel | kind | f [Hz] | wn [rad/s] | zeta | gain / coefficients |\n|---|---|---|---|---|---|\n";
+  const bool inputs = m.n_inputs() > 1;
+  std::string s =
+      inputs ? "| submodel | kind | f [Hz] | wn [rad/s] | zeta | gain / coefficients | input |\n"
+               "|---|---|---|---|---|---|---|\n"
+             : "| submodel | kind | f [Hz] | wn [rad/s] | zeta | gain / coefficients |\n|---|---|---|---|---|---|\n";
   for (const Submodel& sm : m.submodels) {
+    const std::string input = inputs ? " " + m.input_name(sm.input) + " |" : "";
     if (sm.is_resonance()) {
       const ModalParameters p = modal_parameters(sm);
       s += "| " + sm.name + (sm.m == 1 ? " | mode, b0 + b1 p | " : " | mode | ") + format_number(p.hz(), 6) + " | " +
            format_number(p.wn, 6) + " | " + format_number(p.zeta, 4) + " | " + format_number(p.gain, 5) +
-           (sm.m == 1 ? ", b1 = " + format_number(sm.b(1), 5) : "") + " |\n";
+           (sm.m == 1 ? ", b1 = " + format_number(sm.b(1), 5) : "") + " |" + input + "\n";
     } else {
       std::string c;
       const Eigen::VectorXd th = sm.theta();
@@ -154,7 +164,7 @@ std::string model_table(const AdditiveModel& m) {
         c += (j ? ", " : "") + std::string(j < sm.n ? "a" : "b") + std::to_string(j < sm.n ? j + 1 : j - sm.n) + " = " +
              format_number(th(j), 6);
       s += "| " + sm.name + " | l = " + std::to_string(sm.rigid_poles) + ", n = " + std::to_string(sm.n) + " | | | | " +
-           c + " |\n";
+           c + " |" + input + "\n";
     }
   }
   return s;
@@ -248,7 +258,8 @@ double degrees(std::complex<double> h) { return std::arg(h) * 180.0 / std::numbe
 
 // The measured frequency response of the estimation part (H1 = S_yu / S_uu in
 // open loop, S_yr / S_ur in closed loop, a held input's half-sample delay
-// removed) and its coherence, beside both models' responses at the same frequencies.
+// removed) and its coherence, beside both models' responses at the same
+// frequencies; with several inputs, those from the first input (H_1 of S_yu S_uu^-1).
 void write_measured_frf(const std::string& dir, const DiagnoseResult& r, const Record& estimation, bool closed_loop,
                         Hold input) {
   const FrequencyResponse h = frequency_response(estimation, closed_loop, 0, input);
@@ -257,8 +268,8 @@ void write_measured_frf(const std::string& dir, const DiagnoseResult& r, const R
   for (Eigen::Index k = 0; k < F; ++k) {
     const double f = h.frequency_hz(k + 1);
     const std::complex<double> m = h.response(k + 1);
-    const auto g0 = r.steps.front().model.linear.response(2.0 * std::numbers::pi * f);
-    const auto g1 = r.steps.back().model.linear.response(2.0 * std::numbers::pi * f);
+    const auto g0 = r.steps.front().model.linear.response(2.0 * std::numbers::pi * f, 0);
+    const auto g1 = r.steps.back().model.linear.response(2.0 * std::numbers::pi * f, 0);
     t.row(k) << f, std::abs(m), degrees(m), h.coherence(k + 1), std::abs(g0), degrees(g0), std::abs(g1), degrees(g1);
   }
   write_table(dir + "/frf.csv",
@@ -301,7 +312,7 @@ void write_tables(const std::string& dir, const DiagnoseResult& r, const Record&
     for (int i = 0; i < F; ++i) {
       const double f = f0 * std::pow(f1 / f0, double(i) / (F - 1));
       const double w = 2.0 * std::numbers::pi * f;
-      const auto g0 = first.model.linear.response(w), g1 = last.model.linear.response(w);
+      const auto g0 = first.model.linear.response(w, 0), g1 = last.model.linear.response(w, 0);  // the first input's
       t.row(i) << f, std::abs(g0), degrees(g0), std::abs(g1), degrees(g1);
     }
     write_table(dir + "/bode.csv", {"f_hz", "mag_before", "phase_before_deg", "mag_after", "phase_after_deg"}, t);

@@ -16,7 +16,9 @@ namespace {
 void add_column_options(CLI::App* command, modalwatch::cli::ColumnArgs& columns) {
   command->add_option("--t-column", columns.t, "time column of the record (e.g. n: sample index)")
       ->capture_default_str();
-  command->add_option("--u-column", columns.u, "input column of the record (e.g. u1)")->capture_default_str();
+  command->add_option("--u-column", columns.u,
+                      "input column of the record (e.g. u1); repeat it for several inputs (--u-column u1 --u-column "
+                      "u2), in the order of model.inputs [default: model.inputs, else u]");
   command->add_option("--y-column", columns.y, "output column of the record (e.g. y2)")->capture_default_str();
 }
 

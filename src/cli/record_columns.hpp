@@ -1,23 +1,43 @@
 #pragma once
 // The CSV columns the offline commands (fit, diagnose) read as t, u and y,
 // chosen with --t-column, --u-column and --y-column, and the reader that names
-// those options when a record lacks the column.
+// those options when a record lacks the column. --u-column may be repeated:
+// several measured inputs, in order.
+#include <algorithm>
 #include <string>
+#include <vector>
 
 #include "modalwatch/error.hpp"
 #include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/records.hpp"
+#include "modalwatch/model.hpp"
 
 namespace modalwatch::cli {
 
 struct ColumnArgs {
-  std::string t = "t", u = "u", y = "y";  // e.g. n (sample index), u1, y2
+  std::string t = "t", y = "y";  // e.g. n (sample index), y2
+  std::vector<std::string> u;    // e.g. u1, u2; none given: model.inputs, else u
 };
 
-inline RecordColumns record_columns(const ColumnArgs& args) {
+// The input columns: --u-column, else the model's inputs, else u. A model of
+// several inputs needs as many columns (taken in its order), a closed loop has one.
+inline std::vector<std::string> input_columns(const ColumnArgs& args, const AdditiveModel& model, bool closed_loop) {
+  const std::vector<std::string> names = !args.u.empty()         ? args.u
+                                         : !model.inputs.empty() ? model.inputs
+                                                                 : std::vector<std::string>{"u"};
+  if (closed_loop && names.size() > 1)
+    throw InputError("--u-column", "a closed loop has one input (the controller's u); several inputs need loop: open");
+  if (static_cast<int>(names.size()) < model.n_inputs())
+    throw InputError("--u-column", "the model has " + std::to_string(model.n_inputs()) +
+                                       " inputs (model.inputs); name as many input columns");
+  return names;
+}
+
+inline RecordColumns record_columns(const ColumnArgs& args, const std::vector<std::string>& inputs) {
   RecordColumns columns;
   columns.t = args.t;
-  columns.u = args.u;
+  columns.u = inputs.front();
+  columns.further_u.assign(inputs.begin() + 1, inputs.end());
   columns.y = args.y;
   return columns;
 }
@@ -36,8 +56,11 @@ inline Record read_record_with_columns(const RecordSource& source) {
   try {
     return read_record(source);
   } catch (const MissingColumnError& e) {
+    const auto& further = source.columns.further_u;
+    const bool input =
+        e.column() == source.columns.u || std::find(further.begin(), further.end(), e.column()) != further.end();
     const char* option = e.column() == source.columns.t   ? "--t-column"
-                         : e.column() == source.columns.u ? "--u-column"
+                         : input                          ? "--u-column"
                          : e.column() == source.columns.y ? "--y-column"
                                                           : nullptr;
     if (!option) throw;

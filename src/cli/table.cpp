@@ -21,17 +21,23 @@ void print_physical_findings(const std::vector<ModeFinding>& findings) {
 }
 
 AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name,
-                              bool in_samples) {
-  const AdditiveModel start = initial_modes(data, count, closed_loop);
+                              bool in_samples, const std::vector<std::string>& inputs) {
+  const AdditiveModel start = initial_modes(frequency_response(data, closed_loop), count, {}, inputs);
   if (start.submodels.empty())
     throw InputError(data_name, "no resonance peak in the frequency response estimate: no mode to start from");
-  std::printf("initial modes from the data (peaks of %s):", closed_loop ? "S_yr/S_ur" : "H1 = S_yu/S_uu");
-  for (const auto& s : start.submodels)
+  const char* estimate = closed_loop ? "S_yr/S_ur" : data.inputs() > 1 ? "|H|, H = S_yu S_uu^-1" : "H1 = S_yu/S_uu";
+  std::printf("initial modes from the data (peaks of %s):", estimate);
+  std::size_t found = 0;
+  for (const auto& s : start.submodels) {
+    if (s.input != 0) continue;  // one line per resonance, not per input
+    ++found;
     std::printf(" %.5g %s (zeta %.3g)", modal_parameters(s).hz(), frequency_unit(in_samples), modal_parameters(s).zeta);
+  }
   std::printf("\n");
-  if (static_cast<int>(start.submodels.size()) < count)
+  if (data.inputs() > 1) std::printf("each mode is one submodel per input (%d inputs)\n", data.inputs());
+  if (static_cast<int>(found) < count)
     std::printf("WARNING: %d modes asked, the data show %zu resonance peaks above the noise: fitting %zu\n", count,
-                start.submodels.size(), start.submodels.size());
+                found, found);
   return start;
 }
 
@@ -44,16 +50,20 @@ Hold output_hold(const Config& config, const AdditiveModel& start, double sample
 }
 
 void print_modal_table(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>& covariances, bool in_samples) {
-  std::printf("\n%-10s %11s %10s %12s %10s %9s %9s %12s %10s\n", "submodel", in_samples ? "f [1/sample]" : "f [Hz]", "+-",
-              in_samples ? "wn [rad/smp]" : "wn [rad/s]", "+-", "zeta", "+-", "gain", "+-");
+  // Several inputs: a last column names each submodel's input.
+  const bool inputs = model.n_inputs() > 1;
+  std::printf("\n%-10s %11s %10s %12s %10s %9s %9s %12s %10s%s\n", "submodel", in_samples ? "f [1/sample]" : "f [Hz]",
+              "+-", in_samples ? "wn [rad/smp]" : "wn [rad/s]", "+-", "zeta", "+-", "gain", "+-",
+              inputs ? "  input" : "");
   for (std::size_t i = 0; i < model.submodels.size(); ++i) {
     const Submodel& s = model.submodels[i];
     const Eigen::MatrixXd& c = covariances[i];
+    const std::string input = inputs ? "  " + model.input_name(s.input) : "";
     if (s.is_mode()) {
       const ModalParameters p = modal_parameters(s);
       const ModalParameters sd = modal_std(s, c);
-      std::printf("%-10s %11.5f %10.2e %12.5f %10.2e %9.5f %9.2e %12.5g %10.2e\n", s.name.c_str(), p.hz(),
-                  sd.wn / (2 * std::numbers::pi), p.wn, sd.wn, p.zeta, sd.zeta, p.gain, sd.gain);
+      std::printf("%-10s %11.5f %10.2e %12.5f %10.2e %9.5f %9.2e %12.5g %10.2e%s\n", s.name.c_str(), p.hz(),
+                  sd.wn / (2 * std::numbers::pi), p.wn, sd.wn, p.zeta, sd.zeta, p.gain, sd.gain, input.c_str());
       continue;
     }
     // Rigid bodies and general transfer functions: their coefficients, and the
@@ -65,7 +75,7 @@ void print_modal_table(const AdditiveModel& model, const std::vector<Eigen::Matr
       std::printf("  %s%d=%.6g(+-%.2g)", is_a ? "a" : "b", is_a ? j + 1 : j - s.n, th(j),
                   std::sqrt(std::max(0.0, c(j, j))));
     }
-    std::printf("\n");
+    std::printf("%s\n", input.c_str());
     for (const auto& r : resonances(s))
       std::printf("%-10s %11.5f %10s %12.5f %10s %9.5f\n", "", r.hz(), "", r.wn, "", r.zeta);
   }

@@ -24,9 +24,11 @@ void print_physical_findings(const std::vector<ModeFinding>& findings);
 
 // The starting modes that `fit --modes` and `diagnose --modes` take from the
 // data (initial_modes.hpp), with a warning when the data show fewer than asked.
-// Throws InputError (naming `data`) when they show none.
+// Throws InputError (naming `data`) when they show none. With several inputs
+// in the record each mode is one submodel per input, the model's inputs named
+// `inputs`.
 AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name,
-                              bool in_samples);
+                              bool in_samples, const std::vector<std::string>& inputs = {});
 
 // The output hold that `fit` and `diagnose` assume: model.output_hold when
 // given, else batch_output_hold of the start (srivc.hpp), with a line saying

@@ -36,6 +36,7 @@
 #include <Eigen/QR>
 
 #include "modalwatch/diagnose.hpp"
+#include "modalwatch/initial_modes.hpp"
 #include "modalwatch/physical.hpp"
 #include "modalwatch/srivc.hpp"
 #include "output_error.hpp"
@@ -217,8 +218,42 @@ std::string next_mode_name(const AdditiveModel& m) {
   }
 }
 
+// Several inputs: the residual's response to every input (H = S_eu S_uu^-1,
+// initial_modes.hpp) at its largest |H| over the excited band; one mode per
+// input there, each with that input's residue.
+Candidate candidate_modes_per_input(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
+  Record residual = ctx.est.data;
+  residual.y -= y0;
+  const FrequencyResponse h = frequency_response(
+      residual, false, static_cast<int>(std::min<Eigen::Index>(2048, residual.size() / 4)), Hold::zoh);
+  const double excited = 1e-3 * h.excitation.maxCoeff();
+  Eigen::Index peak = -1;
+  for (Eigen::Index f = 2; f < h.frequency_hz.size(); ++f)
+    if (h.excitation(f) > excited && (peak < 0 || h.magnitude(f) > h.magnitude(peak))) peak = f;
+  if (peak < 0) return invalid(EffectKind::mode, "no excited frequency");
+  AugmentedModel m = current;
+  const std::string name = next_mode_name(current.linear);
+  for (int j = 0; j < current.linear.n_inputs(); ++j) {
+    ModalParameters start;
+    start.wn = 2.0 * std::numbers::pi * h.frequency_hz(peak);
+    start.zeta = 0.05;
+    start.gain = -2.0 * start.zeta * h.input_response(j)(peak).imag();
+    if (start.gain == 0.0) start.gain = 2.0 * start.zeta * std::abs(h.input_response(j)(peak));
+    if (start.gain == 0.0) continue;
+    m.linear.submodels.push_back(make_mode(name + "_" + current.linear.input_name(j), start));
+    m.linear.submodels.back().input = j;
+  }
+  Candidate c = finish(EffectKind::mode, fit_structure(m, ctx.est, ctx.options, true), ctx);
+  if (c.valid) {
+    const ModalParameters p = modal_parameters(c.model.linear.submodels.back());
+    c.params = {{"wn", p.wn}, {"zeta", p.zeta}, {"hz", p.hz()}};
+  }
+  return c;
+}
+
 Candidate candidate_mode(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
   const Record& d = ctx.est.data;
+  if (current.linear.n_inputs() > 1) return candidate_modes_per_input(current, y0, ctx);
   const double T = d.sample_time();
   // The input is the measured u in both loops: in closed loop S_eu/S_uu is
   // only a start, the fit decides.

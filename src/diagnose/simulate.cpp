@@ -111,7 +111,19 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
   if (loop.closed && !data.has_reference()) throw std::invalid_argument("diagnose: closed loop needs r");
   std::vector<SubmodelRunner> runners;
   const int substeps = std::max(1, loop.substeps);
-  for (const Submodel& s : model.linear.submodels) runners.emplace_back(s, T / substeps);
+  // Several inputs: a submodel on a further input takes that input as
+  // measured (the effects act on the first input, the one a closed loop has).
+  std::vector<const Eigen::VectorXd*> further;  // per runner: its input, or null for the first
+  bool several = false;
+  for (const Submodel& s : model.linear.submodels) {
+    runners.emplace_back(s, T / substeps);
+    if (s.input < 0 || s.input >= data.inputs())
+      throw std::invalid_argument("diagnose: submodel " + s.name + " is driven by an input the record lacks");
+    further.push_back(s.input == 0 ? nullptr : &data.input(s.input));
+    several = several || s.input != 0;
+  }
+  if (several && loop.closed)
+    throw std::invalid_argument("diagnose: a closed loop has the controller's one input; several inputs are open loop");
   const PlantEffects e = carried(model.effects);
   EffectState effects(e);
 
@@ -157,8 +169,17 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
       u_b = j < 0 ? 0.0 : (j < N ? data.u(j) : u_a);
     }
     auto held = [&](int sub) { return interpolate ? u_a + (u_b - u_a) * (sub + 0.5) / substeps : u_a; };
+    // A further input over the substep `sub`, held or interpolated like u.
+    auto further_held = [&](const Eigen::VectorXd& w, int sub) {
+      const double a = w(k), b = k + 1 < N ? w(k + 1) : a;
+      return interpolate ? a + (b - a) * (sub + 0.5) / substeps : a;
+    };
     double y_plant = 0.0;
-    for (SubmodelRunner& r : runners) y_plant += r.complete(held(0) + branches);
+    if (!several)
+      for (SubmodelRunner& r : runners) y_plant += r.complete(held(0) + branches);
+    else
+      for (std::size_t i = 0; i < runners.size(); ++i)
+        y_plant += runners[i].complete(further[i] ? further_held(*further[i], 0) : held(0) + branches);
     y(k) = y_plant + out_terms;
     if (loop.closed) controller.step(data.r(k) - y(k));
     if (u_sim) (*u_sim)(k) = u;
@@ -167,7 +188,8 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
       double y_sub = 0.0;
       for (SubmodelRunner& r : runners) y_sub += r.advance();
       const double b = effects.branches(y_sub);
-      for (SubmodelRunner& r : runners) r.complete(held(sub) + b);
+      for (std::size_t i = 0; i < runners.size(); ++i)
+        runners[i].complete(further[i] ? further_held(*further[i], sub) : held(sub) + b);
       effects.end_substep(y_sub);
     }
   }

@@ -6,6 +6,8 @@
 #include <numbers>
 #include <stdexcept>
 
+#include <Eigen/QR>
+
 #include "modalwatch/spectra.hpp"
 
 namespace modalwatch {
@@ -34,12 +36,66 @@ double crossing(const Eigen::VectorXd& logh, const Eigen::VectorXd& f, Eigen::In
   return -1.0;
 }
 
+// H = S_yu S_uu^-1 of several inputs at every frequency, from the Welch
+// spectra of y with each input and of the inputs with each other.
+void several_inputs(const Record& data, double T, int segment_length, FrequencyResponse& out) {
+  const int m = data.inputs();
+  std::vector<Spectra> yu;  // e = y, u = u_j: cross * input_psd = S_{y u_j}
+  for (int j = 0; j < m; ++j) yu.push_back(welch_spectra(data.y, data.input(j), T, segment_length));
+  const Eigen::Index F = yu[0].frequency_hz.size();
+  // S_uu(i, j) = E[U_i conj(U_j)]; the diagonal from yu.
+  std::vector<Eigen::MatrixXcd> suu(static_cast<std::size_t>(F), Eigen::MatrixXcd::Zero(m, m));
+  for (int j = 0; j < m; ++j)
+    for (Eigen::Index k = 0; k < F; ++k) suu[static_cast<std::size_t>(k)](j, j) = yu[j].input_psd(k);
+  for (int i = 0; i < m; ++i)
+    for (int j = i + 1; j < m; ++j) {
+      const Spectra uij = welch_spectra(data.input(i), data.input(j), T, segment_length);
+      for (Eigen::Index k = 0; k < F; ++k) {
+        const std::complex<double> c = uij.cross(k) * uij.input_psd(k);
+        suu[static_cast<std::size_t>(k)](i, j) = c;
+        suu[static_cast<std::size_t>(k)](j, i) = std::conj(c);
+      }
+    }
+  out.frequency_hz = yu[0].frequency_hz;
+  out.segments = yu[0].segments;
+  out.response.resize(F);
+  out.further_responses.assign(static_cast<std::size_t>(m - 1), Eigen::VectorXcd(F));
+  out.excitation = Eigen::VectorXd::Zero(F);
+  out.coherence.resize(F);
+  for (Eigen::Index k = 0; k < F; ++k) {
+    Eigen::RowVectorXcd syu(m);
+    for (int j = 0; j < m; ++j) syu(j) = yu[j].cross(k) * yu[j].input_psd(k);
+    const Eigen::MatrixXcd& S = suu[static_cast<std::size_t>(k)];
+    // A frequency no input excites (DC of zero-mean inputs) has no estimate.
+    const Eigen::RowVectorXcd H =
+        S.norm() > 0.0
+            ? Eigen::RowVectorXcd(S.transpose().completeOrthogonalDecomposition().solve(syu.transpose()).transpose())
+            : Eigen::RowVectorXcd(Eigen::RowVectorXcd::Zero(m));
+    out.response(k) = H(0);
+    for (int j = 1; j < m; ++j) out.further_responses[static_cast<std::size_t>(j - 1)](k) = H(j);
+    out.excitation(k) = S.diagonal().real().sum();
+    // Multiple coherence: the share of S_yy that the inputs explain, H S_uu H^H / S_yy.
+    const double syy = yu[0].residual_psd(k);
+    const double explained = (H * S * H.adjoint())(0, 0).real();
+    out.coherence(k) = syy > 0.0 ? std::clamp(explained / syy, 0.0, 1.0) : 0.0;
+  }
+}
+
 }  // namespace
+
+double FrequencyResponse::magnitude(Eigen::Index k) const {
+  if (further_responses.empty()) return std::abs(response(k));
+  double sum = std::norm(response(k));
+  for (const auto& h : further_responses) sum += std::norm(h(k));
+  return std::sqrt(sum);
+}
 
 FrequencyResponse frequency_response(const Record& data, bool closed_loop, int segment_length, Hold input) {
   const Eigen::Index N = data.size();
   if (closed_loop && !data.has_reference())
     throw std::invalid_argument("frequency_response: closed loop needs the reference r in the record");
+  if (closed_loop && data.inputs() > 1)
+    throw std::invalid_argument("frequency_response: a closed loop has one input (the controller's u)");
   if (segment_length <= 0) {
     segment_length = 64;
     while (9 * static_cast<Eigen::Index>(segment_length) <= 2 * N) segment_length *= 2;
@@ -47,7 +103,9 @@ FrequencyResponse frequency_response(const Record& data, bool closed_loop, int s
   }
   const double T = data.sample_time();
   FrequencyResponse out;
-  if (!closed_loop) {
+  if (data.inputs() > 1) {
+    several_inputs(data, T, segment_length, out);
+  } else if (!closed_loop) {
     const Spectra s = welch_spectra(data.y, data.u, T, segment_length);
     out.frequency_hz = s.frequency_hz;
     out.response = s.cross;
@@ -67,14 +125,31 @@ FrequencyResponse frequency_response(const Record& data, bool closed_loop, int s
   }
   // The zero-order hold delays by half a sample: H_d ~ G e^{-j w T / 2}.
   if (input == Hold::zoh)
-    for (Eigen::Index k = 0; k < out.response.size(); ++k)
-      out.response(k) *= std::polar(1.0, 0.5 * kTwoPi * out.frequency_hz(k) * T);
+    for (Eigen::Index k = 0; k < out.response.size(); ++k) {
+      const std::complex<double> advance = std::polar(1.0, 0.5 * kTwoPi * out.frequency_hz(k) * T);
+      out.response(k) *= advance;
+      for (auto& h : out.further_responses) h(k) *= advance;
+    }
   return out;
 }
 
-std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int count, const PeakOptions& options) {
+namespace {
+
+// A resonance and the bin of its peak, where each input's residue is read.
+struct Resonance {
+  ModalParameters modal;
+  Eigen::Index bin = 0;
+};
+
+// b0 = -2 zeta Im H(j wn) of one input's response at the peak bin.
+double peak_gain(const Eigen::VectorXcd& response, Eigen::Index k, double zeta) {
+  const double gain = -2.0 * zeta * response(k).imag();
+  return gain != 0.0 ? gain : 2.0 * zeta * std::abs(response(k));
+}
+
+std::vector<Resonance> find_resonances(const FrequencyResponse& h, int count, const PeakOptions& options) {
   const Eigen::Index F = h.frequency_hz.size();
-  std::vector<ModalParameters> out;
+  std::vector<Resonance> out;
   if (count <= 0 || F < 4) return out;
   // The searched band: from the first to the last excited frequency, without DC.
   const double excited = options.excited_fraction * h.excitation.tail(F - 1).maxCoeff();
@@ -90,7 +165,7 @@ std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int cou
   while (last + 1 < F && h.coherence(last + 1) >= options.coherent) ++last;
   if (last - first < 2) return out;
   Eigen::VectorXd logh(F);
-  for (Eigen::Index k = 0; k < F; ++k) logh(k) = std::log(std::max(std::abs(h.response(k)), 1e-300));
+  for (Eigen::Index k = 0; k < F; ++k) logh(k) = std::log(std::max(h.magnitude(k), 1e-300));
 
   std::vector<Peak> peaks;
   for (Eigen::Index k = first + 1; k < last; ++k) {
@@ -137,11 +212,18 @@ std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int cou
     m.wn = kTwoPi * f0;
     // A bandwidth under two bins is the Hann window's, not the mode's.
     m.zeta = width > 2.0 * df ? width / (2.0 * f0) : options.default_zeta;
-    m.gain = -2.0 * m.zeta * h.response(k).imag();
-    if (m.gain == 0.0) m.gain = 2.0 * m.zeta * std::abs(h.response(k));
-    out.push_back(m);
+    m.gain = peak_gain(h.response, k, m.zeta);
+    out.push_back({m, k});
   }
-  std::sort(out.begin(), out.end(), [](const ModalParameters& a, const ModalParameters& b) { return a.wn < b.wn; });
+  std::sort(out.begin(), out.end(), [](const Resonance& a, const Resonance& b) { return a.modal.wn < b.modal.wn; });
+  return out;
+}
+
+}  // namespace
+
+std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int count, const PeakOptions& options) {
+  std::vector<ModalParameters> out;
+  for (const Resonance& r : find_resonances(h, count, options)) out.push_back(r.modal);
   return out;
 }
 
@@ -149,11 +231,26 @@ AdditiveModel initial_modes(const Record& data, int count, bool closed_loop, con
   return initial_modes(frequency_response(data, closed_loop), count, options);
 }
 
-AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOptions& options) {
-  const std::vector<ModalParameters> peaks = resonance_peaks(h, count, options);
+AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOptions& options,
+                            const std::vector<std::string>& inputs) {
+  const std::vector<Resonance> peaks = find_resonances(h, count, options);
   AdditiveModel model;
+  const int m = h.inputs();
+  if (m == 1) {
+    for (std::size_t i = 0; i < peaks.size(); ++i)
+      model.submodels.push_back(make_mode("mode" + std::to_string(i + 1), peaks[i].modal));
+    return model;
+  }
+  for (int j = 0; j < m; ++j)
+    model.inputs.push_back(j < static_cast<int>(inputs.size()) ? inputs[static_cast<std::size_t>(j)]
+                                                               : "u" + std::to_string(j + 1));
   for (std::size_t i = 0; i < peaks.size(); ++i)
-    model.submodels.push_back(make_mode("mode" + std::to_string(i + 1), peaks[i]));
+    for (int j = 0; j < m; ++j) {
+      ModalParameters p = peaks[i].modal;
+      p.gain = peak_gain(h.input_response(j), peaks[i].bin, p.zeta);
+      model.submodels.push_back(make_mode("mode" + std::to_string(i + 1) + "_" + model.input_name(j), p));
+      model.submodels.back().input = j;
+    }
   return model;
 }
 

@@ -183,9 +183,17 @@ std::complex<double> AdditiveModel::response(double w) const {
   return g;
 }
 
+std::complex<double> AdditiveModel::response(double w, int input) const {
+  std::complex<double> g = 0.0;
+  for (const auto& s : submodels)
+    if (s.input == input) g += s.response(w);
+  return g;
+}
+
 bool Submodel::operator==(const Submodel& other) const {
   return name == other.name && n == other.n && m == other.m && rigid_poles == other.rigid_poles &&
-         a.size() == other.a.size() && b.size() == other.b.size() && a == other.a && b == other.b;
+         a.size() == other.a.size() && b.size() == other.b.size() && a == other.a && b == other.b &&
+         input == other.input;
 }
 
 }  // namespace modalwatch

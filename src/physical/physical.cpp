@@ -72,6 +72,7 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
   const double nyquist = std::numbers::pi / sample_time;  // rad/s
 
   PhysicalCheck out;
+  out.model.inputs = fitted.inputs;
   std::vector<Submodel> subs = fitted.submodels;
   std::vector<bool> removed(K, false);
   for (int i = 0; i < K; ++i) {
@@ -119,7 +120,9 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
     f.verdict = ModeVerdict::feedthrough;  // after a projection too: the reasons add up
     f.reason = (f.reason.empty() ? "" : f.reason + "; then ") + why +
                format(": replaced by the feedthrough %.6g", s.b(0));
+    const int input = s.input;
     s = make_rigid_body(s.name, s.b(0), 0);
+    s.input = input;
     out.refit = true;
   }
 
@@ -131,7 +134,8 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
     for (int i = 0; i < K; ++i) {
       if (removed[i] || !subs[i].is_mode()) continue;
       for (int j = i + 1; j < K; ++j) {
-        if (removed[j] || !subs[j].is_mode()) continue;
+        // Two inputs' views of one resonance are two submodels, never a pair to merge.
+        if (removed[j] || !subs[j].is_mode() || subs[j].input != subs[i].input) continue;
         const ModalParameters pi = modal_parameters(subs[i]), pj = modal_parameters(subs[j]);
         if (!(pi.gain * pj.gain < 0.0)) continue;
         const double si = out.findings[i].fitted_std.wn, sj = out.findings[j].fitted_std.wn;
@@ -153,7 +157,9 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
     ModalParameters merged{0.5 * (pi.wn + pj.wn), 0.5 * (pi.zeta + pj.zeta), pi.gain + pj.gain};
     const double larger = std::abs(pi.gain) > std::abs(pj.gain) ? pi.gain : pj.gain;
     if (std::abs(merged.gain) < 1e-3 * std::abs(larger)) merged.gain = larger;
+    const int input = subs[best_i].input;
     subs[best_i] = make_mode(subs[best_i].name, merged);
+    subs[best_i].input = input;
     removed[best_j] = true;
     ModeFinding& f = out.findings[best_j];
     f.verdict = ModeVerdict::merged;

@@ -93,6 +93,7 @@ class ModeSimulator {
   }
   // d output / d u_k: nonzero only for a biproper submodel.
   double feedthrough() const { return b_(order_) / d_(order_); }
+  int input() const { return mode_.submodel.input; }
   double step(double u) {
     filter_.step(u);
     return filter_.combine(b_);
@@ -120,8 +121,9 @@ std::vector<ModeSimulator> make_modes(const PlantSpec& plant, double T) {
   return modes;
 }
 
+// The effects act on the first input; a mode on a further input takes that input as it is.
 Signals run_open_loop(const PlantSpec& plant, const Eigen::VectorXd& t, double T, const Eigen::VectorXd& u,
-                      const Eigen::VectorXd& noise) {
+                      const std::vector<Eigen::VectorXd>& further_u, const Eigen::VectorXd& noise) {
   std::vector<ModeSimulator> modes = make_modes(plant, T);
   EffectState effects(plant.effects);
   Signals s{u, Eigen::VectorXd::Zero(t.size()), Eigen::VectorXd()};
@@ -134,7 +136,8 @@ Signals run_open_loop(const PlantSpec& plant, const Eigen::VectorXd& t, double T
     }
     const double u_plant = effects.delayed(u(k)) + effects.branches(y_free);
     double y_plant = 0.0;
-    for (ModeSimulator& m : modes) y_plant += m.step(u_plant);
+    for (ModeSimulator& m : modes)
+      y_plant += m.step(m.input() == 0 ? u_plant : further_u[static_cast<std::size_t>(m.input() - 1)](k));
     effects.end_sample(u(k), y_free);
     s.y_clean(k) = y_plant + effects.output_terms(t(k) - t(0));
   }
@@ -192,7 +195,7 @@ Eigen::VectorXd excitation(const ExperimentSpec& ex, const Eigen::VectorXd& t) {
 Signals run(const PlantSpec& plant, const ExperimentSpec& ex, const Eigen::VectorXd& t, const Eigen::VectorXd& w,
             const Eigen::VectorXd& noise) {
   if (ex.closed_loop) return run_closed_loop(plant, ex, t, w, noise);
-  return run_open_loop(plant, t, ex.sample_time, w, noise);
+  return run_open_loop(plant, t, ex.sample_time, w, ex.further_input_samples, noise);
 }
 
 // Unit-variance white Gaussian samples; scaled by the caller.
@@ -219,6 +222,15 @@ void check_specs(const PlantSpec& plant, const ExperimentSpec& ex) {
   if (!(plant.noise_variance >= 0.0) || !std::isfinite(plant.noise_variance))
     throw std::invalid_argument("simulate: noise_variance must be >= 0");
   if (plant.snr_db && !std::isfinite(*plant.snr_db)) throw std::invalid_argument("simulate: snr_db must be finite");
+  for (const PlantMode& m : plant.modes) {
+    const int input = m.submodel.input;
+    if (input < 0 || input > static_cast<int>(ex.further_input_samples.size()))
+      throw std::invalid_argument("simulate: mode " + m.submodel.name + " is driven by input " +
+                                  std::to_string(input + 1) + " of " +
+                                  std::to_string(1 + ex.further_input_samples.size()));
+  }
+  if (!ex.further_input_samples.empty() && ex.closed_loop)
+    throw std::invalid_argument("simulate: further inputs are for open loop only (the controller gives one u)");
   const PlantEffects& e = plant.effects;
   if (e.input_delay < 0) throw std::invalid_argument("simulate: input_delay must be >= 0");
   if (!std::isfinite(e.output_offset) || !std::isfinite(e.input_offset) || !std::isfinite(e.drift) ||
@@ -262,6 +274,8 @@ SimulationResult simulate(const PlantSpec& plant, const ExperimentSpec& ex) {
   if (n < 1) throw std::invalid_argument("simulate: duration shorter than one sample");
   const Eigen::VectorXd t = Eigen::VectorXd::LinSpaced(n, 0.0, static_cast<double>(n - 1)) * ex.sample_time;
   const Eigen::VectorXd w = excitation(ex, t);
+  for (const auto& v : ex.further_input_samples)
+    if (v.size() != n) throw std::invalid_argument("simulate: further_input_samples must have one value per sample");
 
   SimulationResult out;
   out.noise_variance = plant.noise_variance;
@@ -279,6 +293,7 @@ SimulationResult simulate(const PlantSpec& plant, const ExperimentSpec& ex) {
   out.record.u = std::move(s.u);
   out.record.y = std::move(s.y);
   if (ex.closed_loop) out.record.r = w;
+  out.record.further_u = ex.further_input_samples;
   out.y_clean = std::move(s.y_clean);
   fill_truth(plant, t, out);
   return out;
@@ -294,7 +309,11 @@ AdditiveModel plant_model_at(const PlantSpec& plant, double t) {
 bool ExperimentSpec::operator==(const ExperimentSpec& other) const {
   return sample_time == other.sample_time && duration == other.duration && seed == other.seed &&
          closed_loop == other.closed_loop && controller == other.controller && excitation == other.excitation &&
-         excitation_samples.size() == other.excitation_samples.size() && excitation_samples == other.excitation_samples;
+         excitation_samples.size() == other.excitation_samples.size() &&
+         excitation_samples == other.excitation_samples &&
+         further_input_samples.size() == other.further_input_samples.size() &&
+         std::equal(further_input_samples.begin(), further_input_samples.end(), other.further_input_samples.begin(),
+                    [](const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return a.size() == b.size() && a == b; });
 }
 
 }  // namespace modalwatch

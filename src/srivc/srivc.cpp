@@ -210,6 +210,13 @@ Eigen::VectorXd simulate_model(const AdditiveModel& model, const Eigen::VectorXd
   return y;
 }
 
+Eigen::VectorXd simulate_model(const AdditiveModel& model, const Record& data) {
+  const double T = data.sample_time();
+  Eigen::VectorXd y = Eigen::VectorXd::Zero(data.size());
+  for (const auto& s : scale_model(model)) y += simulate_scaled(s, data.input(s.shape->input), T);
+  return y;
+}
+
 void simulate_loop(const AdditiveModel& model, const DiscreteTransferFunction& controller, const Eigen::VectorXd& r,
                    double T, Eigen::VectorXd& z, Eigen::VectorXd& y) {
   simulate_loop_scaled(scale_model(model), controller, r, T, z, y);
@@ -248,6 +255,7 @@ bool unfactored_start(const Record& data, const AdditiveModel& initial, const Sr
   all.m = n - 2;
   all.a = A.tail(n);
   all.b = B;
+  all.input = initial.submodels[0].input;
   AdditiveModel k1;
   k1.submodels = {all};
   SrivcOptions o = options;
@@ -299,9 +307,23 @@ FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const Sriv
                                 std::to_string(2 * initial.n_beta() + 2));
   if (options.closed_loop && (!data.has_reference() || options.controller.empty()))
     throw std::invalid_argument("fit: closed loop needs the reference r in the data and a controller");
+  bool one_input = true;
+  for (const auto& s : initial.submodels) {
+    if (s.input < 0 || s.input >= data.inputs())
+      throw std::invalid_argument("fit: submodel " + s.name + " is driven by input " + std::to_string(s.input + 1) +
+                                  " of " + std::to_string(data.inputs()) + " in the record");
+    if (data.input(s.input).size() != N)
+      throw std::invalid_argument("fit: input " + std::to_string(s.input + 1) + " is not as long as the record");
+    one_input = one_input && s.input == initial.submodels[0].input;
+  }
+  if (options.closed_loop && !one_input)
+    throw std::invalid_argument(
+        "fit: a closed loop has the controller's one input; submodels on several inputs "
+        "are fitted in open loop only");
   FitResult best = fit_additive(data, initial, options);
   const std::size_t K = initial.submodels.size();
-  bool eligible = options.unfactored_start && K >= 2 && 2 * K <= static_cast<std::size_t>(kMaxFilterOrder);
+  // The unfactored start is one transfer function: from one input only.
+  bool eligible = options.unfactored_start && one_input && K >= 2 && 2 * K <= static_cast<std::size_t>(kMaxFilterOrder);
   for (const auto& s : initial.submodels) eligible = eligible && s.is_mode();
   if (!eligible) return best;
   AdditiveModel start;
@@ -318,8 +340,9 @@ namespace {
 FitResult fit_additive(const Record& data, const AdditiveModel& initial, const SrivcOptions& options) {
   const Eigen::Index N = data.size();
   const double T = data.sample_time();
-  const Eigen::VectorXd& u = data.u;
   const Eigen::VectorXd& y = data.y;
+  // Each block's regressors come from its own input (several actuators).
+  const auto input_of = [&](std::size_t i) -> const Eigen::VectorXd& { return data.input(initial.submodels[i].input); };
   const Eigen::Index first = options.settle_samples, used = N - first;  // the samples in eq. (8)
 
   FitResult result;
@@ -327,8 +350,8 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   std::vector<ScaledSubmodel> model = scale_model(result.model);
   const std::size_t K = model.size();
 
-  std::vector<Eigen::VectorXd> x_hat(K);  // G_i u: the submodel outputs on the record
-  for (std::size_t i = 0; i < K; ++i) x_hat[i] = simulate_scaled(model[i], u, T);
+  std::vector<Eigen::VectorXd> x_hat(K);  // G_i u_i: the submodel outputs on the record
+  for (std::size_t i = 0; i < K; ++i) x_hat[i] = simulate_scaled(model[i], input_of(i), T);
 
   auto beta_scaled = [&] {
     Eigen::VectorXd b(result.model.n_beta());
@@ -337,7 +360,8 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
     return b;
   };
 
-  Eigen::VectorXd z = u, y_loop;  // instrument input: u in open loop, S_uo r in closed loop
+  // Instrument input in closed loop: S_uo r (one input); open loop: each block's own input.
+  Eigen::VectorXd z, y_loop;
   for (int it = 1; it <= options.max_iterations; ++it) {
     const Eigen::VectorXd before = beta_scaled();
     for (std::size_t i = 0; i < K; ++i) {
@@ -348,6 +372,7 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
           if (j != i) y_tilde -= x_hat[j];
         if (options.closed_loop) simulate_loop_scaled(model, options.controller, data.r, T, z, y_loop);
         const Eigen::VectorXd x_hat_z = options.closed_loop ? simulate_scaled(model[i], z, T) : x_hat[i];
+        const Eigen::VectorXd& u = input_of(i);
         const Filtered f =
             filter_block(model[i], y_tilde, u, x_hat_z, options.closed_loop ? z : u, T, options.output_hold);
         Eigen::VectorXd theta = iv_solve(f, first);
@@ -364,7 +389,7 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
         // unidentifiable direction) is not a model of this order: keep the previous iterate.
         if (model[i].shape->n > 0 && !(std::abs(theta(model[i].shape->n - 1)) > 0.0)) break;
         model[i].theta = theta;
-        x_hat[i] = simulate_scaled(model[i], u, T);
+        x_hat[i] = simulate_scaled(model[i], input_of(i), T);
       }
     }
     const double change = relative_change(beta_scaled(), before);
@@ -393,11 +418,13 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   Eigen::VectorXd D(nb);  // physical = scaled .* D^{-1}
   for (std::size_t i = 0, o = 0; i < K; ++i) {
     const int nt = model[i].shape->n_theta();
+    const Eigen::VectorXd& u = input_of(i);
+    const Eigen::VectorXd& zi = options.closed_loop ? z : u;
     const Eigen::VectorXd xz = options.closed_loop ? simulate_scaled(model[i], z, T) : x_hat[i];
     // The gradient filters are 1/A_i on the submodel output and 1/(p^l A_i) on the
     // input: exactly the regressor/instrument construction with noise-free signals.
     const Filtered g = filter_block(model[i], x_hat[i], u, x_hat[i], u, T, options.output_hold);
-    const Filtered gh = filter_block(model[i], xz, z, xz, z, T, options.output_hold);
+    const Filtered gh = filter_block(model[i], xz, zi, xz, zi, T, options.output_hold);
     Psi.middleCols(o, nt) = g.psi;
     PsiHat.middleCols(o, nt) = gh.psi;  // rows before `first` are dropped below
     D.segment(o, nt) = scaling(*model[i].shape, model[i].ws);

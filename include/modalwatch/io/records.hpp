@@ -12,15 +12,19 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "modalwatch/io/csv.hpp"
 #include "modalwatch/record.hpp"
 
 namespace modalwatch {
 
-// The CSV columns that hold t, u, y and r (an LCM log has fixed fields).
+// The CSV columns that hold t, u, y and r (an LCM log has fixed fields), and
+// with several measured inputs the columns of the inputs after u, in order
+// (Record::further_u; read by read_record and parse_record, not streamed).
 struct RecordColumns {
   std::string t = "t", u = "u", y = "y", r = "r";
+  std::vector<std::string> further_u;
   bool operator==(const RecordColumns&) const = default;
 };
 

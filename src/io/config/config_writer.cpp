@@ -39,6 +39,12 @@ std::string flow_list(const Range& values) {
   return out + "]";
 }
 
+std::string flow_names(const std::vector<std::string>& names) {
+  std::string out = "[";
+  for (const auto& n : names) (out += out.size() > 1 ? ", " : "") += quoted(n);
+  return out + "]";
+}
+
 std::string points(const Trajectory& traj) {
   std::string out = "[";
   // Appended piece by piece: GCC 12's -O3 warns (-Wrestrict) on "[" + std::string.
@@ -146,6 +152,7 @@ void write_model(YamlWriter& w, const Config& config, const AdditiveModel& model
   w.key(1, "loop", config.closed_loop ? "closed" : "open");
   // Only as given: unset resolves per command (fit and track differ).
   if (config.output_hold) w.key(1, "output_hold", *config.output_hold == Hold::foh ? "foh" : "zoh");
+  if (!model.inputs.empty()) w.key(1, "inputs", flow_names(model.inputs));
   if (model.submodels.empty() && config.model_modes) {
     w.key(1, "modes", std::to_string(*config.model_modes));
     return;
@@ -156,6 +163,7 @@ void write_model(YamlWriter& w, const Config& config, const AdditiveModel& model
     const Submodel& s = model.submodels[i];
     const std::size_t c = configured_index(config, s.name, i);
     write_submodel(w, 2, s);
+    if (!model.inputs.empty()) w.key(3, "input", quoted(model.input_name(s.input)));
     w.number(3, "forgetting", c < config.submodel_settings.size() ? config.submodel_settings[c].forgetting : 1.0);
     if (c < config.submodel_settings.size() && config.submodel_settings[c].random_walk)
       w.number(3, "random_walk", *config.submodel_settings[c].random_walk);

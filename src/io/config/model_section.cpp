@@ -135,11 +135,47 @@ Eigen::VectorXd parse_initial_covariance(const Value& v, const Submodel& s) {
 
 }  // namespace
 
+// `model.inputs`: the names of the measured inputs (record columns), unique;
+// a closed loop has the controller's one input.
+namespace {
+
+std::vector<std::string> parse_inputs(const Value& v, bool closed_loop) {
+  const std::vector<Value> items = v.items();
+  if (items.empty()) v.fail("must list at least one input column");
+  std::vector<std::string> names;
+  for (const Value& item : items) {
+    const std::string name = item.text();
+    if (std::find(names.begin(), names.end(), name) != names.end()) item.fail("duplicate input name");
+    names.push_back(name);
+  }
+  if (closed_loop && names.size() > 1)
+    v.fail("a closed loop has one input (the controller's u); several inputs need loop: open");
+  return names;
+}
+
+// A submodel's `input`: one of model.inputs by name, the first when absent.
+int parse_submodel_input(const Map& m, const std::vector<std::string>& inputs) {
+  const auto v = m.get("input");
+  if (!v) return 0;
+  if (inputs.empty()) v->fail("names an input, but model.inputs does not list the input columns");
+  const std::string name = v->text();
+  const auto it = std::find(inputs.begin(), inputs.end(), name);
+  if (it == inputs.end()) {
+    std::string listed;
+    for (const auto& i : inputs) listed += (listed.empty() ? "" : ", ") + i;
+    v->fail("must be one of model.inputs (" + listed + ")");
+  }
+  return static_cast<int>(it - inputs.begin());
+}
+
+}  // namespace
+
 void parse_model(const Map& model, Config& config) {
-  model.allow({"loop", "output_hold", "submodels", "modes"}, "model");
+  model.allow({"loop", "output_hold", "inputs", "submodels", "modes"}, "model");
   if (const auto loop = model.get("loop")) config.closed_loop = loop->choice({"open", "closed"}) == "closed";
   if (const auto hold = model.get("output_hold"))
     config.output_hold = hold->choice({"zoh", "foh"}) == "foh" ? Hold::foh : Hold::zoh;
+  if (const auto inputs = model.get("inputs")) config.model.inputs = parse_inputs(*inputs, config.closed_loop);
   if (const auto modes = model.get("modes")) {
     if (model.get("submodels"))
       modes->fail("give submodels (initial modes) or modes (a count to start from the data), not both");
@@ -152,7 +188,9 @@ void parse_model(const Map& model, Config& config) {
   std::vector<SubmodelEntry> entries;
   for (const auto& item : items) {
     const Map m(item);
-    entries.push_back(parse_submodel(m, {"forgetting", "random_walk", "stabilisation", "min_memory", "initial_covariance"}));
+    entries.push_back(
+        parse_submodel(m, {"input", "forgetting", "random_walk", "stabilisation", "min_memory", "initial_covariance"}));
+    entries.back().submodel.input = parse_submodel_input(m, config.model.inputs);
     SubmodelSettings settings;
     if (const auto f = m.get("forgetting")) {
       settings.forgetting = f->number();

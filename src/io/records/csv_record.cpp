@@ -84,6 +84,8 @@ Record parse_record(std::string_view text, const std::string& path, const Record
   record.u = table.data.col(u);
   record.y = table.data.col(y);
   if (const int r = table.column(columns.r); r >= 0) record.r = table.data.col(r);
+  for (const std::string& name : columns.further_u)
+    record.further_u.emplace_back(table.data.col(require_column(path, table.columns, name)));
   check_increasing(path, columns.t, record.t);
   if (options.allow_gaps)
     check_gaps(path, columns.t, record.t, options.sample_time);

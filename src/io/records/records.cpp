@@ -98,6 +98,8 @@ RecordReader::RecordReader(const RecordSource& source, const RecordReadOptions& 
     impl_ = std::make_unique<Impl>(Impl{HeldRecord{read_lcm_record(source, options), 0}});
   } else {
     check_csv_source(source);
+    if (!source.columns.further_u.empty())
+      throw std::invalid_argument("RecordReader streams one input; several inputs are read whole (read_record)");
     impl_ = std::make_unique<Impl>(Impl{CsvRecordStream(source.path, source.columns, options)});
   }
 }

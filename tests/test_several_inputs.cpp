@@ -1,0 +1,483 @@
+// Several measured inputs (MISO): each submodel names the input that drives
+// it. The configuration (model.inputs, a submodel's input), the record
+// (the further input columns), the batch fit and the start from the data.
+#include "config_support.hpp"
+#include "simulation_support.hpp"
+
+#include "modalwatch/initial_modes.hpp"
+#include "modalwatch/io/csv.hpp"
+#include "modalwatch/io/records.hpp"
+#include "modalwatch/physical.hpp"
+#include "modalwatch/simulator.hpp"
+#include "modalwatch/spectra.hpp"
+#include "modalwatch/srivc.hpp"
+
+namespace {
+
+// ---------------------------------------------------------------- configuration
+
+const std::string kTwoInputs =
+    "sample_rate_hz: 20\n"       // 1
+    "model:\n"                   // 2
+    "  loop: open\n"             // 3
+    "  inputs: [u1, u2]\n"       // 4
+    "  submodels:\n"             // 5
+    "    - name: m1\n"           // 6
+    "      wn: 2.0\n"            // 7
+    "      zeta: 0.25\n"         // 8
+    "      gain: 3.0\n"          // 9
+    "    - name: m2\n"           // 10
+    "      input: u2\n"          // 11
+    "      frequency_hz: 1.0\n"  // 12
+    "      zeta: 0.1\n"          // 13
+    "      gain: 1.0\n";         // 14
+
+TEST(SeveralInputsConfig, InputsAreNamedAndEachSubmodelIndexesOne) {
+  const Config c = parse_config(kTwoInputs, "test.yaml");
+  EXPECT_EQ(c.model.inputs, (std::vector<std::string>{"u1", "u2"}));
+  EXPECT_EQ(c.model.n_inputs(), 2);
+  ASSERT_EQ(c.model.submodels.size(), 2u);
+  EXPECT_EQ(c.model.submodels[0].input, 0);  // absent: the first input
+  EXPECT_EQ(c.model.submodels[1].input, 1);
+}
+
+TEST(SeveralInputsConfig, SingleInputConfigHasNoInputNames) {
+  const Config c = parse_config(kBase, "test.yaml");
+  EXPECT_TRUE(c.model.inputs.empty());
+  EXPECT_EQ(c.model.n_inputs(), 1);
+  for (const auto& s : c.model.submodels) EXPECT_EQ(s.input, 0);
+  // The written file has no input keys at all: as before several inputs existed.
+  const std::string yaml = modalwatch::config_to_yaml(c, c.model);
+  EXPECT_EQ(yaml.find("input"), std::string::npos) << yaml;
+}
+
+TEST(SeveralInputsConfig, RoundTripsThroughTheWriter) {
+  const Config c = parse_config(kTwoInputs, "test.yaml");
+  const std::string yaml = modalwatch::config_to_yaml(c, c.model);
+  EXPECT_CONTAINS(yaml, "inputs: [\"u1\", \"u2\"]");
+  Config back = parse_config(yaml, "test.yaml");
+  back.source = c.source;
+  EXPECT_TRUE(back == c) << yaml;
+  EXPECT_EQ(back.model.submodels[1].input, 1);
+}
+
+TEST(SeveralInputsConfig, ErrorsNameTheKeyAndLine) {
+  EXPECT_EQ(parse_error(edit(kTwoInputs, "      input: u2", "      input: u3")),
+            "test.yaml:11: key 'model.submodels[1].input': must be one of model.inputs (u1, u2) (got u3)");
+  EXPECT_EQ(parse_error(edit(kBase, "      frequency_hz: 1.0", "      input: u2\n      frequency_hz: 1.0")),
+            "test.yaml:12: key 'model.submodels[1].input': names an input, but model.inputs does not list the "
+            "input columns (got u2)");
+  EXPECT_EQ(parse_error(edit(kTwoInputs, "  inputs: [u1, u2]", "  inputs: [u1, u1]")),
+            "test.yaml:4: key 'model.inputs[1]': duplicate input name (got u1)");
+  EXPECT_EQ(parse_error(edit(kTwoInputs, "  inputs: [u1, u2]", "  inputs: []")),
+            "test.yaml:4: key 'model.inputs': must list at least one input column (got [])");
+  EXPECT_EQ(parse_error(edit(kTwoInputs, "  inputs: [u1, u2]", "  inputs: u1")),
+            "test.yaml:4: key 'model.inputs': expected a list (got u1)");
+  const std::string closed =
+      edit(kTwoInputs, "  loop: open", "  loop: closed") + "controller:\n  numerator: [1]\n  denominator: [1]\n";
+  EXPECT_EQ(parse_error(closed),
+            "test.yaml:4: key 'model.inputs': a closed loop has one input (the controller's u); "
+            "several inputs need loop: open (got [u1, u2])");
+}
+
+// ---------------------------------------------------------------- record
+
+class SeveralInputsRecord : public modalwatch::test_support::ScratchDir {
+ protected:
+  std::string file(const std::string& name, const std::string& text) { return write(name, text); }
+};
+
+TEST_F(SeveralInputsRecord, ReadsEveryNamedInputColumnAndSegmentKeepsThem) {
+  modalwatch::RecordColumns cols;
+  cols.u = "u1";
+  cols.y = "y5";
+  cols.further_u = {"u2"};
+  const auto rec = modalwatch::read_record({file("m.csv", "t,u1,u2,y5\n0,1,10,5\n1,2,20,6\n2,3,30,7\n"), cols});
+  ASSERT_EQ(rec.inputs(), 2);
+  EXPECT_EQ(rec.u, Eigen::Vector3d(1, 2, 3));
+  EXPECT_EQ(rec.input(1), Eigen::Vector3d(10, 20, 30));
+  EXPECT_EQ(rec.y(2), 7.0);
+  const modalwatch::Record part = rec.segment(1, 2);
+  ASSERT_EQ(part.inputs(), 2);
+  EXPECT_EQ(part.input(1), Eigen::Vector2d(20, 30));
+  EXPECT_EQ(part.input(0), Eigen::Vector2d(2, 3));
+}
+
+TEST_F(SeveralInputsRecord, AMissingInputColumnIsNamed) {
+  modalwatch::RecordColumns cols;
+  cols.further_u = {"u2"};
+  try {
+    modalwatch::read_record({file("m.csv", "t,u,y\n0,1,5\n1,2,6\n"), cols});
+    FAIL() << "no error";
+  } catch (const modalwatch::MissingColumnError& e) {
+    EXPECT_EQ(e.column(), "u2");
+  }
+}
+
+TEST_F(SeveralInputsRecord, OneInputByDefault) {
+  const auto rec = modalwatch::read_record({file("s.csv", "t,u,y,u2\n0,1,5,9\n1,2,6,9\n")});
+  EXPECT_EQ(rec.inputs(), 1);
+  EXPECT_TRUE(rec.further_u.empty());
+}
+
+// ---------------------------------------------------------------- two-input plant
+
+using modalwatch::AdditiveModel;
+using modalwatch::ModalParameters;
+using modalwatch::PlantSpec;
+using modalwatch::Record;
+
+constexpr double kT = 0.01;  // 100 Hz
+
+// Three modes seen from two shakers: 3 Hz from both (residues of opposite
+// sign), 11 Hz from the first only, 7 Hz from the second only.
+struct Truth {
+  std::string name;
+  int input;
+  ModalParameters modal;
+};
+const std::vector<Truth> kTruth = {
+    {"a1", 0, {kTwoPi * 3.0, 0.05, 1.0}},
+    {"a2", 1, {kTwoPi * 3.0, 0.05, -0.6}},
+    {"b1", 0, {kTwoPi * 11.0, 0.03, 0.5}},
+    {"c2", 1, {kTwoPi * 7.0, 0.04, 0.8}},
+};
+
+PlantSpec two_input_plant() {
+  PlantSpec p;
+  for (const Truth& t : kTruth) {
+    modalwatch::PlantMode pm;
+    pm.modal = t.modal;
+    pm.submodel = modalwatch::make_mode(t.name, t.modal);
+    pm.submodel.input = t.input;
+    p.modes.push_back(pm);
+  }
+  p.snr_db = 30.0;
+  return p;
+}
+
+// u1 a PRBS, u2 white Gaussian plus `coupling` times u1 (two shakers on one
+// structure see each other: their inputs correlate).
+Record two_input_record(double coupling, std::uint64_t seed = 3) {
+  modalwatch::ExperimentSpec e = modalwatch::test_support::open_loop_prbs(kT, 120.0, seed);
+  const Eigen::Index n = std::llround(e.duration / e.sample_time);
+  const Eigen::VectorXd t = Eigen::VectorXd::LinSpaced(n, 0.0, static_cast<double>(n - 1)) * kT;
+  const Eigen::VectorXd u1 = modalwatch::generate(e.excitation, t);
+  std::mt19937_64 rng(seed + 100);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  Eigen::VectorXd u2(n);
+  for (Eigen::Index k = 0; k < n; ++k) u2(k) = normal(rng) + coupling * u1(k);
+  e.further_input_samples = {u2};
+  return modalwatch::simulate(two_input_plant(), e).record;
+}
+
+// The fitted submodel of each true one (same name), within 1 % in wn, 10 % in
+// zeta and 5 % in gain, on the same input.
+void expect_truth(const AdditiveModel& fitted, const std::vector<std::string>& names) {
+  ASSERT_EQ(fitted.submodels.size(), kTruth.size());
+  for (std::size_t i = 0; i < kTruth.size(); ++i) {
+    const Truth& t = kTruth[i];
+    const auto& s = fitted.submodels[i];
+    SCOPED_TRACE(names[i]);
+    EXPECT_EQ(s.input, t.input);
+    ASSERT_TRUE(s.is_mode());
+    const ModalParameters p = modalwatch::modal_parameters(s);
+    EXPECT_NEAR(p.wn / t.modal.wn, 1.0, 0.01);
+    EXPECT_NEAR(p.zeta / t.modal.zeta, 1.0, 0.10);
+    EXPECT_NEAR(p.gain / t.modal.gain, 1.0, 0.05);
+  }
+}
+
+TEST(SeveralInputsFit, EachSubmodelIsFittedFromItsOwnInput) {
+  const Record data = two_input_record(0.0);
+  ASSERT_EQ(data.inputs(), 2);
+  // Start 10 % off in frequency, damping and gain.
+  AdditiveModel start;
+  start.inputs = {"u1", "u2"};
+  for (const Truth& t : kTruth) {
+    ModalParameters p = t.modal;
+    p.wn *= 1.1;
+    p.zeta *= 0.8;
+    p.gain *= 1.1;
+    start.submodels.push_back(modalwatch::make_mode(t.name, p));
+    start.submodels.back().input = t.input;
+  }
+  const modalwatch::FitResult fit = modalwatch::fit_srivc(data, start, {});
+  EXPECT_TRUE(fit.converged);
+  EXPECT_EQ(fit.model.inputs, start.inputs);
+  expect_truth(fit.model, {"a1", "a2", "b1", "c2"});
+  // 30 dB: the output error is the noise, 1 - 10^(-30/20) of the output.
+  EXPECT_GT(fit.fit_percent, 95.0);
+  EXPECT_NEAR((fit.simulated - modalwatch::simulate_model(fit.model, data)).norm(), 0.0, 1e-9 * fit.simulated.norm());
+}
+
+TEST(SeveralInputsFit, OneInputModelOfATwoInputRecordLeavesTheSecondAsNoise) {
+  const Record data = two_input_record(0.0);
+  AdditiveModel start;
+  for (const Truth& t : kTruth)
+    if (t.input == 0) start.submodels.push_back(modalwatch::make_mode(t.name, t.modal));
+  const modalwatch::FitResult fit = modalwatch::fit_srivc(data, start, {});
+  EXPECT_LT(fit.fit_percent, 80.0);  // u2's response is unexplained
+}
+
+TEST(SeveralInputsFit, RefusesAnInputTheRecordLacksAndSeveralInputsInClosedLoop) {
+  Record data = two_input_record(0.0);
+  AdditiveModel start;
+  start.submodels.push_back(modalwatch::make_mode("m", kTruth[0].modal));
+  start.submodels.back().input = 2;
+  EXPECT_THROW(modalwatch::fit_srivc(data, start, {}), std::invalid_argument);
+  start.submodels.back().input = 0;
+  start.submodels.push_back(modalwatch::make_mode("n", kTruth[3].modal));
+  start.submodels.back().input = 1;
+  modalwatch::SrivcOptions closed;
+  closed.closed_loop = true;
+  closed.controller = modalwatch::DiscreteTransferFunction({0.1}, {1.0});
+  data.r = data.u;
+  try {
+    modalwatch::fit_srivc(data, start, closed);
+    FAIL() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_CONTAINS(std::string(e.what()), "open loop only");
+  }
+}
+
+// ---------------------------------------------------------------- start from the data
+
+// Without a starting guess: the peaks of |H| = sqrt(|H_1|^2 + |H_2|^2) give
+// 3, 7 and 11 Hz; each becomes one submodel per input, and the fit keeps the
+// true ones and sends the others (7 Hz from u1, 11 Hz from u2) to small gains.
+void expect_from_data(double coupling) {
+  const Record data = two_input_record(coupling);
+  const modalwatch::FrequencyResponse h = modalwatch::frequency_response(data, false);
+  ASSERT_EQ(h.inputs(), 2);
+  const AdditiveModel start = modalwatch::initial_modes(h, 3, {}, {"u1", "u2"});
+  ASSERT_EQ(start.submodels.size(), 6u);
+  EXPECT_EQ(start.inputs, (std::vector<std::string>{"u1", "u2"}));
+  const double peaks_hz[] = {3.0, 7.0, 11.0};
+  for (std::size_t i = 0; i < 6; ++i) {
+    const auto& s = start.submodels[i];
+    EXPECT_EQ(s.input, static_cast<int>(i % 2));
+    EXPECT_EQ(s.name, "mode" + std::to_string(i / 2 + 1) + (i % 2 ? "_u2" : "_u1"));
+    EXPECT_NEAR(modalwatch::modal_parameters(s).hz(), peaks_hz[i / 2], 0.2);  // within a bin or two
+  }
+  const modalwatch::FitResult fit = modalwatch::fit_srivc(data, start, {});
+  // The true submodels: mode1_u1, mode1_u2, mode3_u1 (11 Hz), mode2_u2 (7 Hz).
+  AdditiveModel found;
+  for (const char* name : {"mode1_u1", "mode1_u2", "mode3_u1", "mode2_u2"})
+    for (const auto& s : fit.model.submodels)
+      if (s.name == name) found.submodels.push_back(s);
+  expect_truth(found, {"mode1_u1", "mode1_u2", "mode3_u1", "mode2_u2"});
+  // The two that are not there: gains below 2 % of the smallest true one.
+  for (const char* name : {"mode2_u1", "mode3_u2"})
+    for (const auto& s : fit.model.submodels)
+      if (s.name == name) {
+        EXPECT_LT(std::abs(modalwatch::modal_parameters(s).gain), 0.02 * 0.5) << name;
+      }
+  EXPECT_GT(fit.fit_percent, 95.0);
+}
+
+TEST(SeveralInputsStart, IndependentInputsFromTheDataAlone) { expect_from_data(0.0); }
+
+// u2 = n + 0.7 u1: H1 of each input alone would mix the other's response in;
+// the cross-spectral matrix separates them.
+TEST(SeveralInputsStart, CorrelatedInputsFromTheDataAlone) { expect_from_data(0.7); }
+
+TEST(SeveralInputsStart, PerInputResponseIsTheTruth) {
+  const Record data = two_input_record(0.7);
+  const modalwatch::FrequencyResponse h = modalwatch::frequency_response(data, false);
+  AdditiveModel on1, on2;
+  for (const Truth& t : kTruth) (t.input == 0 ? on1 : on2).submodels.push_back(modalwatch::make_mode(t.name, t.modal));
+  // Over the band of the modes, H_j follows G_j: the RMS of the error is below
+  // 10 % of G_j's RMS (bin by bin the estimate scatters at the peaks, where
+  // K = 10 averaged segments leave a few percent of the other input's
+  // response). S_yu1 / S_u1u1 alone takes in 0.7 G_2: an error of tens of percent.
+  const modalwatch::Spectra single = modalwatch::welch_spectra(data.y, data.u, kT, 2048);
+  double g1 = 0.0, g2 = 0.0, e1 = 0.0, e2 = 0.0, e_single = 0.0;
+  for (Eigen::Index k = 1; k < h.frequency_hz.size(); ++k) {
+    const double f = h.frequency_hz(k);
+    if (f < 0.5 || f > 20.0) continue;
+    const double w = kTwoPi * f;
+    g1 += std::norm(on1.response(w));
+    g2 += std::norm(on2.response(w));
+    e1 += std::norm(h.response(k) - on1.response(w));
+    e2 += std::norm(h.further_responses[0](k) - on2.response(w));
+    const std::complex<double> advance = std::polar(1.0, 0.5 * w * kT);  // the held input's half sample
+    e_single += std::norm(single.cross(k) * advance - on1.response(w));
+  }
+  EXPECT_LT(std::sqrt(e1 / g1), 0.10);
+  EXPECT_LT(std::sqrt(e2 / g2), 0.10);
+  EXPECT_GT(std::sqrt(e_single / g1), 0.3);
+}
+
+// ---------------------------------------------------------------- command line
+
+class SeveralInputsCli : public modalwatch::test_support::ScratchDir {
+ protected:
+  static bool contains(const std::string& text, const std::string& what) {
+    return text.find(what) != std::string::npos;
+  }
+  // The two-input record with its own column names: shakers f_a, f_b, output acc.
+  std::string record() const {
+    const Record r = two_input_record(0.0);
+    Eigen::MatrixXd table(r.size(), 4);
+    table << r.t, r.u, r.input(1), r.y;
+    modalwatch::write_table(path("shakers.csv"), {"t", "f_a", "f_b", "acc"}, table);
+    return path("shakers.csv");
+  }
+};
+
+// model.inputs names the record's input columns; `modes: 3` starts from the
+// data, one submodel per input and resonance, and the table names each input.
+TEST_F(SeveralInputsCli, FitNamesTheInputsInTheConfigAndWritesThemBack) {
+  const std::string data = record();
+  const std::string cfg = write("two.yaml", "sample_rate_hz: 100\nmodel:\n  inputs: [f_a, f_b]\n  modes: 3\n");
+  const auto fit = modalwatch::test_support::run_cli("fit --config " + cfg + " --data " + data +
+                                                     " --y-column acc --out " + path("fitted.yaml"));
+  ASSERT_EQ(fit.code, 0) << fit.output;
+  for (const char* s : {"peaks of |H|, H = S_yu S_uu^-1", "each mode is one submodel per input (2 inputs)", "  input",
+                        "mode1_f_a", "mode1_f_b", "mode3_f_b"})
+    EXPECT_TRUE(contains(fit.output, s)) << s << "\n" << fit.output;
+  const Config fitted = modalwatch::load_config(path("fitted.yaml"));
+  EXPECT_EQ(fitted.model.inputs, (std::vector<std::string>{"f_a", "f_b"}));
+  ASSERT_EQ(fitted.model.submodels.size(), 6u);
+  for (std::size_t i = 0; i < 6; ++i) EXPECT_EQ(fitted.model.submodels[i].input, static_cast<int>(i % 2));
+  // The 11 Hz mode from f_a as the fit found it, and the written model seeds the next fit.
+  EXPECT_NEAR(modalwatch::modal_parameters(fitted.model.submodels[4]).wn / kTruth[2].modal.wn, 1.0, 0.01);
+  const auto again =
+      modalwatch::test_support::run_cli("fit --config " + path("fitted.yaml") + " --data " + data + " --y-column acc");
+  ASSERT_EQ(again.code, 0) << again.output;
+  EXPECT_TRUE(contains(again.output, "6 submodels")) << again.output;
+}
+
+// --u-column, repeated, names the inputs without model.inputs; a missing one is
+// named with the option, a closed loop refuses several.
+TEST_F(SeveralInputsCli, RepeatedUColumnNamesTheInputs) {
+  const std::string data = record();
+  const std::string cfg = write("modes.yaml", "sample_rate_hz: 100\nmodel:\n  modes: 3\n");
+  const auto fit = modalwatch::test_support::run_cli("fit --config " + cfg + " --data " + data +
+                                                     " --u-column f_a --u-column f_b --y-column acc");
+  ASSERT_EQ(fit.code, 0) << fit.output;
+  EXPECT_TRUE(contains(fit.output, "mode2_f_b")) << fit.output;
+  EXPECT_TRUE(contains(fit.output, "6 submodels")) << fit.output;
+  const auto missing = modalwatch::test_support::run_cli("fit --config " + cfg + " --data " + data +
+                                                         " --u-column f_a --u-column f_c --y-column acc");
+  EXPECT_EQ(missing.code, 2) << missing.output;
+  EXPECT_TRUE(contains(missing.output, "missing column 'f_c'")) << missing.output;
+  EXPECT_TRUE(contains(missing.output, "pick one with --u-column")) << missing.output;
+  const std::string closed = write("closed.yaml",
+                                   "sample_rate_hz: 100\nmodel:\n  loop: closed\n  modes: 3\n"
+                                   "controller:\n  numerator: [1]\n  denominator: [1]\n");
+  const auto refused = modalwatch::test_support::run_cli("fit --config " + closed + " --data " + data +
+                                                         " --u-column f_a --u-column f_b --y-column acc");
+  EXPECT_EQ(refused.code, 2) << refused.output;
+  EXPECT_TRUE(contains(refused.output, "a closed loop has one input")) << refused.output;
+}
+
+// diagnose simulates each submodel from its input; its model tables and
+// summary name the inputs.
+TEST_F(SeveralInputsCli, DiagnoseReportNamesEachSubmodelsInput) {
+  const std::string data = record();
+  const std::string cfg = write("two.yaml", "sample_rate_hz: 100\nmodel:\n  inputs: [f_a, f_b]\n  modes: 3\n");
+  const auto run = modalwatch::test_support::run_cli("diagnose --config " + cfg + " --data " + data +
+                                                     " --y-column acc --max-steps 0 --report " + path("report"));
+  ASSERT_EQ(run.code, 0) << run.output;
+  std::ifstream md(path("report/report.md"));
+  const std::string report((std::istreambuf_iterator<char>(md)), std::istreambuf_iterator<char>());
+  EXPECT_TRUE(contains(report, "| gain / coefficients | input |")) << report;
+  EXPECT_TRUE(contains(report, "| mode3_f_a | mode | ")) << report;
+  std::ifstream js(path("report/summary.json"));
+  const std::string summary((std::istreambuf_iterator<char>(js)), std::istreambuf_iterator<char>());
+  EXPECT_TRUE(contains(summary, "\"name\": \"mode2_f_b\", \"input\": \"f_b\"")) << summary;
+  const Config written = modalwatch::load_config(path("report/model.yaml"));
+  EXPECT_EQ(written.model.inputs, (std::vector<std::string>{"f_a", "f_b"}));
+}
+
+// ---------------------------------------------------------------- measured: flexible structure
+
+// DaISy's flexible structure (a steel subframe, two white-noise shakers u1, u2,
+// fs = 1024 Hz), read in place from MODALWATCH_SHARED_DATA: u1, u2 -> y5 with
+// no starting guess. The default path of `fit --modes 8`: the 8 largest peaks
+// of |H|, one submodel per input, the batch output hold, the physical check.
+// Estimation on the first 70 % (diagnose's default split), validation on the rest.
+const std::string kFlexible = std::string(MODALWATCH_SHARED_DATA) + "/daisy_flexible_structure.csv";
+
+struct FlexibleFit {
+  AdditiveModel start;
+  modalwatch::FitResult fit;
+  double validation_percent = 0.0;
+};
+
+FlexibleFit fit_flexible(const std::vector<std::string>& inputs) {
+  modalwatch::RecordColumns cols;
+  cols.u = inputs.front();
+  cols.further_u.assign(inputs.begin() + 1, inputs.end());
+  cols.y = "y5";
+  const Record full = modalwatch::read_record({kFlexible, cols});
+  const auto n = static_cast<Eigen::Index>(0.7 * static_cast<double>(full.size()));
+  const Record est = full.segment(0, n);
+  const AdditiveModel start = modalwatch::initial_modes(modalwatch::frequency_response(est, false), 8, {},
+                                                        inputs.size() > 1 ? inputs : std::vector<std::string>{});
+  modalwatch::SrivcOptions options;
+  options.output_hold = modalwatch::batch_output_hold(start, est.sample_time());
+  std::vector<modalwatch::ModeFinding> findings;
+  FlexibleFit out;
+  out.start = start;
+  out.fit = modalwatch::fit_physical(est, start, options, findings);
+  // The model runs from the record's start; the samples after the split are scored.
+  const Eigen::VectorXd y_sim = modalwatch::simulate_model(out.fit.model, full);
+  out.validation_percent = modalwatch::fit_percent(full.y.tail(full.size() - n), y_sim.tail(full.size() - n));
+  return out;
+}
+
+TEST(SeveralInputsMeasured, FlexibleStructureTwoShakersWithoutAStartingGuess) {
+  if (!fs::exists(kFlexible))
+    GTEST_SKIP() << "measured record not found: " << kFlexible
+                 << " (configure with -DMODALWATCH_SHARED_DATA=<folder of the benchmark records>)";
+  const FlexibleFit both = fit_flexible({"u1", "u2"});
+  const FlexibleFit one = fit_flexible({"u1"});
+  // The peaks of the Welch H1 estimates from u1 to y1/y5 in the record's description.
+  const std::vector<double> welch_hz = {119, 192, 215, 230, 333, 397, 417, 467};
+  // How many of them have a mode of `model` within 1 Hz (printed).
+  const auto within_1hz = [&](const AdditiveModel& model, const char* what) {
+    int within = 0;
+    std::printf("  %s:", what);
+    for (const double f : welch_hz) {
+      double nearest = 1e9;
+      for (const auto& s : model.submodels)
+        if (s.is_mode()) nearest = std::min(nearest, std::abs(modalwatch::modal_parameters(s).hz() - f));
+      within += nearest <= 1.0;
+      std::printf(" %.0f Hz: %.2f", f, nearest);
+    }
+    std::printf(" (Hz to the nearest mode): %d of 8 within 1 Hz\n", within);
+    return within;
+  };
+  std::printf("flexible structure u1,u2 -> y5, 8 modes from the data:\n");
+  for (const auto& s : both.fit.model.submodels) {
+    if (!s.is_mode()) {
+      std::printf("  %-10s not a mode (n=%d m=%d l=%d) on %s\n", s.name.c_str(), s.n, s.m, s.rigid_poles,
+                  both.fit.model.input_name(s.input).c_str());
+      continue;
+    }
+    const ModalParameters p = modalwatch::modal_parameters(s);
+    std::printf("  %-10s %8.2f Hz  zeta %.4f  gain %+.4g  on %s\n", s.name.c_str(), p.hz(), p.zeta, p.gain,
+                both.fit.model.input_name(s.input).c_str());
+  }
+  const int start_within = within_1hz(both.start, "start (peaks of |H|)");
+  const int fit_within = within_1hz(both.fit.model, "fitted");
+  std::printf("  validation fit: u1+u2 %.2f %%, u1 only %.2f %% (estimation part %.2f / %.2f %%)\n",
+              both.validation_percent, one.validation_percent, both.fit.fit_percent, one.fit.fit_percent);
+  // What the default reaches: the start from |H| of the estimation part has 5
+  // of the 8 peaks within 1 Hz (192, 230, 397, 417, 467; 333 Hz at 1.2 Hz; 119
+  // and 215 Hz are not among its 8 largest peaks in y5); the fit keeps 3 there
+  // (192, 230, 333 Hz) and moves the 397..467 Hz blocks onto 330..340 Hz: a mode
+  // b0 / (p^2/wn^2 + ...) is not an accelerometer's response, and the blocks
+  // of one resonance on two inputs move apart (each has its own poles).
+  EXPECT_GE(start_within, 5);
+  EXPECT_GE(fit_within, 3);
+  // u2 is half of what drives y5: with it the validation fit is 50 %, without it
+  // the u2 response is noise to a u1-only model.
+  EXPECT_GT(both.validation_percent, 50.0);
+  EXPECT_LT(one.validation_percent, 10.0);
+}
+
+}  // namespace
