@@ -564,6 +564,9 @@ TEST(RecursiveEstimator, RejectsInconsistentSettings) {
   EXPECT_THROW(RecursiveEstimator(c.model, s), std::invalid_argument);
   s.min_memories = {6.0, 0.0, 6.0};
   EXPECT_NO_THROW(RecursiveEstimator(c.model, s));
+  AdditiveModel two_inputs = c.model;  // several inputs are for the batch fits
+  two_inputs.inputs = {"u1", "u2"};
+  EXPECT_THROW(RecursiveEstimator(two_inputs, s), std::invalid_argument);
 }
 
 // ------------------------------------------------------------------ random plants

@@ -1,6 +1,8 @@
 // Several measured inputs (MISO): each submodel names the input that drives
 // it. The configuration (model.inputs, a submodel's input), the record
 // (the further input columns), the batch fit and the start from the data.
+#include <filesystem>
+
 #include "config_support.hpp"
 #include "simulation_support.hpp"
 
@@ -371,6 +373,23 @@ TEST_F(SeveralInputsCli, RepeatedUColumnNamesTheInputs) {
                                                          " --u-column f_a --u-column f_b --y-column acc");
   EXPECT_EQ(refused.code, 2) << refused.output;
   EXPECT_TRUE(contains(refused.output, "a closed loop has one input")) << refused.output;
+}
+
+// The recursive estimator takes one input: track refuses a model fitted on
+// several, and says where they belong.
+TEST_F(SeveralInputsCli, TrackRefusesAModelWithSeveralInputs) {
+  const std::string data = record();
+  const std::string cfg = write("two.yaml", "sample_rate_hz: 100\nmodel:\n  inputs: [f_a, f_b]\n  modes: 3\n");
+  ASSERT_EQ(modalwatch::test_support::run_cli("fit --config " + cfg + " --data " + data + " --y-column acc --out " +
+                                              path("fitted.yaml"))
+                .code,
+            0);
+  const auto track = modalwatch::test_support::run_cli("track --config " + path("fitted.yaml") + " --data " + data +
+                                                       " --out " + path("est.csv"));
+  EXPECT_EQ(track.code, 2) << track.output;
+  EXPECT_TRUE(contains(track.output, "takes one input")) << track.output;
+  EXPECT_TRUE(contains(track.output, "several inputs are for fit and diagnose")) << track.output;
+  EXPECT_FALSE(std::filesystem::exists(path("est.csv")));
 }
 
 // diagnose simulates each submodel from its input; its model tables and

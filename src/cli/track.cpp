@@ -483,6 +483,10 @@ int track(const TrackArgs& args) {
     const Config config = load_config(args.config);
     if (config.model.submodels.empty())
       throw InputError(args.config, "model gives only modes: N; track needs the submodels (fit --out writes them)");
+    if (config.model.n_inputs() > 1)
+      throw InputError(args.config, "key 'model.inputs': the recursive estimator (track, the daemon) takes one input; " +
+                                        std::to_string(config.model.n_inputs()) +
+                                        " are named (several inputs are for fit and diagnose)");
     const EstimatorSettings& settings = config.estimator;  // completed by load_config
 
     RecordReadOptions read_options;

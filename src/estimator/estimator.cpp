@@ -138,6 +138,9 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
   m.select_kernel(StepKernel::avx2_fma);  // where the CPU has it; else portable
   if (!(settings.sample_time > 0.0)) throw std::invalid_argument("estimator: sample_time must be > 0");
   if (initial.submodels.empty()) throw std::invalid_argument("estimator: no submodels");
+  if (initial.n_inputs() > 1)
+    throw std::invalid_argument("estimator: the recursive estimator (track, the daemon) takes one input; model.inputs names " +
+                                std::to_string(initial.n_inputs()) + " (several inputs are for fit and diagnose)");
   for (const auto& s : initial.submodels) {
     s.check();
     if (s.n + s.rigid_poles > kMaxFilterOrder || s.n_theta() > kMaxTheta)
