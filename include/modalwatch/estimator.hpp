@@ -272,6 +272,7 @@ class WarmupFit {
   std::uint64_t generation_ = 0;
   Eigen::VectorXd t_, u_, y_, r_;
   int n_ = 0;
+  int settle_ = 0;  // samples at the start that only drive the prefilters (a refit's)
   bool done_ = false, failed_ = false;
   // The result: theta(t0) (physical units), its covariance per submodel when
   // the fit was used, the fit's noise variance, the window's output variance.

@@ -183,6 +183,7 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
 
   if (settings.warmup_samples > 0) {
     m.fit_context = std::make_shared<const WarmupFit::Context>(WarmupFit::Context{initial, m.cfg});
+    m.refit_context = std::make_shared<WarmupFit::Context>(WarmupFit::Context{initial, m.cfg});
     m.allocate_window();
     m.status.warming_up = true;
   } else {
@@ -265,7 +266,7 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
     m.wu(m.buffered) = s.u;
     m.wy(m.buffered) = s.y;
     m.wr(m.buffered) = s.r;
-    if (++m.buffered == m.cfg.warmup_samples) {
+    if (++m.buffered == std::max(m.window_samples, m.cfg.warmup_samples)) {
       m.fit_pending = true;
       if (m.cfg.defer_warmup_fit) return flags | kWarmingUp | kWarmupFitPending;
       try {

@@ -174,4 +174,49 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
   status.last_reset_reason = reason;
 }
 
+// A divergence on a model that has fitted the data for a while is most often
+// the plant changing: a mode large against the noise moved, and forgetting
+// would take a memory to follow it from a state the data no longer fit, while
+// going back to the last good state and waiting for the error to settle
+// (restore_good) waits in vain. The window after the change is then fitted as
+// the warm-up is (section 4.7), from the last good state, which is also its
+// prior. A divergence soon after a (re)fit says that the fit itself did not
+// describe the data (a model that lacks an effect, a fit that did not
+// converge): a refit would repeat it, and the reset and wait stay. The fit's
+// simulation starts from rest, the plant does not: the window's first samples,
+// while the response to the input before it dies out (transient_samples()),
+// only drive the fit's prefilters; the reset would wait for them too, and then
+// for up to four windows more, the refit for one. The window holds at most
+// kRefitTransientWindows of them.
+bool RecursiveEstimator::Impl::may_refit() const {
+  constexpr double kFittedWindows = 4.0;  // as long as a restart may wait to settle
+  return refit_context && cfg.fit_on_warmup && !blocks.empty() &&
+         static_cast<double>(status.samples - warm_since_sample) > kFittedWindows / (1.0 - e_alpha) &&
+         transient_samples() <= static_cast<std::uint64_t>(kRefitTransientWindows) * cfg.warmup_samples;
+}
+
+void RecursiveEstimator::Impl::begin_refit() {
+  // Until the fit is applied the estimates are the last good state's.
+  AdditiveModel& start = refit_context->initial;
+  for (std::size_t i = 0; i < blocks.size(); ++i) {
+    detail::Block& b = blocks[i];
+    b.theta = b.good_theta;
+    b.P = b.good_P;
+    rediscretise(b);
+    Submodel& s = start.submodels[i];
+    for (int j = 0; j < s.n; ++j) s.a(j) = b.theta(j) / b.scale(j);
+    for (int k = 0; k <= s.m; ++k) s.b(k) = b.theta(s.n + k) / b.scale(s.n + k);
+  }
+  e_var = e_var_good;
+  settling = transient = bridged = rearm = 0;
+  outlier_run = 0;
+  buffered = 0;
+  refitting = true;
+  window_settle = static_cast<int>(transient_samples());
+  window_samples = cfg.warmup_samples + window_settle;
+  status.warming_up = true;
+  ++status.resets;
+  status.last_reset_reason = kResetRefit;
+}
+
 }  // namespace modalwatch

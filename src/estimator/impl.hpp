@@ -25,6 +25,12 @@ inline constexpr char kResetUnstableLoop[] = "the instrument's closed loop with 
 inline constexpr char kResetDiverged[] =
     "output error diverged (residual RMS above divergence_ratio x its last good value)";
 inline constexpr char kResetDegenerate[] = "non-finite or degenerate update (NaN/Inf in theta, P or the gain)";
+inline constexpr char kResetRefit[] =
+    "output error diverged (residual RMS above divergence_ratio x its last good value): refit on a new warm-up window";
+
+// The longest transient a refit waits for at the start of its window, in
+// warm-up windows (may_refit()).
+inline constexpr int kRefitTransientWindows = 3;
 
 struct WarmupFit::Context {
   AdditiveModel initial;
@@ -35,6 +41,14 @@ struct RecursiveEstimator::Impl {
   EstimatorSettings cfg;
   AdditiveModel initial;
   std::shared_ptr<const WarmupFit::Context> fit_context;  // immutable, shared with the jobs
+  // A refit's context: the last good state as the start and the prior, written
+  // in place (no allocation) before the window fills; its job reads it only
+  // while the estimator waits for the result.
+  std::shared_ptr<WarmupFit::Context> refit_context;
+  bool refitting = false;              // the window being filled is a refit's
+  int window_samples = 0;              // the window being filled is complete at this many samples ...
+  int window_settle = 0;               // ... of which the first ones only drive the fit's prefilters
+  std::uint64_t warm_since_sample = 0;  // status.samples when the last (re)fit was applied
   std::vector<detail::Block> blocks;
   std::vector<detail::BlockFilters> snapshot;  // filters at t_{k-1}, for refinements
   DiscreteTransferFunction controller;         // C_d(q) of the instrument's loop (eqs. 9, 29)
@@ -100,7 +114,8 @@ struct RecursiveEstimator::Impl {
   MODALWATCH_HOT void rediscretise(detail::Block& b);
   void rediscretise_prefilters(detail::Block& b, double Ts);
   void allocate_window() {
-    for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) w->resize(cfg.warmup_samples);
+    // A refit's window is the warm-up's after up to kRefitTransientWindows more for its start's transient.
+    for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) w->resize((1 + kRefitTransientWindows) * cfg.warmup_samples);
   }
   void set_reference(detail::Block& b, double stabilisation) const;
   void set_reference_variance(detail::Block& b) const;
@@ -112,6 +127,8 @@ struct RecursiveEstimator::Impl {
   double shortest_decay_time() const;
   void save_good();
   void restore_good(const char* reason);
+  bool may_refit() const;
+  void begin_refit();
   unsigned advance(const Sample& s, bool allow_update) { return (this->*kernel)(s, allow_update); }
   unsigned advance_portable(const Sample& s, bool allow_update);
   MODALWATCH_TARGET_AVX2_FMA unsigned advance_avx2_fma(const Sample& s, bool allow_update);

@@ -38,7 +38,8 @@ void WarmupFit::run() noexcept {
     window.u = u_.head(N);
     window.y = y_.head(N);
     if (cfg.closed_loop) window.r = r_.head(N);
-    const double y_var = (window.y.array() - window.y.mean()).square().mean();
+    const auto fitted = window.y.tail(N - settle_);
+    const double y_var = (fitted.array() - fitted.mean()).square().mean();
     AdditiveModel model = initial;
     std::vector<Eigen::MatrixXd> cov;
     double sigma2 = 0.0;
@@ -50,6 +51,7 @@ void WarmupFit::run() noexcept {
         o.controller = cfg.controller;
         o.output_hold = cfg.output_hold;
         o.max_iterations = cfg.warmup_iterations;
+        o.settle_samples = settle_;
         const FitResult fit = fit_srivc(window, initial, o);
         bool ok = fit.model.beta().allFinite() && fit.covariance.allFinite() && fit.noise_variance > 0.0;
         for (const auto& s : fit.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
@@ -118,6 +120,9 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   }
   pow_ref = p / std::max(N, 1);
   status.warming_up = false;
+  refitting = false;
+  window_samples = window_settle = 0;
+  warm_since_sample = status.samples;
 }
 
 bool RecursiveEstimator::warmup_fit_pending() const noexcept { return impl_->fit_pending; }
@@ -127,9 +132,10 @@ WarmupFit RecursiveEstimator::take_warmup_fit() {
   if (!m.fit_pending || m.fit_taken)
     throw std::logic_error("RecursiveEstimator::take_warmup_fit: no warm-up fit pending");
   WarmupFit job;
-  job.context_ = m.fit_context;
+  job.context_ = m.refitting ? m.refit_context : m.fit_context;
   job.generation_ = m.fit_generation;
   job.n_ = m.buffered;
+  job.settle_ = m.refitting ? m.window_settle : 0;
   job.t_.swap(m.wt);  // Eigen swaps the buffers: no copy, no allocation
   job.u_.swap(m.wu);
   job.y_.swap(m.wy);
