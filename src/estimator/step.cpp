@@ -196,10 +196,6 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   } else if (rearm > 0) {
     --rearm;
   } else if (diverging) {
-    if (may_refit()) {
-      begin_refit();
-      return flags | kReset | kWarmingUp;
-    }
     restore_good(kResetDiverged);
     return flags | kReset;
   }

@@ -61,19 +61,27 @@ void WarmupFit::run() noexcept {
           //   C0 = (Cp^-1 + C^-1)^-1,  theta0 = C0 (Cp^-1 theta_cfg + C^-1 theta_fit).
           // Where the window is informative the fit dominates; along directions it
           // leaves undetermined (a setpoint with few frequencies) the prior holds.
+          // Computed in units of the prior's std (Cp = S^2): the parameters span
+          // many decades (a_2 = 1/wn^2 beside b_0), and the pseudo-inverse of C in
+          // physical units would drop the small ones' directions as rank-deficient,
+          // leaving the prior there whatever the data say.
           sigma2 = fit.noise_variance;
           const double rho = cfg.initial_covariance_relative;
           for (std::size_t i = 0; i < model.submodels.size(); ++i) {
             const Eigen::VectorXd th_cfg = initial.submodels[i].theta(), th_fit = fit.model.submodels[i].theta();
             const Eigen::MatrixXd C = fit.theta_covariance(static_cast<int>(i));
-            Eigen::VectorXd prior_var(th_cfg.size());
-            for (Eigen::Index j = 0; j < th_cfg.size(); ++j)
-              prior_var(j) = std::pow(rho * std::max(std::abs(th_cfg(j)), 1e-12), 2);
-            const Eigen::MatrixXd Cinv = C.completeOrthogonalDecomposition().pseudoInverse();
-            Eigen::MatrixXd info = Cinv;
-            info.diagonal() += prior_var.cwiseInverse();
-            const Eigen::MatrixXd C0 = info.inverse();
-            Eigen::VectorXd th0 = C0 * (prior_var.cwiseInverse().cwiseProduct(th_cfg) + Cinv * th_fit);
+            Eigen::VectorXd prior_std(th_cfg.size());
+            for (Eigen::Index j = 0; j < th_cfg.size(); ++j) prior_std(j) = rho * std::max(std::abs(th_cfg(j)), 1e-12);
+            const Eigen::VectorXd inv_std = prior_std.cwiseInverse();
+            const Eigen::MatrixXd Cs = inv_std.asDiagonal() * C * inv_std.asDiagonal();
+            const Eigen::MatrixXd Cs_inv = Cs.completeOrthogonalDecomposition().pseudoInverse();
+            Eigen::MatrixXd info = Cs_inv;
+            info.diagonal().array() += 1.0;
+            const Eigen::MatrixXd C0s = info.inverse();
+            const Eigen::VectorXd th0s =
+                C0s * (inv_std.cwiseProduct(th_cfg) + Cs_inv * inv_std.cwiseProduct(th_fit));
+            const Eigen::MatrixXd C0 = prior_std.asDiagonal() * C0s * prior_std.asDiagonal();
+            Eigen::VectorXd th0 = prior_std.cwiseProduct(th0s);
             Submodel s = initial.submodels[i];
             s.set_theta(th0);
             if (s.n > 0) {
@@ -136,6 +144,7 @@ WarmupFit RecursiveEstimator::take_warmup_fit() {
   job.generation_ = m.fit_generation;
   job.n_ = m.buffered;
   job.settle_ = m.refitting ? m.window_settle : 0;
+  job.refit_ = m.refitting;
   job.t_.swap(m.wt);  // Eigen swaps the buffers: no copy, no allocation
   job.u_.swap(m.wu);
   job.y_.swap(m.wy);
