@@ -220,8 +220,6 @@ void RecursiveEstimator::Impl::begin_refit() {
     for (int j = 0; j < s.n; ++j) s.a(j) = b.good_theta(j) / b.scale(j);
     for (int k = 0; k <= s.m; ++k) s.b(k) = b.good_theta(s.n + k) / b.scale(s.n + k);
   }
-  settling = transient = bridged = rearm = 0;
-  outlier_run = 0;
   refit_armed = false;
   refitting = true;
   status.warming_up = true;

@@ -19,6 +19,35 @@
 
 namespace modalwatch {
 
+namespace {
+
+// A refit replaces a state that tracked the plant until the divergence, so it
+// must earn it: a window that leaves a direction of the model open (a setpoint
+// with too few frequencies) cannot say where the changed plant lies along it,
+// and a fit no closer to the data than the last good state says nothing new.
+// Its output error on the fitted part must be below a quarter of that state's
+// (half its RMS): a change that tripped the divergence reset left it ten times
+// the noise level or more.
+bool refit_acceptable(const Record& window, Eigen::Index settle, const AdditiveModel& start, const FitResult& fit,
+                      const EstimatorSettings& cfg) {
+  if (!(fit.information_condition <= FitResult::kPoorlyDetermined)) return false;
+  const double T = window.sample_time();
+  Eigen::VectorXd y_start;
+  if (cfg.closed_loop) {
+    Eigen::VectorXd z;
+    simulate_loop(start, cfg.controller, window.r, T, z, y_start);
+  } else {
+    y_start = simulate_model(start, window.u, T);
+  }
+  const Eigen::Index n = window.y.size() - settle;
+  if (n <= 0 || fit.simulated.size() != window.y.size()) return false;
+  const double e_start = (window.y.tail(n) - y_start.tail(n)).squaredNorm();
+  const double e_fit = (window.y.tail(n) - fit.simulated.tail(n)).squaredNorm();
+  return e_fit < 0.25 * e_start;
+}
+
+}  // namespace
+
 WarmupFit::WarmupFit() = default;
 WarmupFit::~WarmupFit() = default;
 WarmupFit::WarmupFit(WarmupFit&&) noexcept = default;
@@ -52,9 +81,13 @@ void WarmupFit::run() noexcept {
         o.output_hold = cfg.output_hold;
         o.max_iterations = cfg.warmup_iterations;
         o.settle_samples = settle_;
+        // A refit starts from the state that tracked each mode: the unfactored
+        // start's partial fractions could hand a mode's name to another.
+        if (refit_) o.unfactored_start = false;
         const FitResult fit = fit_srivc(window, initial, o);
         bool ok = fit.model.beta().allFinite() && fit.covariance.allFinite() && fit.noise_variance > 0.0;
         for (const auto& s : fit.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
+        if (ok && refit_) ok = refit_acceptable(window, settle_, initial, fit, cfg);
         if (ok) {
           // theta(t0), P(t0): the configured model as a prior (relative std rho per
           // parameter) fused with the fit and its covariance C, per submodel:
@@ -110,10 +143,21 @@ void WarmupFit::run() noexcept {
 }
 
 // The estimator's part: build from the fit's result, then run the filters over
-// the window without updating (section 4.7).
+// the window without updating (section 4.7). A refit that did not earn its
+// place changes nothing: the restored state goes on waiting for its error to
+// settle, as without a refit.
 void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   const int N = buffered;
   const double sigma2 = fit.sigma2_;
+  if (refitting && !fit.fit_used_) {
+    status.warming_up = false;
+    refitting = false;
+    window_samples = window_settle = 0;
+    status.last_reset_reason = kResetDiverged;
+    return;
+  }
+  settling = transient = bridged = rearm = 0;
+  outlier_run = 0;
   if (fit.fit_used_) status.warmup_fit_used = true;
   build(fit.model_, fit.covariance_.empty() ? nullptr : &fit.covariance_, sigma2, fit.y_var_);
   if (sigma2 > 0.0) {
