@@ -22,15 +22,33 @@ namespace modalwatch {
 namespace {
 
 // A refit replaces a state that tracked the plant until the divergence, so it
-// must earn it: a window that leaves a direction of the model open (a setpoint
-// with too few frequencies) cannot say where the changed plant lies along it,
-// and a fit no closer to the data than the last good state says nothing new.
-// Its output error on the fitted part must be below a quarter of that state's
-// (half its RMS): a change that tripped the divergence reset left it ten times
-// the noise level or more.
+// must earn it:
+// - a window that leaves a direction of the model open (a setpoint with too
+//   few frequencies) cannot say where the changed plant lies along it;
+// - a refit follows the modes it had, it does not identify the structure
+//   anew: each resonance keeps its place in frequency order and moves by less
+//   than kRefitFrequencyRatio (a fault of a third of the stiffness moves wn by
+//   18 %); a fit that moves one further has taken another mode's place or
+//   the noise's;
+// - a fit no closer to the data than the last good state says nothing new:
+//   its output error on the fitted part must be below a quarter of that
+//   state's (half its RMS), where a change that tripped the divergence reset
+//   left ten times the noise level or more.
 bool refit_acceptable(const Record& window, Eigen::Index settle, const AdditiveModel& start, const FitResult& fit,
                       const EstimatorSettings& cfg) {
+  constexpr double kRefitFrequencyRatio = 1.5;
   if (!(fit.information_condition <= FitResult::kPoorlyDetermined)) return false;
+  const auto& before = start.submodels;
+  const auto& after = fit.model.submodels;
+  for (std::size_t i = 0; i < before.size(); ++i) {
+    if (!before[i].is_resonance() || !after[i].is_resonance()) continue;
+    const double w0 = modal_parameters(before[i]).wn, w1 = modal_parameters(after[i]).wn;
+    if (!(w1 < kRefitFrequencyRatio * w0 && w0 < kRefitFrequencyRatio * w1)) return false;
+    for (std::size_t j = 0; j < i; ++j)
+      if (before[j].is_resonance() && after[j].is_resonance() &&
+          (modal_parameters(before[j]).wn < w0) != (modal_parameters(after[j]).wn < w1))
+        return false;
+  }
   const double T = window.sample_time();
   Eigen::VectorXd y_start;
   if (cfg.closed_loop) {
@@ -81,13 +99,22 @@ void WarmupFit::run() noexcept {
         o.output_hold = cfg.output_hold;
         o.max_iterations = cfg.warmup_iterations;
         o.settle_samples = settle_;
-        // A refit starts from the state that tracked each mode: the unfactored
-        // start's partial fractions could hand a mode's name to another.
+        const auto usable = [&](const FitResult& f) {
+          bool ok = f.model.beta().allFinite() && f.covariance.allFinite() && f.noise_variance > 0.0;
+          for (const auto& s : f.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
+          return ok && (!refit_ || refit_acceptable(window, settle_, initial, f, cfg));
+        };
+        // A refit starts from the state that tracked each mode; the unfactored
+        // start (which may find the changed plant where that start does not)
+        // only where it does not give a usable fit.
         if (refit_) o.unfactored_start = false;
-        const FitResult fit = fit_srivc(window, initial, o);
-        bool ok = fit.model.beta().allFinite() && fit.covariance.allFinite() && fit.noise_variance > 0.0;
-        for (const auto& s : fit.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
-        if (ok && refit_) ok = refit_acceptable(window, settle_, initial, fit, cfg);
+        FitResult fit = fit_srivc(window, initial, o);
+        bool ok = usable(fit);
+        if (!ok && refit_ && initial.submodels.size() >= 2) {
+          o.unfactored_start = true;
+          fit = fit_srivc(window, initial, o);
+          ok = usable(fit);
+        }
         if (ok) {
           // theta(t0), P(t0): the configured model as a prior (relative std rho per
           // parameter) fused with the fit and its covariance C, per submodel:
