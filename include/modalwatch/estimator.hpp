@@ -259,6 +259,9 @@ class WarmupFit {
   bool empty() const noexcept { return !context_; }
   bool done() const noexcept { return done_; }
   int samples() const noexcept { return n_; }  // in the window
+  // The window is a refit's (after a divergence the restored state did not
+  // settle from), not the warm-up's.
+  bool refit() const noexcept { return refit_; }
   // The fit and theta(t0), P(t0) from it (allocates). A fit that fails or gives
   // an unusable model leaves the configured model, as the synchronous path does
   // (status().warmup_fit_used says which). Only allocation failure is left:
@@ -272,6 +275,8 @@ class WarmupFit {
   std::uint64_t generation_ = 0;
   Eigen::VectorXd t_, u_, y_, r_;
   int n_ = 0;
+  int settle_ = 0;  // samples at the start that only drive the prefilters (a refit's)
+  bool refit_ = false;
   bool done_ = false, failed_ = false;
   // The result: theta(t0) (physical units), its covariance per submodel when
   // the fit was used, the fit's noise variance, the window's output variance.
@@ -341,6 +346,7 @@ class RecursiveEstimator {
   void restore(const EstimatorState& state);
 
  private:
+  unsigned fit_window() noexcept;  // the (re)fit of a complete window: kWarmingUp [| kWarmupFitPending]
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

@@ -74,7 +74,7 @@ EstimationLoop::EstimationLoop(const Config& config, const std::optional<Checkpo
     spdlog::info("restored checkpoint {}: last sample utime {} us, seq {}; no warm-up", config.daemon.checkpoint_path,
                  last_utime_, last_seq_);
   }
-  if (estimator_.status().warming_up) {
+  if (config.estimator.warmup_samples > 0) {  // a warm-up, or later a refit (estimator.hpp)
     // Touched here (value-initialised), so that holding input never page-faults on the loop.
     const double held = std::ceil(config.daemon.warmup_backlog / config.sample_time);
     backlog_.resize(static_cast<std::size_t>(std::max(1.0, held)));
@@ -97,7 +97,8 @@ void EstimationLoop::set_probe(LoopProbe* probe) {
 
 void EstimationLoop::start_fitter() {
   // Before the loop runs: after that only it and the fitter touch the estimator.
-  if (estimator_.status().warming_up) fitter_.start();
+  // Also after a restore: a divergence may end in a refit, which it runs too.
+  if (config_.estimator.warmup_samples > 0) fitter_.start();
 }
 
 void EstimationLoop::start() {

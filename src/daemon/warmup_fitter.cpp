@@ -46,8 +46,8 @@ void WarmupFitter::run() {
       continue;
     }
     const std::int64_t t0 = mono_ns();
-    spdlog::info("warm-up window complete ({} samples): fitting on the fitter thread; input is held meanwhile",
-                 job_.samples());
+    spdlog::info("{} window complete ({} samples): fitting on the fitter thread; input is held meanwhile",
+                 job_.refit() ? "refit (the output error diverged and did not settle)" : "warm-up", job_.samples());
     if (probe_) probe_->warmup_fit_running();
     job_.run();
     try {

@@ -186,6 +186,7 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
 
   if (settings.warmup_samples > 0) {
     m.fit_context = std::make_shared<const WarmupFit::Context>(WarmupFit::Context{initial, m.cfg});
+    m.refit_context = std::make_shared<WarmupFit::Context>(WarmupFit::Context{initial, m.cfg});
     m.allocate_window();
     m.status.warming_up = true;
   } else {
@@ -264,26 +265,52 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
   }
   ++m.status.samples;
   if (m.status.warming_up) {
-    m.wt(m.buffered) = s.t;
-    m.wu(m.buffered) = s.u;
-    m.wy(m.buffered) = s.y;
-    m.wr(m.buffered) = s.r;
-    if (++m.buffered == m.cfg.warmup_samples) {
-      m.fit_pending = true;
-      if (m.cfg.defer_warmup_fit) return flags | kWarmingUp | kWarmupFitPending;
-      try {
-        WarmupFit job = take_warmup_fit();
-        job.run();
-        apply_warmup_fit(std::move(job));
-      } catch (...) {
-        // Allocation failure: apply_warmup_fit() restarted the warm-up (or take failed before).
-        m.fit_pending = m.fit_taken = false;
-        m.buffered = 0;
-      }
-    }
+    m.buffer_window_sample(s);
+    if (m.buffered == m.cfg.warmup_samples) return flags | fit_window();
     return flags | kWarmingUp;
   }
-  return flags | m.advance(sample, !bad_values);
+  const bool armed = m.refit_armed;
+  flags |= m.advance(sample, !bad_values);
+  // Settling after a divergence (restore_good): an error that settles ends the
+  // wait as usual; one still near the divergence level after the window goes to
+  // a refit (may_refit()). A missing output or a gap cannot be fitted: the wait
+  // goes on as before.
+  if (armed && m.refit_armed && !(flags & kReset)) {
+    if (m.settling == 0 || bad_values) {
+      m.refit_armed = false;
+    } else {
+      m.buffer_window_sample(s);
+      if (m.buffered > m.window_settle)
+        (2 * (m.buffered - m.window_settle) <= m.window_samples - m.window_settle ? m.misfit_first : m.misfit_second) +=
+            m.e_short;
+      if (m.buffered == m.window_samples) {
+        if (!m.misfit_persists()) {
+          m.refit_armed = false;
+        } else {
+          m.begin_refit();
+          return flags | fit_window();
+        }
+      }
+    }
+  }
+  return flags;
+}
+
+// The window is complete: its fit, on another thread when deferred.
+unsigned RecursiveEstimator::fit_window() noexcept {
+  Impl& m = *impl_;
+  m.fit_pending = true;
+  if (m.cfg.defer_warmup_fit) return kWarmingUp | kWarmupFitPending;
+  try {
+    WarmupFit job = take_warmup_fit();
+    job.run();
+    apply_warmup_fit(std::move(job));
+  } catch (...) {
+    // Allocation failure: apply_warmup_fit() restarted the warm-up (or take failed before).
+    m.fit_pending = m.fit_taken = false;
+    m.buffered = 0;
+  }
+  return kWarmingUp;
 }
 
 StepKernel RecursiveEstimator::step_kernel() const noexcept { return impl_->kernel_id; }

@@ -43,6 +43,7 @@ void RecursiveEstimator::Impl::restart_filters() {
   bridged = 0;
   settling = transient + static_cast<std::uint64_t>(kSettleWindows / (1.0 - e_alpha));
   outlier_run = 0;
+  refit_armed = false;
 }
 
 // In closed loop a gap short against the modes' decay times is bridged
@@ -170,8 +171,59 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
   restart_filters();
   // Give the restored state one residual window before judging it again.
   rearm = static_cast<std::uint64_t>(1.0 / (1.0 - e_alpha));
+  if (reason == kResetDiverged && may_refit()) {
+    refit_armed = true;
+    buffered = 0;
+    window_settle = static_cast<int>(transient);
+    window_samples = refit_samples() + window_settle;
+    misfit_first = misfit_second = 0.0;
+  }
   ++status.resets;
   status.last_reset_reason = reason;
+}
+
+// A divergence on a model that has fitted the data for a while is a runaway of
+// the estimate, an output burst, or the plant changing. restore_good() and the
+// wait for the output error to settle handle the first two; for a change the
+// wait is in vain (the restored state no longer fits) and forgetting then
+// takes a memory to follow from there. So the samples after the reset are kept,
+// and if the error has not settled once the restarted filters' transient and
+// one warm-up window are over, that window is fitted as the warm-up is
+// (section 4.7), from the last good state, which is also its prior; the
+// transient only drives the fit's prefilters (the fit's simulation starts from
+// rest, the plant did not). The window is the longest memory of the
+// submodels (the data their recursive estimates rest on), at most the warm-up
+// window; where the wait for the error to settle ends sooner, the wait stays
+// (step()). A divergence soon after a (re)fit says that the fit itself did not
+// describe the data (a model that lacks an effect, a fit that did not
+// converge): a refit would repeat it, and the reset and wait stay.
+int RecursiveEstimator::Impl::refit_samples() const {
+  const double lambda = *std::max_element(cfg.forgetting.begin(), cfg.forgetting.end());
+  const double memory = lambda < 1.0 ? 1.0 / (1.0 - lambda) : std::numeric_limits<double>::infinity();
+  return static_cast<int>(std::min(memory, static_cast<double>(cfg.warmup_samples)));
+}
+
+bool RecursiveEstimator::Impl::may_refit() const {
+  constexpr double kFittedWindows = 4.0;  // as long as a restart may wait to settle
+  return refit_context && cfg.fit_on_warmup && !blocks.empty() &&
+         static_cast<double>(status.samples - warm_since_sample) > kFittedWindows / (1.0 - e_alpha) &&
+         transient_samples() + static_cast<std::uint64_t>(refit_samples()) <= static_cast<std::uint64_t>(wt.size());
+}
+
+// The window is complete and the error has not settled: fit it from the last
+// good state (theta is that state while settling: no update meanwhile).
+void RecursiveEstimator::Impl::begin_refit() {
+  AdditiveModel& start = refit_context->initial;
+  for (std::size_t i = 0; i < blocks.size(); ++i) {
+    const detail::Block& b = blocks[i];
+    Submodel& s = start.submodels[i];
+    for (int j = 0; j < s.n; ++j) s.a(j) = b.good_theta(j) / b.scale(j);
+    for (int k = 0; k <= s.m; ++k) s.b(k) = b.good_theta(s.n + k) / b.scale(s.n + k);
+  }
+  refit_armed = false;
+  refitting = true;
+  status.warming_up = true;
+  status.last_reset_reason = kResetRefit;
 }
 
 }  // namespace modalwatch

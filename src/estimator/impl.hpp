@@ -25,6 +25,13 @@ inline constexpr char kResetUnstableLoop[] = "the instrument's closed loop with 
 inline constexpr char kResetDiverged[] =
     "output error diverged (residual RMS above divergence_ratio x its last good value)";
 inline constexpr char kResetDegenerate[] = "non-finite or degenerate update (NaN/Inf in theta, P or the gain)";
+inline constexpr char kResetRefit[] =
+    "output error diverged (residual RMS above divergence_ratio x its last good value): refit on a new warm-up window";
+
+// The warm-up's buffer holds a refit's window too (may_refit()): its fitted
+// part, at most a warm-up window, after the transient at its start, up to this
+// many warm-up windows.
+inline constexpr int kRefitTransientWindows = 3;
 
 struct WarmupFit::Context {
   AdditiveModel initial;
@@ -35,6 +42,15 @@ struct RecursiveEstimator::Impl {
   EstimatorSettings cfg;
   AdditiveModel initial;
   std::shared_ptr<const WarmupFit::Context> fit_context;  // immutable, shared with the jobs
+  // A refit's context: the last good state as the start and the prior, written
+  // in place (no allocation) before the window fills; its job reads it only
+  // while the estimator waits for the result.
+  std::shared_ptr<WarmupFit::Context> refit_context;
+  bool refit_armed = false;            // settling after a divergence, the samples buffered for a refit
+  bool refitting = false;              // the window is a refit's
+  int window_samples = 0;              // the window being filled is complete at this many samples ...
+  int window_settle = 0;               // ... of which the first ones only drive the fit's prefilters
+  std::uint64_t warm_since_sample = 0;  // status.samples when the last (re)fit was applied
   std::vector<detail::Block> blocks;
   std::vector<detail::BlockFilters> snapshot;  // filters at t_{k-1}, for refinements
   DiscreteTransferFunction controller;         // C_d(q) of the instrument's loop (eqs. 9, 29)
@@ -100,7 +116,7 @@ struct RecursiveEstimator::Impl {
   MODALWATCH_HOT void rediscretise(detail::Block& b);
   void rediscretise_prefilters(detail::Block& b, double Ts);
   void allocate_window() {
-    for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) w->resize(cfg.warmup_samples);
+    for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) w->resize((1 + kRefitTransientWindows) * cfg.warmup_samples);
   }
   void set_reference(detail::Block& b, double stabilisation) const;
   void set_reference_variance(detail::Block& b) const;
@@ -112,6 +128,26 @@ struct RecursiveEstimator::Impl {
   double shortest_decay_time() const;
   void save_good();
   void restore_good(const char* reason);
+  int refit_samples() const;
+  // The restored state's mean square error over the two halves of the window's
+  // fitted part. A changed plant leaves a misfit that stays (or grows, on a
+  // ramp) at half the divergence ratio or more; the after-effect of an output
+  // burst in the restarted filters dies down with the modes' decay instead.
+  double misfit_first = 0.0, misfit_second = 0.0;
+  bool misfit_persists() const {
+    const double half = 0.5 * (window_samples - window_settle);
+    return misfit_second > 0.25 * cfg.divergence_ratio * cfg.divergence_ratio * e_var_good * half &&
+           misfit_second > 0.5 * misfit_first;
+  }
+  bool may_refit() const;
+  void buffer_window_sample(const Sample& s) {
+    wt(buffered) = s.t;
+    wu(buffered) = s.u;
+    wy(buffered) = s.y;
+    wr(buffered) = s.r;
+    ++buffered;
+  }
+  void begin_refit();
   unsigned advance(const Sample& s, bool allow_update) { return (this->*kernel)(s, allow_update); }
   unsigned advance_portable(const Sample& s, bool allow_update);
   MODALWATCH_TARGET_AVX2_FMA unsigned advance_avx2_fma(const Sample& s, bool allow_update);

@@ -19,6 +19,53 @@
 
 namespace modalwatch {
 
+namespace {
+
+// A refit replaces a state that tracked the plant until the divergence, so it
+// must earn it:
+// - a window that leaves a direction of the model open (a setpoint with too
+//   few frequencies) cannot say where the changed plant lies along it;
+// - a refit follows the modes it had, it does not identify the structure
+//   anew: each resonance keeps its place in frequency order and moves by less
+//   than kRefitFrequencyRatio (a fault of a third of the stiffness moves wn by
+//   18 %); a fit that moves one further has taken another mode's place or
+//   the noise's;
+// - a fit no closer to the data than the last good state says nothing new:
+//   its output error on the fitted part must be below a quarter of that
+//   state's (half its RMS), where a change that tripped the divergence reset
+//   left ten times the noise level or more.
+bool refit_acceptable(const Record& window, Eigen::Index settle, const AdditiveModel& start, const FitResult& fit,
+                      const EstimatorSettings& cfg) {
+  constexpr double kRefitFrequencyRatio = 1.5;
+  if (!(fit.information_condition <= FitResult::kPoorlyDetermined)) return false;
+  const auto& before = start.submodels;
+  const auto& after = fit.model.submodels;
+  for (std::size_t i = 0; i < before.size(); ++i) {
+    if (!before[i].is_resonance() || !after[i].is_resonance()) continue;
+    const double w0 = modal_parameters(before[i]).wn, w1 = modal_parameters(after[i]).wn;
+    if (!(w1 < kRefitFrequencyRatio * w0 && w0 < kRefitFrequencyRatio * w1)) return false;
+    for (std::size_t j = 0; j < i; ++j)
+      if (before[j].is_resonance() && after[j].is_resonance() &&
+          (modal_parameters(before[j]).wn < w0) != (modal_parameters(after[j]).wn < w1))
+        return false;
+  }
+  const double T = window.sample_time();
+  Eigen::VectorXd y_start;
+  if (cfg.closed_loop) {
+    Eigen::VectorXd z;
+    simulate_loop(start, cfg.controller, window.r, T, z, y_start);
+  } else {
+    y_start = simulate_model(start, window.u, T);
+  }
+  const Eigen::Index n = window.y.size() - settle;
+  if (n <= 0 || fit.simulated.size() != window.y.size()) return false;
+  const double e_start = (window.y.tail(n) - y_start.tail(n)).squaredNorm();
+  const double e_fit = (window.y.tail(n) - fit.simulated.tail(n)).squaredNorm();
+  return e_fit < 0.25 * e_start;
+}
+
+}  // namespace
+
 WarmupFit::WarmupFit() = default;
 WarmupFit::~WarmupFit() = default;
 WarmupFit::WarmupFit(WarmupFit&&) noexcept = default;
@@ -38,7 +85,8 @@ void WarmupFit::run() noexcept {
     window.u = u_.head(N);
     window.y = y_.head(N);
     if (cfg.closed_loop) window.r = r_.head(N);
-    const double y_var = (window.y.array() - window.y.mean()).square().mean();
+    const auto fitted = window.y.tail(N - settle_);
+    const double y_var = (fitted.array() - fitted.mean()).square().mean();
     AdditiveModel model = initial;
     std::vector<Eigen::MatrixXd> cov;
     double sigma2 = 0.0;
@@ -50,28 +98,50 @@ void WarmupFit::run() noexcept {
         o.controller = cfg.controller;
         o.output_hold = cfg.output_hold;
         o.max_iterations = cfg.warmup_iterations;
-        const FitResult fit = fit_srivc(window, initial, o);
-        bool ok = fit.model.beta().allFinite() && fit.covariance.allFinite() && fit.noise_variance > 0.0;
-        for (const auto& s : fit.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
+        o.settle_samples = settle_;
+        const auto usable = [&](const FitResult& f) {
+          bool ok = f.model.beta().allFinite() && f.covariance.allFinite() && f.noise_variance > 0.0;
+          for (const auto& s : f.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
+          return ok && (!refit_ || refit_acceptable(window, settle_, initial, f, cfg));
+        };
+        // A refit starts from the state that tracked each mode; the unfactored
+        // start (which may find the changed plant where that start does not)
+        // only where it does not give a usable fit.
+        if (refit_) o.unfactored_start = false;
+        FitResult fit = fit_srivc(window, initial, o);
+        bool ok = usable(fit);
+        if (!ok && refit_ && initial.submodels.size() >= 2) {
+          o.unfactored_start = true;
+          fit = fit_srivc(window, initial, o);
+          ok = usable(fit);
+        }
         if (ok) {
           // theta(t0), P(t0): the configured model as a prior (relative std rho per
           // parameter) fused with the fit and its covariance C, per submodel:
           //   C0 = (Cp^-1 + C^-1)^-1,  theta0 = C0 (Cp^-1 theta_cfg + C^-1 theta_fit).
           // Where the window is informative the fit dominates; along directions it
           // leaves undetermined (a setpoint with few frequencies) the prior holds.
+          // Computed in units of the prior's std (Cp = S^2): the parameters span
+          // many decades (a_2 = 1/wn^2 beside b_0), and the pseudo-inverse of C in
+          // physical units would drop the small ones' directions as rank-deficient,
+          // leaving the prior there whatever the data say.
           sigma2 = fit.noise_variance;
           const double rho = cfg.initial_covariance_relative;
           for (std::size_t i = 0; i < model.submodels.size(); ++i) {
             const Eigen::VectorXd th_cfg = initial.submodels[i].theta(), th_fit = fit.model.submodels[i].theta();
             const Eigen::MatrixXd C = fit.theta_covariance(static_cast<int>(i));
-            Eigen::VectorXd prior_var(th_cfg.size());
-            for (Eigen::Index j = 0; j < th_cfg.size(); ++j)
-              prior_var(j) = std::pow(rho * std::max(std::abs(th_cfg(j)), 1e-12), 2);
-            const Eigen::MatrixXd Cinv = C.completeOrthogonalDecomposition().pseudoInverse();
-            Eigen::MatrixXd info = Cinv;
-            info.diagonal() += prior_var.cwiseInverse();
-            const Eigen::MatrixXd C0 = info.inverse();
-            Eigen::VectorXd th0 = C0 * (prior_var.cwiseInverse().cwiseProduct(th_cfg) + Cinv * th_fit);
+            Eigen::VectorXd prior_std(th_cfg.size());
+            for (Eigen::Index j = 0; j < th_cfg.size(); ++j) prior_std(j) = rho * std::max(std::abs(th_cfg(j)), 1e-12);
+            const Eigen::VectorXd inv_std = prior_std.cwiseInverse();
+            const Eigen::MatrixXd Cs = inv_std.asDiagonal() * C * inv_std.asDiagonal();
+            const Eigen::MatrixXd Cs_inv = Cs.completeOrthogonalDecomposition().pseudoInverse();
+            Eigen::MatrixXd info = Cs_inv;
+            info.diagonal().array() += 1.0;
+            const Eigen::MatrixXd C0s = info.inverse();
+            const Eigen::VectorXd th0s =
+                C0s * (inv_std.cwiseProduct(th_cfg) + Cs_inv * inv_std.cwiseProduct(th_fit));
+            const Eigen::MatrixXd C0 = prior_std.asDiagonal() * C0s * prior_std.asDiagonal();
+            Eigen::VectorXd th0 = prior_std.cwiseProduct(th0s);
             Submodel s = initial.submodels[i];
             s.set_theta(th0);
             if (s.n > 0) {
@@ -100,10 +170,21 @@ void WarmupFit::run() noexcept {
 }
 
 // The estimator's part: build from the fit's result, then run the filters over
-// the window without updating (section 4.7).
+// the window without updating (section 4.7). A refit that did not earn its
+// place changes nothing: the restored state goes on waiting for its error to
+// settle, as without a refit.
 void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   const int N = buffered;
   const double sigma2 = fit.sigma2_;
+  if (refitting && !fit.fit_used_) {
+    status.warming_up = false;
+    refitting = false;
+    window_samples = window_settle = 0;
+    status.last_reset_reason = kResetDiverged;
+    return;
+  }
+  settling = transient = bridged = rearm = 0;
+  outlier_run = 0;
   if (fit.fit_used_) status.warmup_fit_used = true;
   build(fit.model_, fit.covariance_.empty() ? nullptr : &fit.covariance_, sigma2, fit.y_var_);
   if (sigma2 > 0.0) {
@@ -118,6 +199,9 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   }
   pow_ref = p / std::max(N, 1);
   status.warming_up = false;
+  refitting = false;
+  window_samples = window_settle = 0;
+  warm_since_sample = status.samples;
 }
 
 bool RecursiveEstimator::warmup_fit_pending() const noexcept { return impl_->fit_pending; }
@@ -127,9 +211,11 @@ WarmupFit RecursiveEstimator::take_warmup_fit() {
   if (!m.fit_pending || m.fit_taken)
     throw std::logic_error("RecursiveEstimator::take_warmup_fit: no warm-up fit pending");
   WarmupFit job;
-  job.context_ = m.fit_context;
+  job.context_ = m.refitting ? m.refit_context : m.fit_context;
   job.generation_ = m.fit_generation;
   job.n_ = m.buffered;
+  job.settle_ = m.refitting ? m.window_settle : 0;
+  job.refit_ = m.refitting;
   job.t_.swap(m.wt);  // Eigen swaps the buffers: no copy, no allocation
   job.u_.swap(m.wu);
   job.y_.swap(m.wy);
