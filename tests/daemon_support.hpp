@@ -192,6 +192,33 @@ inline void publish_paced(lcm_t* lcm, const Config& c, Daemon& d, Eigen::Index b
   publish_paced(lcm, c, d, drift_data().record, begin, end, published, utime_shift, seq_shift, backlog);
 }
 
+inline bool all_handled(Daemon& d);
+inline void dispatch_rest(lcm_t* lcm);
+
+// The Daemon in process on its own memq:// instance over the whole record,
+// paced by its counters, until it has handled every sample (within
+// `timeout_s`); returns its counters after stop(). `rx` collects what it
+// published.
+inline DaemonCounters run_in_process(const Config& c, const Record& rec, Received& rx, double timeout_s = 30.0) {
+  lcm_t* lcm = lcm_create("memq://");
+  EXPECT_NE(lcm, nullptr);
+  if (!lcm) return {};
+  rx.subscribe(lcm, c.lcm);
+  DaemonCounters k;
+  {
+    Daemon d(c, lcm);
+    d.start();
+    std::uint64_t published = 0;
+    publish_paced(lcm, c, d, rec, 0, rec.size(), published);
+    EXPECT_TRUE(wait_for([&] { return all_handled(d) && d.counters().samples_received == published; }, timeout_s));
+    d.stop();
+    k = d.counters();
+  }
+  dispatch_rest(lcm);
+  lcm_destroy(lcm);
+  return k;
+}
+
 inline bool all_handled(Daemon& d) {
   const DaemonCounters k = d.counters();
   return k.samples_received ==

@@ -57,24 +57,13 @@ class DaemonInProcess : public ScratchDir {
 TEST_F(DaemonInProcess, FlagsTheDriftingModeOnlyAndMatchesTrack) {
   const DriftData& data = drift_track();
   ASSERT_EQ(data.record.size(), samples_at(60.0));
-  Config c = load_config(kDriftConfig);
-  lcm_t* lcm = lcm_create("memq://");
-  ASSERT_NE(lcm, nullptr);
   Received rx;
-  rx.subscribe(lcm, c.lcm);
-  {
-    Daemon d(c, lcm);
-    d.start();
-    std::uint64_t published = 0;
-    publish_paced(lcm, c, d, 0, data.record.size(), published);
-    ASSERT_TRUE(wait_for([&] { return all_handled(d) && d.counters().samples_received == 245760u; }, 30.0));
-    d.stop();
-    const DaemonCounters k = d.counters();
-    EXPECT_EQ(k.samples_processed, 245760u);
-    EXPECT_EQ(k.samples_dropped + k.decode_errors + k.samples_nonfinite + k.gaps + k.resets, 0u);
-  }
-  dispatch_rest(lcm);
-  lcm_destroy(lcm);
+  const DaemonCounters counters = run_in_process(load_config(kDriftConfig), data.record, rx);
+  EXPECT_EQ(counters.samples_received, 245760u);
+  EXPECT_EQ(counters.samples_processed, 245760u);
+  EXPECT_EQ(counters.samples_dropped + counters.decode_errors + counters.samples_nonfinite + counters.gaps +
+                counters.resets,
+            0u);
 
   // Flags: the first raise of each quantity of each mode.
   std::array<double, 6> first_raise;
@@ -188,25 +177,11 @@ TEST_F(DaemonInProcess, ARefitAfterAModeStepRunsOnTheFitterThreadAndMatchesTrack
   const Outcome sim = run_cli("simulate --config " + cfg + " --out " + rec_csv);
   ASSERT_EQ(sim.code, 0) << sim.output;
   const Record rec = read_record(rec_csv);
-  Config c = load_config(cfg);
-  lcm_t* lcm = lcm_create("memq://");
-  ASSERT_NE(lcm, nullptr);
   Received rx;
-  rx.subscribe(lcm, c.lcm);
-  {
-    Daemon d(c, lcm);
-    d.start();
-    std::uint64_t published = 0;
-    publish_paced(lcm, c, d, rec, 0, rec.size(), published);
-    ASSERT_TRUE(wait_for([&] { return all_handled(d) && d.counters().samples_received == published; }, 30.0));
-    d.stop();
-    const DaemonCounters k = d.counters();
-    EXPECT_EQ(k.samples_processed, static_cast<std::uint64_t>(rec.size()));
-    EXPECT_EQ(k.resets, 1u);
-    EXPECT_EQ(k.samples_dropped + k.held_dropped, 0u);
-  }
-  dispatch_rest(lcm);
-  lcm_destroy(lcm);
+  const DaemonCounters counters = run_in_process(load_config(cfg), rec, rx);
+  EXPECT_EQ(counters.samples_processed, static_cast<std::uint64_t>(rec.size()));
+  EXPECT_EQ(counters.resets, 1u);
+  EXPECT_EQ(counters.samples_dropped + counters.held_dropped, 0u);
 
   const std::string us_csv = path("refit_us.csv"), us_est = path("refit_est.csv"), us_flags = path("refit_flags.csv");
   write_wire_times_csv(rec, us_csv);

@@ -47,25 +47,10 @@ TEST_F(DaemonOnBankRecords, FlagChangesAreThoseOfTrackOnThreeFaultRecords) {
     const Config c = load_config(config_path);
     const Record rec = read_record((dir / "record.csv").string());
 
-    lcm_t* lcm = lcm_create("memq://");
-    ASSERT_NE(lcm, nullptr);
     Received rx;
-    rx.subscribe(lcm, c.lcm);
-    {
-      Daemon d(c, lcm);
-      d.start();
-      std::uint64_t published = 0;
-      publish_paced(lcm, c, d, rec, 0, rec.size(), published);
-      ASSERT_TRUE(wait_for(
-          [&] { return all_handled(d) && d.counters().samples_received == static_cast<std::uint64_t>(rec.size()); },
-          120.0));
-      d.stop();
-      const DaemonCounters k = d.counters();
-      EXPECT_EQ(k.samples_processed, static_cast<std::uint64_t>(rec.size()));
-      EXPECT_EQ(k.samples_dropped + k.decode_errors + k.samples_nonfinite + k.gaps, 0u);
-    }
-    dispatch_rest(lcm);
-    lcm_destroy(lcm);
+    const DaemonCounters k = run_in_process(c, rec, rx, 120.0);
+    EXPECT_EQ(k.samples_processed, static_cast<std::uint64_t>(rec.size()));
+    EXPECT_EQ(k.samples_dropped + k.decode_errors + k.samples_nonfinite + k.gaps, 0u);
 
     const std::string csv = path(dir.filename().string() + ".csv"), flags = path(dir.filename().string() + ".flags");
     write_wire_times_csv(rec, csv);
