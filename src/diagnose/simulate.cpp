@@ -175,11 +175,8 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
       return interpolate ? a + (b - a) * (sub + 0.5) / substeps : a;
     };
     double y_plant = 0.0;
-    if (!several)
-      for (SubmodelRunner& r : runners) y_plant += r.complete(held(0) + branches);
-    else
-      for (std::size_t i = 0; i < runners.size(); ++i)
-        y_plant += runners[i].complete(further[i] ? further_held(*further[i], 0) : held(0) + branches);
+    for (std::size_t i = 0; i < runners.size(); ++i)
+      y_plant += runners[i].complete(further[i] ? further_held(*further[i], 0) : held(0) + branches);
     y(k) = y_plant + out_terms;
     if (loop.closed) controller.step(data.r(k) - y(k));
     if (u_sim) (*u_sim)(k) = u;

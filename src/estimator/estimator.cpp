@@ -271,27 +271,9 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
   }
   const bool armed = m.refit_armed;
   flags |= m.advance(sample, !bad_values);
-  // Settling after a divergence (restore_good): an error that settles ends the
-  // wait as usual; one still near the divergence level after the window goes to
-  // a refit (may_refit()). A missing output or a gap cannot be fitted: the wait
-  // goes on as before.
-  if (armed && m.refit_armed && !(flags & kReset)) {
-    if (m.settling == 0 || bad_values) {
-      m.refit_armed = false;
-    } else {
-      m.buffer_window_sample(s);
-      if (m.buffered > m.window_settle)
-        (2 * (m.buffered - m.window_settle) <= m.window_samples - m.window_settle ? m.misfit_first : m.misfit_second) +=
-            m.e_short;
-      if (m.buffered == m.window_samples) {
-        if (!m.misfit_persists()) {
-          m.refit_armed = false;
-        } else {
-          m.begin_refit();
-          return flags | fit_window();
-        }
-      }
-    }
+  if (armed && m.refit_armed && !(flags & kReset) && m.keep_for_refit(s, bad_values)) {
+    m.begin_refit();
+    return flags | fit_window();
   }
   return flags;
 }

@@ -188,7 +188,7 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
 // wait is in vain (the restored state no longer fits) and forgetting then
 // takes a memory to follow from there. So the samples after the reset are kept,
 // and if the error has not settled once the restarted filters' transient and
-// one warm-up window are over, that window is fitted as the warm-up is
+// one memory are over, that window is fitted as the warm-up is
 // (section 4.7), from the last good state, which is also its prior; the
 // transient only drives the fit's prefilters (the fit's simulation starts from
 // rest, the plant did not). The window is the longest memory of the
@@ -208,6 +208,25 @@ bool RecursiveEstimator::Impl::may_refit() const {
   return refit_context && cfg.fit_on_warmup && !blocks.empty() &&
          static_cast<double>(status.samples - warm_since_sample) > kFittedWindows / (1.0 - e_alpha) &&
          transient_samples() + static_cast<std::uint64_t>(refit_samples()) <= static_cast<std::uint64_t>(wt.size());
+}
+
+// Settling after a divergence (restore_good), the sample just taken: an error
+// that settles ends the wait as usual; one still near the divergence level
+// after the window goes to a refit (true). A missing output or a gap cannot be
+// fitted: the wait goes on as before.
+bool RecursiveEstimator::Impl::keep_for_refit(const Sample& s, bool bad_values) {
+  if (settling == 0 || bad_values) {
+    refit_armed = false;
+    return false;
+  }
+  buffer_window_sample(s);
+  if (buffered > window_settle) {
+    const bool first_half = 2 * (buffered - window_settle) <= window_samples - window_settle;
+    (first_half ? misfit_first : misfit_second) += e_short;
+  }
+  if (buffered < window_samples) return false;
+  refit_armed = misfit_persists();
+  return refit_armed;
 }
 
 // The window is complete and the error has not settled: fit it from the last

@@ -147,6 +147,7 @@ struct RecursiveEstimator::Impl {
     wr(buffered) = s.r;
     ++buffered;
   }
+  bool keep_for_refit(const Sample& s, bool bad_values);
   void begin_refit();
   unsigned advance(const Sample& s, bool allow_update) { return (this->*kernel)(s, allow_update); }
   unsigned advance_portable(const Sample& s, bool allow_update);
