@@ -270,6 +270,8 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
     return flags | kWarmingUp;
   }
   const bool armed = m.refit_armed;
+  if (flags & kGap || bad_values) m.forget_history();
+  if (!armed && !bad_values && m.refit_context && m.cfg.fit_on_warmup) m.keep_history(s);
   flags |= m.advance(sample, !bad_values);
   if (armed && m.refit_armed && !(flags & kReset) && m.keep_for_refit(s, bad_values)) {
     m.begin_refit();

@@ -135,15 +135,14 @@ double RecursiveEstimator::Impl::shortest_decay_time() const {
 // while its part correlated with the instrument still biases theta. Submodels
 // with poles at the origin or of other orders have no such bound (the output
 // error alone decides for them).
-std::uint64_t RecursiveEstimator::Impl::transient_samples() const {
+std::uint64_t RecursiveEstimator::Impl::transient_samples(double decay) const {
   double rate = std::numeric_limits<double>::infinity();  // slowest decay rate, 1/s
   for (const auto& b : blocks) {
     const double r = b.decay_rate();
     if (r > 0.0) rate = std::min(rate, r);
   }
-  constexpr double kTransientDecay = 0.1;
   if (!std::isfinite(rate) || !(rate > 0.0)) return 0;
-  const double samples = std::ceil(-std::log(kTransientDecay) / (rate * cfg.sample_time));
+  const double samples = std::ceil(-std::log(decay) / (rate * cfg.sample_time));
   return samples < 1e12 ? static_cast<std::uint64_t>(samples) : std::uint64_t{1000000000000};
 }
 
@@ -172,9 +171,21 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
   // Give the restored state one residual window before judging it again.
   rearm = static_cast<std::uint64_t>(1.0 / (1.0 - e_alpha));
   if (reason == kResetDiverged && may_refit()) {
+    // The window starts with the samples before the reset, as far back as the
+    // ring holds and the slowest mode's free response needs to die out: the
+    // fit's filters start from rest, the plant did not, and a tenth of a
+    // lightly damped mode's response left at the fit's start biases it (its
+    // gain by tens of %). The restored state's filters restarted at the reset
+    // and still wait out their own transient.
+    constexpr double kWindowDecay = 1e-3;
+    const auto room = static_cast<Eigen::Index>(wt.size() - refit_samples() - static_cast<Eigen::Index>(transient));
+    const auto wanted = static_cast<Eigen::Index>(transient_samples(kWindowDecay) - transient);
+    const Eigen::Index before = std::max<Eigen::Index>(0, std::min({history, room, wanted}));
+    const Eigen::Index first = (ring_head - before + wt.size()) % wt.size();
+    for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) std::rotate(w->data(), w->data() + first, w->data() + w->size());
     refit_armed = true;
-    buffered = 0;
-    window_settle = static_cast<int>(transient);
+    buffered = static_cast<int>(before);
+    window_settle = static_cast<int>(before + static_cast<Eigen::Index>(transient));
     window_samples = refit_samples() + window_settle;
     misfit_first = misfit_second = 0.0;
   }
@@ -217,6 +228,7 @@ bool RecursiveEstimator::Impl::may_refit() const {
 bool RecursiveEstimator::Impl::keep_for_refit(const Sample& s, bool bad_values) {
   if (settling == 0 || bad_values) {
     refit_armed = false;
+    forget_history();
     return false;
   }
   buffer_window_sample(s);

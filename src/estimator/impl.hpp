@@ -72,8 +72,12 @@ struct RecursiveEstimator::Impl {
   EstimatorStatus status;
 
   // Warm-up window, preallocated; a WarmupFit job holds it while it runs.
+  // Between windows the same arrays keep the latest samples as a ring
+  // (keep_history()): a refit's window starts with them (restore_good()).
   Eigen::VectorXd wt, wu, wy, wr;
   int buffered = 0;
+  Eigen::Index ring_head = 0;  // where the next sample goes
+  Eigen::Index history = 0;    // consecutive samples (no gap, none missing) that end before ring_head
   bool fit_pending = false;          // window full, its fit not applied yet (defer_warmup_fit)
   bool fit_taken = false;            // ... and the window is out in a job
   std::uint64_t fit_generation = 0;  // tells a stale job (restore() since) from the pending one
@@ -124,7 +128,7 @@ struct RecursiveEstimator::Impl {
   void restart_filters();
   bool bridge(const Sample& next, double dt);
   void bridge_plant_loop(double r, double z);
-  std::uint64_t transient_samples() const;
+  std::uint64_t transient_samples(double decay = 0.1) const;
   double shortest_decay_time() const;
   void save_good();
   void restore_good(const char* reason);
@@ -147,6 +151,15 @@ struct RecursiveEstimator::Impl {
     wr(buffered) = s.r;
     ++buffered;
   }
+  void keep_history(const Sample& s) {
+    wt(ring_head) = s.t;
+    wu(ring_head) = s.u;
+    wy(ring_head) = s.y;
+    wr(ring_head) = s.r;
+    if (++ring_head == wt.size()) ring_head = 0;
+    if (history < wt.size()) ++history;
+  }
+  void forget_history() { ring_head = history = 0; }
   bool keep_for_refit(const Sample& s, bool bad_values);
   void begin_refit();
   unsigned advance(const Sample& s, bool allow_update) { return (this->*kernel)(s, allow_update); }

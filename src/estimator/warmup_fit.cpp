@@ -180,6 +180,7 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
     status.warming_up = false;
     refitting = false;
     window_samples = window_settle = 0;
+    forget_history();
     status.last_reset_reason = kResetDiverged;
     return;
   }
@@ -201,6 +202,7 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   status.warming_up = false;
   refitting = false;
   window_samples = window_settle = 0;
+  forget_history();
   warm_since_sample = status.samples;
 }
 
