@@ -495,9 +495,9 @@ bool refitted(const EstimatorStatus& st) {
 // At 50 dB, a step of the lightly damped flexible mode trips the divergence
 // reset; the restored state no longer fits, and waiting for the error to settle
 // (the restarted filters' transient, 1.22 s for the suspension mode, then up to
-// four memories, 1.95 s) would be in vain. The window after the transient and
-// one memory (0.49 s) is fitted instead: 2 s after the step the flexible mode
-// is at its new wn, where the wait would still hold the old one.
+// four memories, 1.95 s) would be in vain. The memory after the reset (0.49 s)
+// is fitted instead: 2 s after the step the flexible mode is at its new wn,
+// where the wait would still hold the old one.
 TEST(RecursiveEstimator, AModeThatStepsIsRefittedOnTheWindowAfterTheStep) {
   const SteppedBeam beam = stepped_beam(-0.08, 0.0);
   const Record& r = beam.record;

@@ -187,6 +187,7 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
   if (settings.warmup_samples > 0) {
     m.fit_context = std::make_shared<const WarmupFit::Context>(WarmupFit::Context{initial, m.cfg});
     m.refit_context = std::make_shared<WarmupFit::Context>(WarmupFit::Context{initial, m.cfg});
+    m.keeps_history = m.cfg.fit_on_warmup;
     m.allocate_window();
     m.status.warming_up = true;
   } else {
@@ -270,8 +271,12 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
     return flags | kWarmingUp;
   }
   const bool armed = m.refit_armed;
-  if (flags & kGap || bad_values) m.forget_history();
-  if (!armed && !bad_values && m.refit_context && m.cfg.fit_on_warmup) m.keep_history(s);
+  if (m.keeps_history) {
+    if (flags & kGap || bad_values)
+      m.forget_history();
+    else if (!armed)
+      m.keep_history(s);
+  }
   flags |= m.advance(sample, !bad_values);
   if (armed && m.refit_armed && !(flags & kReset) && m.keep_for_refit(s, bad_values)) {
     m.begin_refit();

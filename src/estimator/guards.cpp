@@ -178,16 +178,18 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
     // gain by tens of %). The restored state's filters restarted at the reset
     // and still wait out their own transient.
     constexpr double kWindowDecay = 1e-3;
-    const auto room = static_cast<Eigen::Index>(wt.size() - refit_samples() - static_cast<Eigen::Index>(transient));
-    const auto wanted = static_cast<Eigen::Index>(transient_samples(kWindowDecay) - transient);
+    const auto wanted = static_cast<Eigen::Index>(transient_samples(kWindowDecay));
+    const auto room = wt.size() - refit_samples() - static_cast<Eigen::Index>(transient);
     const Eigen::Index before = std::max<Eigen::Index>(0, std::min({history, room, wanted}));
     const Eigen::Index first = (ring_head - before + wt.size()) % wt.size();
     for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) std::rotate(w->data(), w->data() + first, w->data() + w->size());
     refit_armed = true;
     buffered = static_cast<int>(before);
-    window_settle = static_cast<int>(before + static_cast<Eigen::Index>(transient));
+    // Where the ring holds less, the samples after the reset make up the
+    // rest, up to the restarted filters' own transient.
+    const Eigen::Index after = std::min(static_cast<Eigen::Index>(transient), wanted - before);
+    window_settle = static_cast<int>(before + after);
     window_samples = refit_samples() + window_settle;
-    misfit_first = misfit_second = 0.0;
   }
   ++status.resets;
   status.last_reset_reason = reason;
@@ -197,17 +199,19 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
 // the estimate, an output burst, or the plant changing. restore_good() and the
 // wait for the output error to settle handle the first two; for a change the
 // wait is in vain (the restored state no longer fits) and forgetting then
-// takes a memory to follow from there. So the samples after the reset are kept,
-// and if the error has not settled once the restarted filters' transient and
-// one memory are over, that window is fitted as the warm-up is
-// (section 4.7), from the last good state, which is also its prior; the
-// transient only drives the fit's prefilters (the fit's simulation starts from
-// rest, the plant did not). The window is the longest memory of the
-// submodels (the data their recursive estimates rest on), at most the warm-up
-// window; where the wait for the error to settle ends sooner, the wait stays
-// (step()). A divergence soon after a (re)fit says that the fit itself did not
-// describe the data (a model that lacks an effect, a fit that did not
-// converge): a refit would repeat it, and the reset and wait stay.
+// takes a memory to follow from there. So the samples from the reset on are
+// kept, behind the ring's samples before it, and one memory after the reset
+// that window is fitted as the warm-up is (section 4.7), from the last good
+// state, which is also its prior; the samples before the reset only drive the
+// fit's prefilters (the fit's simulation starts from rest, the plant did not).
+// The fit decides whether the change was real (refit_acceptable: the restored
+// state's misfit persists over the window, and the fit removes most of it);
+// otherwise, and where the wait for the error to settle ends sooner, the wait
+// stays. The window is the longest memory of the submodels (the data their
+// recursive estimates rest on), at most the warm-up window. A divergence soon
+// after a (re)fit says that the fit itself did not describe the data (a model
+// that lacks an effect, a fit that did not converge): a refit would repeat
+// it, and the reset and wait stay.
 int RecursiveEstimator::Impl::refit_samples() const {
   const double lambda = *std::max_element(cfg.forgetting.begin(), cfg.forgetting.end());
   const double memory = lambda < 1.0 ? 1.0 / (1.0 - lambda) : std::numeric_limits<double>::infinity();
@@ -222,9 +226,8 @@ bool RecursiveEstimator::Impl::may_refit() const {
 }
 
 // Settling after a divergence (restore_good), the sample just taken: an error
-// that settles ends the wait as usual; one still near the divergence level
-// after the window goes to a refit (true). A missing output or a gap cannot be
-// fitted: the wait goes on as before.
+// that settles ends the wait as usual; a complete window goes to a refit
+// (true). A missing output or a gap cannot be fitted: the wait goes on as before.
 bool RecursiveEstimator::Impl::keep_for_refit(const Sample& s, bool bad_values) {
   if (settling == 0 || bad_values) {
     refit_armed = false;
@@ -232,18 +235,13 @@ bool RecursiveEstimator::Impl::keep_for_refit(const Sample& s, bool bad_values) 
     return false;
   }
   buffer_window_sample(s);
-  if (buffered > window_settle) {
-    const bool first_half = 2 * (buffered - window_settle) <= window_samples - window_settle;
-    (first_half ? misfit_first : misfit_second) += e_short;
-  }
-  if (buffered < window_samples) return false;
-  refit_armed = misfit_persists();
-  return refit_armed;
+  return buffered == window_samples;
 }
 
 // The window is complete and the error has not settled: fit it from the last
 // good state (theta is that state while settling: no update meanwhile).
 void RecursiveEstimator::Impl::begin_refit() {
+  refit_context->noise_variance = e_var_good;
   AdditiveModel& start = refit_context->initial;
   for (std::size_t i = 0; i < blocks.size(); ++i) {
     const detail::Block& b = blocks[i];

@@ -36,6 +36,7 @@ inline constexpr int kRefitTransientWindows = 3;
 struct WarmupFit::Context {
   AdditiveModel initial;
   EstimatorSettings cfg;
+  double noise_variance = 0.0;  // a refit's: the output-error variance of the last good state
 };
 
 struct RecursiveEstimator::Impl {
@@ -76,6 +77,7 @@ struct RecursiveEstimator::Impl {
   // (keep_history()): a refit's window starts with them (restore_good()).
   Eigen::VectorXd wt, wu, wy, wr;
   int buffered = 0;
+  bool keeps_history = false;  // a refit is possible: the ring runs
   Eigen::Index ring_head = 0;  // where the next sample goes
   Eigen::Index history = 0;    // consecutive samples (no gap, none missing) that end before ring_head
   bool fit_pending = false;          // window full, its fit not applied yet (defer_warmup_fit)
@@ -133,16 +135,6 @@ struct RecursiveEstimator::Impl {
   void save_good();
   void restore_good(const char* reason);
   int refit_samples() const;
-  // The restored state's mean square error over the two halves of the window's
-  // fitted part. A changed plant leaves a misfit that stays (or grows, on a
-  // ramp) at half the divergence ratio or more; the after-effect of an output
-  // burst in the restarted filters dies down with the modes' decay instead.
-  double misfit_first = 0.0, misfit_second = 0.0;
-  bool misfit_persists() const {
-    const double half = 0.5 * (window_samples - window_settle);
-    return misfit_second > 0.25 * cfg.divergence_ratio * cfg.divergence_ratio * e_var_good * half &&
-           misfit_second > 0.5 * misfit_first;
-  }
   bool may_refit() const;
   void buffer_window_sample(const Sample& s) {
     wt(buffered) = s.t;

@@ -30,12 +30,16 @@ namespace {
 //   than kRefitFrequencyRatio (a fault of a third of the stiffness moves wn by
 //   18 %); a fit that moves one further has taken another mode's place or
 //   the noise's;
+// - the last good state's misfit must persist: a changed plant leaves an
+//   output error that stays (or grows, on a ramp) at half the divergence
+//   ratio times the noise level or more over the fitted part's second half;
+//   an output burst's after-effect dies down with the modes' decay instead;
 // - a fit no closer to the data than the last good state says nothing new:
 //   its output error on the fitted part must be below a quarter of that
 //   state's (half its RMS), where a change that tripped the divergence reset
 //   left ten times the noise level or more.
-bool refit_acceptable(const Record& window, Eigen::Index settle, const AdditiveModel& start, const FitResult& fit,
-                      const EstimatorSettings& cfg) {
+bool refit_acceptable(const Record& window, Eigen::Index settle, const AdditiveModel& start, double noise_variance,
+                      const FitResult& fit, const EstimatorSettings& cfg) {
   constexpr double kRefitFrequencyRatio = 1.5;
   if (!(fit.information_condition <= FitResult::kPoorlyDetermined)) return false;
   const auto& before = start.submodels;
@@ -58,7 +62,12 @@ bool refit_acceptable(const Record& window, Eigen::Index settle, const AdditiveM
     y_start = simulate_model(start, window.u, T);
   }
   const Eigen::Index n = window.y.size() - settle;
-  if (n <= 0 || fit.simulated.size() != window.y.size()) return false;
+  if (n < 2 || fit.simulated.size() != window.y.size()) return false;
+  const Eigen::Index half = n / 2;
+  const double e_first = (window.y.segment(settle, half) - y_start.segment(settle, half)).squaredNorm() / half;
+  const double e_second = (window.y.tail(n - half) - y_start.tail(n - half)).squaredNorm() / (n - half);
+  const double settled = 0.25 * cfg.divergence_ratio * cfg.divergence_ratio * noise_variance;
+  if (!(e_second > settled && e_second > 0.5 * e_first)) return false;
   const double e_start = (window.y.tail(n) - y_start.tail(n)).squaredNorm();
   const double e_fit = (window.y.tail(n) - fit.simulated.tail(n)).squaredNorm();
   return e_fit < 0.25 * e_start;
@@ -102,7 +111,7 @@ void WarmupFit::run() noexcept {
         const auto usable = [&](const FitResult& f) {
           bool ok = f.model.beta().allFinite() && f.covariance.allFinite() && f.noise_variance > 0.0;
           for (const auto& s : f.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
-          return ok && (!refit_ || refit_acceptable(window, settle_, initial, f, cfg));
+          return ok && (!refit_ || refit_acceptable(window, settle_, initial, context_->noise_variance, f, cfg));
         };
         // A refit starts from the state that tracked each mode; the unfactored
         // start (which may find the changed plant where that start does not)
