@@ -72,9 +72,9 @@ struct Stream {
   double t() const { return static_cast<double>(k) * kPeriod; }
 
   // One update; returns the changes it made.
-  const std::vector<FlagChange>& step(bool valid = true) {
+  const std::vector<FlagChange>& step(bool valid = true, double evidence_span = 0.0) {
     changes.clear();
-    detector.update(t(), value, std_dev, valid, changes);
+    detector.update(t(), value, std_dev, valid, changes, evidence_span);
     log.insert(log.end(), changes.begin(), changes.end());
     ++k;
     return changes;
@@ -337,6 +337,34 @@ TEST(FaultDetector, ABlipShorterThanTheHoldTimeNeverFlags) {
   s.run(30.0);
   EXPECT_FALSE(s.detector.any_flag());
   EXPECT_TRUE(s.log.empty());
+}
+
+// An estimate fitted on a window stands for all of it: a change it shows began
+// at the window's start at the latest, and the hold counts from there.
+TEST(FaultDetector, AFitsWindowCountsTowardTheHold) {
+  const double hold = FaultThresholds{}.hold_time;
+  Stream whole(configured()), part(configured());
+  for (Stream* s : {&whole, &part}) {
+    s->run(5.0);
+    s->value[2].zeta = 1.5 * kBaseline[2].zeta;
+  }
+  // A window as long as the hold: the flag rises with the fit's first update.
+  const double t_fit = whole.t();
+  ASSERT_EQ(whole.step(true, hold).size(), 1u);
+  EXPECT_TRUE(whole.q(2, Quantity::zeta).flagged);
+  EXPECT_DOUBLE_EQ(whole.log.front().time, t_fit);
+  // Half as long: pending since the window's start, raised half a hold later.
+  part.step(true, 0.5 * hold);
+  const QuantityStatus& zeta = part.q(2, Quantity::zeta);
+  EXPECT_TRUE(zeta.pending);
+  EXPECT_DOUBLE_EQ(zeta.since, t_fit - 0.5 * hold);
+  const double raised = part.run_until(hold, [&] { return zeta.flagged; });
+  EXPECT_NEAR(raised - t_fit, 0.5 * hold, 1e-9);
+  // The span says nothing about a condition that is not there.
+  Stream quiet(configured());
+  quiet.run(5.0);
+  EXPECT_TRUE(quiet.step(true, 100.0).empty());
+  EXPECT_FALSE(quiet.q(2, Quantity::zeta).pending);
 }
 
 // ------------------------------------------------------------------ baselines

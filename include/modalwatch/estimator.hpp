@@ -128,6 +128,11 @@ struct EstimatorStatus {
   bool warming_up = true;
   bool low_excitation = false;
   bool warmup_fit_used = false;  // theta(t0) from the offline fit on the warm-up window
+  std::uint64_t fits = 0;  // windows whose fit has ended (the warm-up's, refits; used or not)
+  // s of data the last (re)fit's estimate rests on, the fitted part of its
+  // window; 0 before the first and after a refit that was refused. A fault detector may count a hold from its
+  // start (FaultDetector::update's evidence_span).
+  double fitted_window = 0.0;
 };
 
 // What step() did with a sample (bit flags).

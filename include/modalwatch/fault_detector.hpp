@@ -151,12 +151,16 @@ class FaultDetector {
   // (wn, zeta, gain), e.g. modal_covariance()) at time t. `valid` is false while
   // the estimator warms up or excitation is low: no flag changes then, and
   // learning pauses. Flag changes since the last call are appended to `changes`
-  // (reserve 3 per mode: no allocation).
+  // (reserve 3 per mode: no allocation). `evidence_span` (s) says that these
+  // estimates stand for that much data before t that all say the same, as the
+  // fit of a window does (EstimatorStatus::fitted_window, on the first valid
+  // update after the fit): a condition they show began that long ago, and its
+  // hold counts from there (on the mode clock).
   void update(double t, const std::vector<ModalParameters>& value, const std::vector<Eigen::Matrix3d>& covariance,
-              bool valid, std::vector<FlagChange>& changes);
+              bool valid, std::vector<FlagChange>& changes, double evidence_span = 0.0);
   // The same with standard deviations only (a diagonal covariance).
   void update(double t, const std::vector<ModalParameters>& value, const std::vector<ModalParameters>& std_dev,
-              bool valid, std::vector<FlagChange>& changes);
+              bool valid, std::vector<FlagChange>& changes, double evidence_span = 0.0);
 
   // A baseline kept from an earlier run (a checkpoint, a reloaded config): the
   // mode tests against it at once, with its covariance; its state is ready when

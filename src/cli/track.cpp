@@ -410,6 +410,7 @@ class FlagRecorder {
   FlagRecorder(const Config& config, const RecursiveEstimator& estimator)
       : detector_(fault_detector_settings(config)),
         warming_up_(estimator.status().warming_up),
+        fits_(estimator.status().fits),
         names_(detector_.status().size()),
         period_us_(std::max<std::int64_t>(1, std::llround(config.daemon.publish_period * 1e6))) {
     for (std::size_t i = 0; i < names_.size(); ++i) names_[i] = config.model.submodels[i].name;
@@ -421,8 +422,12 @@ class FlagRecorder {
   // After the estimator's step on the sample at t (s).
   void after_step(double t, const RecursiveEstimator& estimator) {
     const EstimatorStatus& st = estimator.status();
-    const bool fit_sample = warming_up_ && !st.warming_up;
+    // A refit runs within one step() here, where the daemon's fitter holds the
+    // input: the sample that ends a window counts as a warm-up sample either way.
+    const bool fit_sample = (warming_up_ && !st.warming_up) || st.fits != fits_;
     warming_up_ = st.warming_up;
+    fits_ = st.fits;
+    if (fit_sample) evidence_span_ = st.fitted_window;
     const std::int64_t utime = std::llround(t * 1e6);
     if (!have_time_) {
       have_time_ = true;
@@ -440,8 +445,10 @@ class FlagRecorder {
       covariances_[i] = estimator.mode_covariance(static_cast<int>(i));
     }
     changes_.clear();
-    detector_.update(static_cast<double>(utime - utime0_) * 1e-6, values_, covariances_,
-                     !fit_sample && !st.warming_up && !st.low_excitation, changes_);
+    const bool valid = !fit_sample && !st.warming_up && !st.low_excitation;
+    detector_.update(static_cast<double>(utime - utime0_) * 1e-6, values_, covariances_, valid, changes_,
+                     evidence_span_);
+    if (valid) evidence_span_ = 0.0;
     for (const FlagChange& c : changes_) {
       static constexpr const char* kQuantityNames[kQuantities] = {"wn", "zeta", "gain"};
       char line[256];
@@ -461,6 +468,8 @@ class FlagRecorder {
  private:
   FaultDetector detector_;
   bool warming_up_;  // the estimator's status after the previous sample
+  std::uint64_t fits_ = 0;       // ... and its windows fitted
+  double evidence_span_ = 0.0;  // a (re)fit's window, until the detector's next valid update
   std::vector<std::string> names_;
   std::vector<ModalParameters> values_;
   std::vector<Eigen::Matrix3d> covariances_;

@@ -130,7 +130,10 @@ void EstimationLoop::run() noexcept {
     const int request = stop_.load(std::memory_order_acquire);
     const bool stopping = request != keep_running;
     const bool final_stop = request == stop_requested;
-    if (fit_in_flight_ && fitter_.take_applied()) fit_in_flight_ = false;  // the estimator is ours again
+    if (fit_in_flight_ && fitter_.take_applied()) {  // the estimator is ours again
+      fit_in_flight_ = false;
+      evidence_span_ = estimator_.status().fitted_window;
+    }
     if (probe_ && !probe_fired_ && !fit_in_flight_ && backlog_size_ == 0 && !estimator_.status().warming_up &&
         read(counters_.snapshots) > 0) {
       probe_->warmed_up();
@@ -322,7 +325,9 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
     flag_changes_.clear();
     const double t = static_cast<double>(last_utime_ - utime0_) * 1e-6;
     const bool valid = !st.warming_up && !st.low_excitation;
-    detector_->update(t, mode_values_, mode_covariances_, valid, flag_changes_);  // capacity reserved: no allocation
+    // capacity reserved: no allocation
+    detector_->update(t, mode_values_, mode_covariances_, valid, flag_changes_, evidence_span_);
+    if (valid) evidence_span_ = 0.0;
     for (const FlagChange& c : flag_changes_) {
       if (snap.n_changes == kMaxEntries) break;
       snap.changes[static_cast<std::size_t>(snap.n_changes++)] = c;

@@ -164,6 +164,7 @@ class EstimationLoop {
   // holds the input in backlog_, a FIFO preallocated at construction.
   WarmupFitter fitter_;
   bool fit_in_flight_ = false;
+  double evidence_span_ = 0.0;  // a (re)fit's window, until the detector's next valid update
   EstimatorStatus status_before_fit_;
   std::vector<StampedSample> backlog_;
   std::size_t backlog_head_ = 0, backlog_size_ = 0;

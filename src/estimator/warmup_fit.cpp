@@ -185,17 +185,22 @@ void WarmupFit::run() noexcept {
 void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   const int N = buffered;
   const double sigma2 = fit.sigma2_;
+  ++status.fits;
   if (refitting && !fit.fit_used_) {
     status.warming_up = false;
     refitting = false;
     window_samples = window_settle = 0;
     forget_history();
+    status.fitted_window = 0.0;
     status.last_reset_reason = kResetDiverged;
     return;
   }
   settling = transient = bridged = rearm = 0;
   outlier_run = 0;
-  if (fit.fit_used_) status.warmup_fit_used = true;
+  if (fit.fit_used_) {
+    status.warmup_fit_used = true;
+    status.fitted_window = (N - fit.settle_) * cfg.sample_time;
+  }
   build(fit.model_, fit.covariance_.empty() ? nullptr : &fit.covariance_, sigma2, fit.y_var_);
   if (sigma2 > 0.0) {
     e_var = e_short = e_var_good = sigma2;

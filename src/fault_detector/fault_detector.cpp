@@ -32,7 +32,8 @@
 //   clear_time: NOT (|z_q| > f sigma_threshold AND |rel_q| > f relative_threshold),
 //   f = clear_fraction; a failed test counts as back.
 // - Timers: a pending rise starts at the first valid update past the thresholds
-//   and matures at the first valid update at least hold_time (mode clock) later;
+//   (evidence_span before it, when that update gives one) and matures at the
+//   first valid update at least hold_time (mode clock) later;
 //   hold_time = 0 raises at once. Leaving the thresholds cancels it. The clear
 //   timer likewise restarts whenever the quantity re-enters the reduced box.
 //   below_since_ holds the start of whichever timer runs (rise when unflagged,
@@ -300,7 +301,8 @@ void FaultDetector::learn(std::size_t i, double now, const Eigen::Vector3d& x, c
 }
 
 void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
-                           const std::vector<ModalParameters>& std_dev, bool valid, std::vector<FlagChange>& changes) {
+                           const std::vector<ModalParameters>& std_dev, bool valid, std::vector<FlagChange>& changes,
+                           double evidence_span) {
   if (std_dev.size() != diagonal_.size())
     throw std::invalid_argument("FaultDetector::update: estimates for a different number of modes");
   for (std::size_t i = 0; i < diagonal_.size(); ++i) {
@@ -308,16 +310,17 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
     for (int q = 0; q < kQuantities; ++q)
       diagonal_[i](q, q) = std::isfinite(sd(q)) && sd(q) > 0.0 ? sd(q) * sd(q) : kNaN;
   }
-  update(t, value, diagonal_, valid, changes);
+  update(t, value, diagonal_, valid, changes, evidence_span);
 }
 
 void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
                            const std::vector<Eigen::Matrix3d>& covariance, bool valid,
-                           std::vector<FlagChange>& changes) {
+                           std::vector<FlagChange>& changes, double evidence_span) {
   const std::size_t n = modes_.size();
   if (value.size() != n || covariance.size() != n)
     throw std::invalid_argument("FaultDetector::update: estimates for a different number of modes");
   const bool t_ok = std::isfinite(t);
+  const double span = std::isfinite(evidence_span) && evidence_span > 0.0 ? evidence_span : 0.0;
 
   for (std::size_t i = 0; i < n; ++i) {
     const bool mode_valid = valid && t_ok && finite(value[i]);
@@ -394,8 +397,8 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
         }
         if (!s.pending) {
           s.pending = true;
-          s.since = t;
-          timer = now;
+          s.since = t - span;
+          timer = now - span;
         }
         if (now - timer >= th.hold_time - kTimeSlack) {
           s.flagged = true;
