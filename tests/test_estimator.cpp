@@ -464,7 +464,7 @@ struct SteppedBeam {
   Record record;
   double wn_before = 0.0, wn_after = 0.0;
 };
-SteppedBeam stepped_beam(double step, double burst, bool two_sines = false) {
+SteppedBeam stepped_beam(double step, double burst, bool two_sines = false, double ramp = 1.0 / 4096) {
   SteppedBeam b{load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/flexible-beam.yaml"), {}, {}};
   b.config.estimator.forgetting.assign(2, 0.9995);
   b.config.estimator.warmup_samples = 2 * 4096;
@@ -481,7 +481,7 @@ SteppedBeam stepped_beam(double step, double burst, bool two_sines = false) {
   for (auto& m : b.plant.modes) m.wn = m.zeta = m.gain = Trajectory{};
   b.wn_before = b.plant.modes[1].modal.wn;
   b.wn_after = (1.0 + step) * b.wn_before;
-  b.plant.modes[1].wn.points = {{10.0, b.wn_before}, {10.0 + 1.0 / 4096, b.wn_after}};
+  b.plant.modes[1].wn.points = {{10.0, b.wn_before}, {10.0 + ramp, b.wn_after}};
   b.record = simulate(b.plant, e).record;
   for (Eigen::Index k = 0; k < b.record.size(); ++k)
     if (b.record.t(k) >= 10.0 && b.record.t(k) < 10.0 + burst) b.record.y(k) *= 30.0;
@@ -547,6 +547,33 @@ TEST(RecursiveEstimator, ARefitLeavesAnUnchangedLightlyDampedModeWhereItWas) {
   EXPECT_NEAR(after.wn / before.wn, 1.0, 0.002);
   EXPECT_NEAR(after.zeta / before.zeta, 1.0, 0.02);
   EXPECT_NEAR(after.gain / before.gain, 1.0, 0.01);
+}
+
+// A ramp that outlasts the memory after the reset leaves no single model for
+// that window: its fit is a compromise that misfits by far more than the
+// noise, and the next memory is fitted instead, once the ramp is over.
+TEST(RecursiveEstimator, ARampThatOutlastsTheRefitWindowIsFittedOnTheWindowAfterIt) {
+  const SteppedBeam beam = stepped_beam(-0.08, 0.0, false, 0.8);
+  const Record& r = beam.record;
+  RecursiveEstimator est(beam.config.model, beam.config.estimator);
+  double refit_at = NAN, wn_at_refit = NAN, gain_at_refit = NAN;
+  const double suspension_gain = beam.plant.modes[0].modal.gain;
+  for (Eigen::Index k = 0; k < r.size(); ++k) {
+    est.step(Sample{r.t(k), r.u(k), r.y(k), r.r(k)});
+    if (std::isnan(refit_at) && refitted(est.status()) && !est.status().warming_up) {
+      refit_at = r.t(k);
+      wn_at_refit = est.mode(1).value.wn;
+      gain_at_refit = est.mode(0).value.gain;
+    }
+  }
+  std::printf("refit %.3f s after the ramp's start: flexible wn %.4f of the new value, suspension gain %.4f\n",
+              refit_at - 10.0, wn_at_refit / beam.wn_after, gain_at_refit / suspension_gain);
+  ASSERT_FALSE(std::isnan(refit_at)) << "no refit; resets " << est.status().resets << ": " << est.status().last_reset_reason << " final wn " << est.mode(1).value.wn / beam.wn_after;
+  EXPECT_GT(refit_at, 10.8) << "a window inside the ramp was taken";
+  EXPECT_LT(refit_at, 12.0);
+  EXPECT_NEAR(wn_at_refit / beam.wn_after, 1.0, 0.003);
+  EXPECT_NEAR(gain_at_refit / suspension_gain, 1.0, 0.01);
+  EXPECT_EQ(est.status().resets, 1u);
 }
 
 // An output burst trips the same reset, but once it is over the restored state

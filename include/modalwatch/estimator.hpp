@@ -289,6 +289,7 @@ class WarmupFit {
   std::vector<Eigen::MatrixXd> covariance_;
   double sigma2_ = 0.0, y_var_ = 0.0;
   bool fit_used_ = false;
+  bool unsettled_ = false;  // a refit's: the change is real, but the window did not fit to the noise level
 };
 
 class RecursiveEstimator {

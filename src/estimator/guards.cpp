@@ -184,6 +184,7 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
     const Eigen::Index first = (ring_head - before + wt.size()) % wt.size();
     for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) std::rotate(w->data(), w->data() + first, w->data() + w->size());
     refit_armed = true;
+    refit_retries = 0;
     buffered = static_cast<int>(before);
     // Where the ring holds less, the samples after the reset make up the
     // rest, up to the restarted filters' own transient.

@@ -32,6 +32,9 @@ inline constexpr char kResetRefit[] =
 // part, at most a warm-up window, after the transient at its start, up to this
 // many warm-up windows.
 inline constexpr int kRefitTransientWindows = 3;
+// A refit whose window the plant still changed in is tried again on the next
+// window this many times.
+inline constexpr int kRefitRetries = 3;
 
 struct WarmupFit::Context {
   AdditiveModel initial;
@@ -51,6 +54,7 @@ struct RecursiveEstimator::Impl {
   bool refitting = false;              // the window is a refit's
   int window_samples = 0;              // the window being filled is complete at this many samples ...
   int window_settle = 0;               // ... of which the first ones only drive the fit's prefilters
+  int refit_retries = 0;               // windows tried again since the divergence
   std::uint64_t warm_since_sample = 0;  // status.samples when the last (re)fit was applied
   std::vector<detail::Block> blocks;
   std::vector<detail::BlockFilters> snapshot;  // filters at t_{k-1}, for refinements

@@ -37,21 +37,31 @@ namespace {
 // - a fit no closer to the data than the last good state says nothing new:
 //   its output error on the fitted part must be below a quarter of that
 //   state's (half its RMS), where a change that tripped the divergence reset
-//   left ten times the noise level or more.
-bool refit_acceptable(const Record& window, Eigen::Index settle, const AdditiveModel& start, double noise_variance,
-                      const FitResult& fit, const EstimatorSettings& cfg) {
+//   left ten times the noise level or more;
+// - a window the plant still changed in (a ramp) has no single model, and
+//   the fit's compromise lands in whichever directions the excitation leaves
+//   loose. Such a window is `unsettled`, and the next one is fitted instead
+//   (finish_warmup): the restored state's misfit still grows (by more than
+//   a quarter from the first half to the second), or the fit does not
+//   describe the window to the level at which the restored state would
+//   count as settled.
+enum class RefitVerdict { accepted, refused, unsettled };
+
+RefitVerdict refit_verdict(const Record& window, Eigen::Index settle, const AdditiveModel& start,
+                           double noise_variance, const FitResult& fit, const EstimatorSettings& cfg) {
+  constexpr auto refused = RefitVerdict::refused;
   constexpr double kRefitFrequencyRatio = 1.5;
-  if (!(fit.information_condition <= FitResult::kPoorlyDetermined)) return false;
+  if (!(fit.information_condition <= FitResult::kPoorlyDetermined)) return refused;
   const auto& before = start.submodels;
   const auto& after = fit.model.submodels;
   for (std::size_t i = 0; i < before.size(); ++i) {
     if (!before[i].is_resonance() || !after[i].is_resonance()) continue;
     const double w0 = modal_parameters(before[i]).wn, w1 = modal_parameters(after[i]).wn;
-    if (!(w1 < kRefitFrequencyRatio * w0 && w0 < kRefitFrequencyRatio * w1)) return false;
+    if (!(w1 < kRefitFrequencyRatio * w0 && w0 < kRefitFrequencyRatio * w1)) return refused;
     for (std::size_t j = 0; j < i; ++j)
       if (before[j].is_resonance() && after[j].is_resonance() &&
           (modal_parameters(before[j]).wn < w0) != (modal_parameters(after[j]).wn < w1))
-        return false;
+        return refused;
   }
   const double T = window.sample_time();
   Eigen::VectorXd y_start;
@@ -62,15 +72,17 @@ bool refit_acceptable(const Record& window, Eigen::Index settle, const AdditiveM
     y_start = simulate_model(start, window.u, T);
   }
   const Eigen::Index n = window.y.size() - settle;
-  if (n < 2 || fit.simulated.size() != window.y.size()) return false;
+  if (n < 2 || fit.simulated.size() != window.y.size()) return refused;
   const Eigen::Index half = n / 2;
   const double e_first = (window.y.segment(settle, half) - y_start.segment(settle, half)).squaredNorm() / half;
   const double e_second = (window.y.tail(n - half) - y_start.tail(n - half)).squaredNorm() / (n - half);
   const double settled = 0.25 * cfg.divergence_ratio * cfg.divergence_ratio * noise_variance;
-  if (!(e_second > settled && e_second > 0.5 * e_first)) return false;
+  if (!(e_second > settled && e_second > 0.5 * e_first)) return refused;
   const double e_start = (window.y.tail(n) - y_start.tail(n)).squaredNorm();
   const double e_fit = (window.y.tail(n) - fit.simulated.tail(n)).squaredNorm();
-  return e_fit < 0.25 * e_start;
+  constexpr double kStillChanging = 1.25;  // the misfit's growth from the first half to the second
+  if (!(e_fit < settled * n) || e_second > kStillChanging * e_first) return RefitVerdict::unsettled;
+  return e_fit < 0.25 * e_start ? RefitVerdict::accepted : refused;
 }
 
 }  // namespace
@@ -111,7 +123,10 @@ void WarmupFit::run() noexcept {
         const auto usable = [&](const FitResult& f) {
           bool ok = f.model.beta().allFinite() && f.covariance.allFinite() && f.noise_variance > 0.0;
           for (const auto& s : f.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
-          return ok && (!refit_ || refit_acceptable(window, settle_, initial, context_->noise_variance, f, cfg));
+          if (!ok || !refit_) return ok;
+          const RefitVerdict v = refit_verdict(window, settle_, initial, context_->noise_variance, f, cfg);
+          unsettled_ = unsettled_ || v == RefitVerdict::unsettled;
+          return v == RefitVerdict::accepted;
         };
         // A refit starts from the state that tracked each mode; the unfactored
         // start (which may find the changed plant where that start does not)
@@ -189,10 +204,21 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   if (refitting && !fit.fit_used_) {
     status.warming_up = false;
     refitting = false;
-    window_samples = window_settle = 0;
-    forget_history();
     status.fitted_window = 0.0;
     status.last_reset_reason = kResetDiverged;
+    if (fit.unsettled_ && refit_retries < kRefitRetries && settling > 0) {
+      // The next memory is the next window; this one's end drives its prefilters.
+      ++refit_retries;
+      const Eigen::Index keep = std::min<Eigen::Index>(window_settle, N);
+      for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) std::copy(w->data() + N - keep, w->data() + N, w->data());
+      buffered = static_cast<int>(keep);
+      window_settle = static_cast<int>(keep);
+      window_samples = window_settle + refit_samples();
+      refit_armed = true;
+      return;
+    }
+    window_samples = window_settle = 0;
+    forget_history();
     return;
   }
   settling = transient = bridged = rearm = 0;
