@@ -143,6 +143,11 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
                                 std::to_string(initial.n_inputs()) + " (several inputs are for fit and diagnose)");
   for (const auto& s : initial.submodels) {
     s.check();
+    // Its per-sample filter bank gives b_k the k-th derivative of the input only.
+    if (s.output_derivatives != 0)
+      throw std::invalid_argument("estimator: the recursive estimator (track, the daemon) takes a position output; "
+                                  "submodel '" + s.name + "' measures " + output_kind_name(s.output_derivatives) +
+                                  " (model.output velocity and acceleration are for fit and diagnose)");
     if (s.n + s.rigid_poles > kMaxFilterOrder || s.n_theta() > kMaxTheta)
       throw std::invalid_argument("estimator: submodel '" + s.name + "' exceeds the maximum order");
   }
