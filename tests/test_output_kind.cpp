@@ -1,0 +1,376 @@
+// What the sensor measures (model.output): the measured output is p^z times
+// the position response, z = 1 for a velocity sensor and 2 for an
+// accelerometer. wn, zeta and the gain b0 keep describing the position
+// response, so a plant measured by any sensor is identified as the same modes;
+// the nonlinear effects act on the position (and its velocity), not on y.
+#include <algorithm>
+#include <cmath>
+#include <complex>
+#include <cstdio>
+#include <numbers>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "config_support.hpp"
+#include "simulation_support.hpp"
+
+#include "modalwatch/diagnose.hpp"
+#include "modalwatch/estimator.hpp"
+#include "modalwatch/initial_modes.hpp"
+#include "modalwatch/physical.hpp"
+#include "modalwatch/simulator.hpp"
+#include "modalwatch/srivc.hpp"
+
+namespace modalwatch {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+// ---------------------------------------------------------------- the model
+
+TEST(OutputKind, TheMeasuredResponseIsTheZthDerivativeOfThePositions) {
+  const ModalParameters modal{2 * kPi * 3.0, 0.04, 0.7};
+  const Submodel position = make_mode("m", modal);
+  for (int z = 1; z <= 2; ++z) {
+    const Submodel measured = make_mode("m", modal, z);
+    for (const double w : {0.3, 5.0, modal.wn, 80.0}) {
+      const std::complex<double> expected = std::pow(std::complex<double>(0.0, w), z) * position.response(w);
+      EXPECT_NEAR(std::abs(measured.response(w) - expected), 0.0, 1e-12 * std::abs(expected)) << "z " << z << " w " << w;
+    }
+    // The modal view is the position's whatever the sensor.
+    EXPECT_EQ(modal_parameters(measured), modal_parameters(position));
+  }
+  // An accelerometer on a rigid body b0 / p^2 sees the constant b0, at DC too.
+  const Submodel body = make_rigid_body("body", 0.25, 2, 2);
+  EXPECT_TRUE(body.is_feedthrough());
+  EXPECT_EQ(body.response(0.0), std::complex<double>(0.25));
+  EXPECT_EQ(body.response(7.0), std::complex<double>(0.25));
+  // A velocity sensor on it sees b0 / p.
+  EXPECT_NEAR(std::abs(make_rigid_body("body", 0.25, 2, 1).response(5.0) - std::complex<double>(0.0, -0.05)), 0.0,
+              1e-15);
+}
+
+TEST(OutputKind, AnAccelerationOfAComplexResidueIsImproperAndRefused) {
+  Submodel s = make_mode("m", {3.0, 0.05, 1.0}, 1);
+  s.m = 1;
+  s.b.conservativeResize(2);
+  s.b(1) = 0.1;
+  EXPECT_NO_THROW(s.check());  // velocity: (b0 + b1 p) p / A, biproper
+  s.output_derivatives = 2;
+  EXPECT_THROW(s.check(), std::invalid_argument);
+  EXPECT_THROW(make_rigid_body("body", 1.0, 1, 2).check(), std::invalid_argument);
+  // Same coefficients, another sensor: another submodel.
+  EXPECT_FALSE(make_mode("m", {3.0, 0.05, 1.0}, 2) == make_mode("m", {3.0, 0.05, 1.0}, 0));
+}
+
+// ---------------------------------------------------------------- fit from the data alone
+
+// Three modes between 2 and 15 Hz at 100 Hz, peaks of comparable height as
+// acceleration (the accelerometer lifts the upper modes by wn^2).
+std::vector<ModalParameters> three_modes() {
+  return {{2 * kPi * 2.0, 0.03, 1.0}, {2 * kPi * 7.0, 0.02, -0.3}, {2 * kPi * 15.0, 0.04, 0.1}};
+}
+
+PlantSpec measured_plant(int z, bool rigid_body) {
+  PlantSpec plant = test_support::plant_of(three_modes(), 30.0);
+  for (PlantMode& m : plant.modes) m.submodel.output_derivatives = z;
+  if (rigid_body) {
+    PlantMode body;
+    body.resonant = false;
+    // 1 / mass; below the modes' peaks it would drown in the noise they set at 30 dB.
+    body.submodel = make_rigid_body("body", 100.0, 2, z);
+    plant.modes.push_back(body);
+  }
+  return plant;
+}
+
+Record measured_record(int z, bool rigid_body) {
+  return simulate(measured_plant(z, rigid_body), test_support::open_loop_prbs(0.01, 120.0, 5, 1, 14)).record;
+}
+
+// The modes from the record's frequency response alone (fit --modes 3), read
+// as a sensor of z derivatives; a rigid body, when asked, starts at zero gain.
+FitResult fit_from_data(const Record& data, int z, bool rigid_body) {
+  AdditiveModel start = initial_modes(data, 3, false, {}, z);
+  EXPECT_EQ(start.submodels.size(), 3u);
+  if (rigid_body) start.submodels.push_back(make_rigid_body("body", 0.0, 2, z));
+  std::vector<ModeFinding> findings;
+  return fit_physical(data, start, SrivcOptions{}, findings);
+}
+
+std::vector<ModalParameters> fitted_modes(const AdditiveModel& model) {
+  std::vector<ModalParameters> got;
+  for (const Submodel& s : model.submodels)
+    if (s.is_resonance()) got.push_back(modal_parameters(s));
+  std::sort(got.begin(), got.end(), [](auto& a, auto& b) { return a.wn < b.wn; });
+  return got;
+}
+
+// Every true mode within 1 % in wn, 10 % in zeta and 5 % in gain.
+bool within_bounds(const std::vector<ModalParameters>& got, bool report) {
+  const std::vector<ModalParameters> truth = three_modes();
+  if (got.size() != truth.size()) {
+    if (report) ADD_FAILURE() << got.size() << " modes fitted, 3 true";
+    return false;
+  }
+  bool ok = true;
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    const bool wn = std::abs(got[i].wn - truth[i].wn) <= 0.01 * truth[i].wn;
+    const bool zeta = std::abs(got[i].zeta - truth[i].zeta) <= 0.10 * truth[i].zeta;
+    const bool gain = std::abs(got[i].gain - truth[i].gain) <= 0.05 * std::abs(truth[i].gain);
+    std::printf("  mode %zu: wn %.5g (true %.5g), zeta %.4g (%.4g), gain %.4g (%.4g)\n", i + 1, got[i].wn,
+                truth[i].wn, got[i].zeta, truth[i].zeta, got[i].gain, truth[i].gain);
+    if (report) {
+      EXPECT_TRUE(wn) << "mode " << i + 1 << " wn " << got[i].wn << " true " << truth[i].wn;
+      EXPECT_TRUE(zeta) << "mode " << i + 1 << " zeta " << got[i].zeta << " true " << truth[i].zeta;
+      EXPECT_TRUE(gain) << "mode " << i + 1 << " gain " << got[i].gain << " true " << truth[i].gain;
+    }
+    ok = ok && wn && zeta && gain;
+  }
+  return ok;
+}
+
+struct SensorCase {
+  int z;
+  bool rigid_body;
+};
+
+void PrintTo(const SensorCase& c, std::ostream* os) {
+  *os << output_kind_name(c.z) << (c.rigid_body ? " with a rigid body" : "");
+}
+
+class FitFromTheData : public ::testing::TestWithParam<SensorCase> {};
+
+TEST_P(FitFromTheData, RecoversEveryModeOfTheSensorsPlant) {
+  const SensorCase c = GetParam();
+  const Record data = measured_record(c.z, c.rigid_body);
+  const FitResult fit = fit_from_data(data, c.z, c.rigid_body);
+  for (const Submodel& s : fit.model.submodels) EXPECT_EQ(s.output_derivatives, c.z) << s.name;
+  std::printf("%s: fit %.2f %%\n", output_kind_name(c.z), fit.fit_percent);
+  EXPECT_TRUE(within_bounds(fitted_modes(fit.model), true));
+  if (c.rigid_body) {
+    const Submodel& body = fit.model.submodels.back();
+    ASSERT_EQ(body.rigid_poles, 2);
+    EXPECT_NEAR(body.b(0), 100.0, 0.05 * 100.0);
+  }
+}
+
+std::string sensor_name(const ::testing::TestParamInfo<SensorCase>& p) {
+  return std::string(output_kind_name(p.param.z)) + (p.param.rigid_body ? "WithRigidBody" : "");
+}
+
+INSTANTIATE_TEST_SUITE_P(Sensors, FitFromTheData,
+                         ::testing::Values(SensorCase{2, false}, SensorCase{2, true}, SensorCase{1, false}),
+                         sensor_name);
+
+// The accelerometer's record read as positions: three modes b0 / A cannot be
+// p^2 b0 / A (that is a feedthrough plus numerators b0' + b1' p). The poles
+// still come out (within 1 % in wn, measured), but every gain is off by more
+// than a factor 10 (about wn^2, with the wrong sign for the first two), and
+// the fit follows the data 16 points worse (80.4 % against 96.8 %).
+TEST(OutputKind, AnAccelerationFittedAsPositionMissesTheGains) {
+  const Record data = measured_record(2, false);
+  const FitResult as_acceleration = fit_from_data(data, 2, false);
+  const FitResult as_position = fit_from_data(data, 0, false);
+  std::printf("fit as acceleration %.2f %%, as position %.2f %%\n", as_acceleration.fit_percent,
+              as_position.fit_percent);
+  const std::vector<ModalParameters> got = fitted_modes(as_position.model), truth = three_modes();
+  EXPECT_FALSE(within_bounds(got, false));
+  ASSERT_EQ(got.size(), truth.size());
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    EXPECT_NEAR(got[i].wn, truth[i].wn, 0.01 * truth[i].wn) << "mode " << i + 1;
+    EXPECT_GT(std::abs(got[i].gain), 10.0 * std::abs(truth[i].gain)) << "mode " << i + 1;
+  }
+  EXPECT_LT(as_position.fit_percent, as_acceleration.fit_percent - 10.0);
+}
+
+// ---------------------------------------------------------------- the simulator and the effects
+
+// x'' + 2 zeta wn x' + wn^2 x + c' x^3 = wn^2 b0 u (c' = wn^2 b0 c) by RK4 with
+// u held over each sample, output the acceleration x'' at the samples.
+Eigen::VectorXd duffing_acceleration(const ModalParameters& m, double c, const Eigen::VectorXd& u, double T) {
+  const int sub = 20;
+  const double h = T / sub;
+  double x = 0.0, v = 0.0;
+  const auto accel = [&](double xx, double vv, double uk) {
+    return m.wn * m.wn * m.gain * (uk - c * xx * xx * xx) - 2.0 * m.zeta * m.wn * vv - m.wn * m.wn * xx;
+  };
+  Eigen::VectorXd y(u.size());
+  for (Eigen::Index k = 0; k < u.size(); ++k) {
+    y(k) = accel(x, v, u(k));
+    for (int s = 0; s < sub; ++s) {
+      const double k1x = v, k1v = accel(x, v, u(k));
+      const double k2x = v + 0.5 * h * k1v, k2v = accel(x + 0.5 * h * k1x, v + 0.5 * h * k1v, u(k));
+      const double k3x = v + 0.5 * h * k2v, k3v = accel(x + 0.5 * h * k2x, v + 0.5 * h * k2v, u(k));
+      const double k4x = v + h * k3v, k4v = accel(x + h * k3x, v + h * k3v, u(k));
+      x += h / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x);
+      v += h / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
+    }
+  }
+  return y;
+}
+
+TEST(OutputKind, TheSimulatorsAccelerationWithACubicStiffnessIsTheDuffingOscillators) {
+  const ModalParameters modal{2 * kPi * 2.0, 0.05, 1.0};
+  const double T = 1e-3, c = 0.2;
+  const Eigen::Index N = 5000;
+  Eigen::VectorXd u(N);
+  for (Eigen::Index k = 0; k < N; ++k) {
+    const double t = static_cast<double>(k) * T;
+    u(k) = std::sin(2 * kPi * 1.5 * t) + 0.7 * std::sin(2 * kPi * 3.1 * t + 0.4);
+  }
+  PlantSpec plant;
+  PlantMode mode;
+  mode.modal = modal;
+  mode.submodel = make_mode("m", modal, 2);
+  plant.modes.push_back(mode);
+  plant.effects.cubic = c;
+  ExperimentSpec ex;
+  ex.sample_time = T;
+  ex.duration = static_cast<double>(N) * T;
+  ex.excitation_samples = u;
+  const Eigen::VectorXd y = simulate(plant, ex).y_clean;
+  const Eigen::VectorXd reference = duffing_acceleration(modal, c, u, T);
+  // The cubic branch is sampled and held (effects.hpp) where the reference's is
+  // continuous: at 500 samples per period they agree to 0.5 % of the output.
+  const double rms = std::sqrt(reference.squaredNorm() / static_cast<double>(N));
+  const double error = std::sqrt((y - reference).squaredNorm() / static_cast<double>(N));
+  std::printf("acceleration rms %.4g, error rms %.3g (%.3g %%)\n", rms, error, 100.0 * error / rms);
+  EXPECT_LT(error, 5e-3 * rms);
+  // The cubic matters: without it the acceleration is another one.
+  const Eigen::VectorXd linear = duffing_acceleration(modal, 0.0, u, T);
+  EXPECT_GT(std::sqrt((linear - reference).squaredNorm() / static_cast<double>(N)), 0.1 * rms);
+}
+
+// diagnose on an accelerometer's record of two modes with a cubic stiffness,
+// from the two modes off by 5-20 %: the cubic ranks first and comes out
+// within 10 % of the truth.
+TEST(OutputKind, DiagnoseFindsTheCubicStiffnessBehindAnAccelerometer) {
+  const double T = 0.01, cubic = 0.02;
+  PlantSpec plant;
+  for (const ModalParameters& p : {ModalParameters{5.0, 0.05, 1.0}, ModalParameters{20.0, 0.03, 0.5}}) {
+    PlantMode m;
+    m.modal = p;
+    m.submodel = make_mode("m" + std::to_string(plant.modes.size() + 1), p, 2);
+    plant.modes.push_back(m);
+  }
+  plant.effects.cubic = cubic;
+  plant.snr_db = 60.0;
+  const auto record = [&](std::uint64_t seed, double duration) {
+    ExperimentSpec ex;
+    ex.sample_time = T;
+    ex.duration = duration;
+    ex.seed = seed;
+    ex.excitation.kind = SignalSpec::Kind::multisine;
+    ex.excitation.f_min_hz = 0.1;
+    ex.excitation.f_max_hz = 10.0;
+    ex.excitation.period_s = 10.0;
+    ex.excitation.rms = 1.0;
+    ex.excitation.seed = seed;
+    return simulate(plant, ex).record;
+  };
+  AdditiveModel configured;
+  configured.submodels.push_back(make_mode("m1", {5.3, 0.08, 0.8}, 2));
+  configured.submodels.push_back(make_mode("m2", {19.0, 0.05, 0.6}, 2));
+  const DiagnoseResult r = diagnose(record(11, 30.0), record(12, 15.0), configured, LoopSpec{}, DiagnoseOptions{});
+  ASSERT_GE(r.steps.size(), 2u) << r.stop_reason;
+  ASSERT_FALSE(r.steps[0].ranking.empty());
+  EXPECT_EQ(r.steps[0].ranking.front().kind, EffectKind::cubic);
+  const DiagnoseStep& added = r.steps[1];
+  ASSERT_EQ(added.effect, "cubic");
+  ASSERT_TRUE(added.model.effects.cubic_on);
+  std::printf("cubic %.5g (true %.5g)\n", added.model.effects.cubic, cubic);
+  EXPECT_NEAR(added.model.effects.cubic, cubic, 0.1 * cubic);
+  for (const Submodel& s : added.model.linear.submodels) EXPECT_EQ(s.output_derivatives, 2) << s.name;
+  EXPECT_LE(added.validation_rms, r.steps[0].validation_rms / 5.0);
+}
+
+// ---------------------------------------------------------------- the recursive estimator
+
+TEST(OutputKind, TheRecursiveEstimatorRefusesAVelocityOrAccelerationOutput) {
+  EstimatorSettings settings;
+  settings.sample_time = 0.01;
+  for (int z = 1; z <= 2; ++z) {
+    AdditiveModel model;
+    model.submodels.push_back(make_mode("m1", {10.0, 0.05, 1.0}, z));
+    try {
+      RecursiveEstimator estimator(model, settings);
+      ADD_FAILURE() << "z = " << z << " accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(std::string("measures ") + output_kind_name(z)), std::string::npos)
+          << e.what();
+      EXPECT_NE(std::string(e.what()).find("are for fit and diagnose"), std::string::npos) << e.what();
+    }
+  }
+  AdditiveModel position;
+  position.submodels.push_back(make_mode("m1", {10.0, 0.05, 1.0}));
+  EXPECT_NO_THROW(RecursiveEstimator(position, settings));
+}
+
+}  // namespace
+}  // namespace modalwatch
+
+// ---------------------------------------------------------------- the configuration
+
+namespace {
+
+const std::string kAccelerometer =
+    "sample_rate_hz: 100\n"                                // 1
+    "model:\n"                                             // 2
+    "  output: acceleration\n"                             // 3
+    "  submodels:\n"                                       // 4
+    "    - {name: m1, wn: 5, zeta: 0.05, gain: 1}\n"       // 5
+    "    - {name: body, kind: rigid_body, gain: 0.2}\n"    // 6
+    "plant:\n"                                             // 7
+    "  noise_variance: 0.01\n"                             // 8
+    "  modes:\n"                                           // 9
+    "    - {name: m1, wn: 5, zeta: 0.05, gain: 1}\n"       // 10
+    "    - {name: d, kind: feedthrough, gain: 0.1}\n";     // 11
+
+TEST(OutputKindConfig, TheKeyGivesEverySubmodelAndThePlantTheSensor) {
+  const Config c = parse_config(kAccelerometer, "test.yaml");
+  EXPECT_EQ(c.output_derivatives, 2);
+  for (const auto& s : c.model.submodels) EXPECT_EQ(s.output_derivatives, 2) << s.name;
+  for (const auto& m : c.plant->modes) EXPECT_EQ(m.submodel.output_derivatives, 2) << m.submodel.name;
+  // An accelerometer's constant is a rigid body b0 / p^2: feedthrough and rigid body agree.
+  EXPECT_EQ(c.plant->modes[1].submodel.rigid_poles, 2);
+  EXPECT_TRUE(c.model.submodels[1].is_feedthrough());
+  // Absent: position.
+  const Config p = parse_config(edit(kAccelerometer, "  output: acceleration\n", ""), "test.yaml");
+  EXPECT_EQ(p.output_derivatives, 0);
+  for (const auto& s : p.model.submodels) EXPECT_EQ(s.output_derivatives, 0) << s.name;
+  EXPECT_EQ(parse_config(edit(kAccelerometer, "acceleration", "velocity"), "test.yaml").output_derivatives, 1);
+}
+
+TEST(OutputKindConfig, AWrongValueNamesTheKeyAndLine) {
+  EXPECT_EQ(parse_error(edit(kAccelerometer, "output: acceleration", "output: force")),
+            "test.yaml:3: key 'model.output': must be one of position, velocity, acceleration (got force)");
+  // b0 + b1 p measured as acceleration is improper.
+  const std::string tf = edit(kAccelerometer, "{name: m1, wn: 5, zeta: 0.05, gain: 1}",
+                              "{name: m1, kind: transfer_function, a: [0.02, 0.04], b: [1, 0.1]}");
+  const std::string msg = parse_error(tf);
+  EXPECT_CONTAINS(msg, "test.yaml:5: key 'model.submodels[0].b': m + z = 1 + 2 exceeds n + l = 2 + 0");
+  EXPECT_CONTAINS(msg, "improper for model.output acceleration");
+  EXPECT_CONTAINS(parse_error(edit(kAccelerometer, "kind: rigid_body, gain: 0.2", "kind: rigid_body, gain: 0.2, "
+                                                                                   "rigid_poles: 1")),
+                  "test.yaml:6: key 'model.submodels[1].rigid_poles': a rigid body b0 / p^1 measured as acceleration "
+                  "is improper");
+}
+
+TEST(OutputKindConfig, TheWriterRoundTripsTheSensorAndLeavesPositionUnwritten) {
+  for (const std::string kind : {"velocity", "acceleration"}) {
+    const Config c = parse_config(edit(kAccelerometer, "acceleration", kind), "test.yaml");
+    const std::string yaml = modalwatch::config_to_yaml(c, c.model);
+    EXPECT_CONTAINS(yaml, "output: " + kind);
+    const Config back = parse_config(yaml, "test.yaml");
+    EXPECT_EQ(back.model, c.model) << yaml;
+    EXPECT_EQ(back.output_derivatives, c.output_derivatives);
+  }
+  const Config p = parse_config(edit(kAccelerometer, "  output: acceleration\n", ""), "test.yaml");
+  EXPECT_EQ(modalwatch::config_to_yaml(p, p.model).find("output:"), std::string::npos);
+}
+
+}  // namespace
