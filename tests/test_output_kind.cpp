@@ -20,6 +20,8 @@
 #include "modalwatch/diagnose.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/initial_modes.hpp"
+#include "modalwatch/io/config.hpp"
+#include "modalwatch/io/csv.hpp"
 #include "modalwatch/physical.hpp"
 #include "modalwatch/simulator.hpp"
 #include "modalwatch/srivc.hpp"
@@ -308,6 +310,55 @@ TEST(OutputKind, TheRecursiveEstimatorRefusesAVelocityOrAccelerationOutput) {
   AdditiveModel position;
   position.submodels.push_back(make_mode("m1", {10.0, 0.05, 1.0}));
   EXPECT_NO_THROW(RecursiveEstimator(position, settings));
+}
+
+// ---------------------------------------------------------------- the command line
+
+class OutputKindCli : public test_support::ScratchDir {
+ protected:
+  static bool contains(const std::string& text, const std::string& what) {
+    return text.find(what) != std::string::npos;
+  }
+  std::string accelerometer_record() const {
+    const Record r = measured_record(2, false);
+    Eigen::MatrixXd table(r.size(), 3);
+    table << r.t, r.u, r.y;
+    write_table(path("acc.csv"), {"t", "u", "y"}, table);
+    return path("acc.csv");
+  }
+};
+
+// `fit --modes 3 --output acceleration`: the modes from the accelerometer's
+// record alone, written back with model.output, which `track` refuses and a
+// contradicting --output too.
+TEST_F(OutputKindCli, FitTakesTheSensorFromTheOptionAndWritesItBack) {
+  const std::string data = accelerometer_record();
+  const std::string cfg = write("modes.yaml", "sample_rate_hz: 100\nmodel:\n  modes: 1\n");
+  const auto fit = test_support::run_cli("fit --config " + cfg + " --data " + data +
+                                         " --modes 3 --output acceleration --out " + path("fitted.yaml"));
+  ASSERT_EQ(fit.code, 0) << fit.output;
+  EXPECT_TRUE(contains(fit.output, "output: acceleration; gain is the position response's DC gain b0")) << fit.output;
+  const Config fitted = load_config(path("fitted.yaml"));
+  EXPECT_EQ(fitted.output_derivatives, 2);
+  std::vector<ModalParameters> got;
+  for (const Submodel& s : fitted.model.submodels) {
+    EXPECT_EQ(s.output_derivatives, 2) << s.name;
+    got.push_back(modal_parameters(s));
+  }
+  std::sort(got.begin(), got.end(), [](auto& a, auto& b) { return a.wn < b.wn; });
+  EXPECT_TRUE(within_bounds(got, true));
+
+  const auto track = test_support::run_cli("track --config " + path("fitted.yaml") + " --data " + data + " --out " +
+                                           path("est.csv"));
+  EXPECT_EQ(track.code, 2) << track.output;
+  EXPECT_TRUE(contains(track.output, "measures acceleration")) << track.output;
+  EXPECT_FALSE(std::filesystem::exists(path("est.csv")));
+
+  const auto contradicting = test_support::run_cli("fit --config " + path("fitted.yaml") + " --data " + data +
+                                                   " --output velocity");
+  EXPECT_NE(contradicting.code, 0) << contradicting.output;
+  EXPECT_TRUE(contains(contradicting.output, "the configured submodels measure acceleration (model.output"))
+      << contradicting.output;
 }
 
 }  // namespace

@@ -283,9 +283,10 @@ Candidate candidate_mode(const AugmentedModel& current, const Eigen::VectorXd& y
 Candidate candidate_rigid_body(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
   for (const auto& s : current.linear.submodels)
     if (s.rigid_poles > 0) return invalid(EffectKind::rigid_body, "the model has a rigid body");
+  const int z = current.linear.output_derivatives();
+  if (z == 2) return invalid(EffectKind::rigid_body, "an accelerometer sees a rigid body as the feedthrough b0");
   const Record& d = ctx.est.data;
   const double D = d.t(d.size() - 1) - d.t(0);
-  const int z = current.linear.output_derivatives();
   // b0 / p^2 measured as p^z: a response growing as t^(2-z).
   const double h = 1e-3 * rms_or_one(d.y) / (rms_or_one(d.u) * std::max(z == 0 ? D * D : std::pow(D, 2 - z), 1e-12));
   AugmentedModel m = current;
