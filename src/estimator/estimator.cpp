@@ -60,16 +60,17 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.n = s.n;
     b.m = s.m;
     b.l = s.rigid_poles;
+    b.z = s.output_derivatives;
     b.nt = s.n_theta();
-    b.biproper = b.m == b.n + b.l;
+    b.biproper = b.m + b.z == b.n + b.l;
+    b.b0_position = b.m == 0 && b.z == 0;
+    b.position_mode = b.n == 2 && b.b0_position;
     b.ws = time_scale(s);
     b.lambda = cfg.forgetting.empty() ? 1.0 : cfg.forgetting[i];
     b.random_walk = cfg.random_walks.empty() ? cfg.random_walk : cfg.random_walks[i];
     const double min_memory = cfg.min_memories.empty() ? cfg.min_memory : cfg.min_memories[i];
     b.forget_per_decay = min_memory > 0.0 ? cfg.update_divisor * T / min_memory : 0.0;
-    b.scale.resize(b.nt);
-    for (int j = 1; j <= b.n; ++j) b.scale(j - 1) = std::pow(b.ws, j);
-    for (int k = 0; k <= b.m; ++k) b.scale(b.n + k) = std::pow(b.ws, k - b.l);
+    b.set_scale();
     b.theta = s.theta().cwiseProduct(Eigen::VectorXd(b.scale));
     // P(t0): given, from the warm-up fit, or relative to the parameter size.
     b.P = ThetaMat::Zero(b.nt, b.nt);
@@ -143,11 +144,6 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
                                 std::to_string(initial.n_inputs()) + " (several inputs are for fit and diagnose)");
   for (const auto& s : initial.submodels) {
     s.check();
-    // Its per-sample filter bank gives b_k the k-th derivative of the input only.
-    if (s.output_derivatives != 0)
-      throw std::invalid_argument("estimator: the recursive estimator (track, the daemon) takes a position output; "
-                                  "submodel '" + s.name + "' measures " + output_kind_name(s.output_derivatives) +
-                                  " (model.output velocity and acceleration are for fit and diagnose)");
     if (s.n + s.rigid_poles > kMaxFilterOrder || s.n_theta() > kMaxTheta)
       throw std::invalid_argument("estimator: submodel '" + s.name + "' exceeds the maximum order");
   }

@@ -242,6 +242,11 @@ std::uint64_t checkpoint_fingerprint(const Config& config) {
     f.u64(static_cast<std::uint64_t>(s.n));
     f.u64(static_cast<std::uint64_t>(s.m));
     f.u64(static_cast<std::uint64_t>(s.rigid_poles));
+    // A velocity or acceleration sensor (a position's fingerprint is as before it could be another).
+    if (s.output_derivatives != 0) {
+      f.str("output");
+      f.u64(static_cast<std::uint64_t>(s.output_derivatives));
+    }
     const double lambda = i < config.estimator.forgetting.size() ? config.estimator.forgetting[i]
                           : i < config.submodel_settings.size()  ? config.submodel_settings[i].forgetting
                                                                  : 1.0;
