@@ -22,6 +22,7 @@
 #include "modalwatch/diagnose.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/initial_modes.hpp"
+#include "modalwatch/io/checkpoint.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/records.hpp"
@@ -376,6 +377,50 @@ TEST(OutputKind, NoiseFreeAccelerometerDataKeepTheTrueParametersExactly) {
     }
     EXPECT_EQ(est.status().updates, 4000u);
   }
+}
+
+// A checkpoint of an accelerometer's estimator: the state holds the estimate,
+// the sensor comes from the configuration (its fingerprint tells the two
+// sensors apart), and the restored estimator goes on as one that saw the same
+// gap without a restart.
+TEST(OutputKind, AnAccelerometersCheckpointRestoresTheEstimatorOfThatSensor) {
+  const Config c = test_support::paper_config();
+  PlantSpec plant = *c.plant;
+  AdditiveModel start = c.model;
+  for (std::size_t i = 0; i < plant.modes.size(); ++i) {
+    PlantMode& m = plant.modes[i];
+    m.submodel.output_derivatives = 2;
+    m.modal.gain /= m.modal.wn * m.modal.wn;
+    start.submodels[i].output_derivatives = 2;
+    start.submodels[i].b(0) /= std::pow(m.modal.wn, 2);
+  }
+  const Record r = simulate(plant, *c.experiment).record;
+  const EstimatorSettings settings = test_support::with_warmup_fit(c.estimator);
+  const Eigen::Index half = r.size() / 2;
+  const auto sample = [&](Eigen::Index k) { return Sample{r.t(k) + (k >= half ? 2.0 : 0.0), r.u(k), r.y(k), r.r(k)}; };
+  RecursiveEstimator gapped(start, settings), first(start, settings);
+  for (Eigen::Index k = 0; k < half; ++k) {
+    gapped.step(sample(k));
+    first.step(sample(k));
+  }
+  Checkpoint written;
+  written.estimator = first.state();
+  const Checkpoint read = decode_checkpoint(encode_checkpoint(written), "test");
+  RecursiveEstimator resumed(start, settings);
+  resumed.restore(read.estimator);
+  for (const Submodel& sm : resumed.model().submodels) EXPECT_EQ(sm.output_derivatives, 2) << sm.name;
+  for (Eigen::Index k = half; k < r.size(); ++k) {
+    gapped.step(sample(k));
+    resumed.step(sample(k));
+  }
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(resumed.mode(i).value.wn / gapped.mode(i).value.wn, 1.0, 1e-9) << "mode " << i + 1;
+    EXPECT_NEAR(resumed.mode(i).value.zeta / gapped.mode(i).value.zeta, 1.0, 1e-9) << "mode " << i + 1;
+    EXPECT_NEAR(resumed.mode(i).value.gain / gapped.mode(i).value.gain, 1.0, 1e-9) << "mode " << i + 1;
+  }
+  Config accelerometer = c;
+  accelerometer.model = start;
+  EXPECT_NE(checkpoint_fingerprint(accelerometer), checkpoint_fingerprint(c));
 }
 
 TEST(OutputKind, TheRecursiveEstimatorTracksAnAccelerometerAsWellAsAPositionSensor) {
