@@ -595,6 +595,7 @@ TEST(OutputKindConfig, TheWriterRoundTripsTheSensorAndLeavesPositionUnwritten) {
     EXPECT_CONTAINS(yaml, "output: " + kind);
     const Config back = parse_config(yaml, "test.yaml");
     EXPECT_EQ(back.model, c.model) << yaml;
+    EXPECT_EQ(*back.plant, *c.plant) << yaml;
     EXPECT_EQ(back.output_derivatives, c.output_derivatives);
   }
   const Config p = parse_config(edit(kAccelerometer, "  output: acceleration\n", ""), "test.yaml");

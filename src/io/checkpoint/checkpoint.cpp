@@ -242,7 +242,8 @@ std::uint64_t checkpoint_fingerprint(const Config& config) {
     f.u64(static_cast<std::uint64_t>(s.n));
     f.u64(static_cast<std::uint64_t>(s.m));
     f.u64(static_cast<std::uint64_t>(s.rigid_poles));
-    // A velocity or acceleration sensor (a position's fingerprint is as before it could be another).
+    // The sensor when it is not a position one: position adds nothing, so that
+    // a position model's fingerprint does not depend on the key.
     if (s.output_derivatives != 0) {
       f.str("output");
       f.u64(static_cast<std::uint64_t>(s.output_derivatives));
