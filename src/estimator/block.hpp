@@ -156,7 +156,7 @@ struct Block {
   MODALWATCH_HOT double output(const double* d) const {
     if (b0_position) return theta(n) * d[0];  // a mode's B = b0 (the common case)
     double s = 0.0;
-    for (int j = 0; j <= m; ++j) s += theta(n + j) * d[j + z];
+    for (int k = z; k <= m + z; ++k) s += theta(n - z + k) * d[k];  // b_j on p^(j+z)
     return s;
   }
   // Regressor (eqs. 19, 33) and instrument (eqs. 20, 29, 32) from the filtered
@@ -176,9 +176,9 @@ struct Block {
       phi(j - 1) = -dy[j];
       psi(j - 1) = -dx[j];
     }
-    for (int j = 0; j <= m; ++j) {
-      phi(n + j) = du[j + z];
-      psi(n + j) = dz[j + z];
+    for (int k = z; k <= m + z; ++k) {  // b_j on p^(j+z)
+      phi(n - z + k) = du[k];
+      psi(n - z + k) = dz[k];
     }
   }
   MODALWATCH_HOT double feedthrough() const { return biproper ? theta(n + m) / (n > 0 ? theta(n - 1) : 1.0) : 0.0; }
