@@ -10,6 +10,9 @@
 // stationary estimate (errors AR(1) over the estimator's memory tau). Quantity q
 // is past when that holds AND |d_q| / |x0_q| > relative_threshold (the size of
 // change that matters); a flag rises after hold_time past and falls with hysteresis.
+// An estimate fitted on a window (a warm-up fit, a refit after a divergence)
+// stands for the whole window: a condition it shows counts as past since the
+// window's start (update()'s evidence_span).
 //
 // A plain class: no I/O, no threads, no allocation in update().
 #include <array>
