@@ -22,9 +22,9 @@ namespace modalwatch {
 namespace {
 
 // A refit replaces a state that tracked the plant until the divergence, so it
-// must earn it:
-// - a window that leaves a direction of the model open (a setpoint with too
-//   few frequencies) cannot say where the changed plant lies along it;
+// must earn it (a window that leaves a direction of the model open, a setpoint
+// with too few frequencies, is no reason to refuse: the fusion with the
+// restored state in run() keeps that state along the open direction):
 // - a refit follows the modes it had, it does not identify the structure
 //   anew: each resonance keeps its place in frequency order and moves by less
 //   than kRefitFrequencyRatio (a fault of a third of the stiffness moves wn by
@@ -51,7 +51,6 @@ RefitVerdict refit_verdict(const Record& window, Eigen::Index settle, const Addi
                            double noise_variance, const FitResult& fit, const EstimatorSettings& cfg) {
   constexpr auto refused = RefitVerdict::refused;
   constexpr double kRefitFrequencyRatio = 1.5;
-  if (!(fit.information_condition <= FitResult::kPoorlyDetermined)) return refused;
   const auto& before = start.submodels;
   const auto& after = fit.model.submodels;
   for (std::size_t i = 0; i < before.size(); ++i) {
