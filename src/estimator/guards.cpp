@@ -205,8 +205,9 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
 // that window is fitted as the warm-up is (section 4.7), from the last good
 // state, which is also its prior; the samples before the reset only drive the
 // fit's prefilters (the fit's simulation starts from rest, the plant did not).
-// The fit decides whether the change was real (refit_acceptable: the restored
-// state's misfit persists over the window, and the fit removes most of it);
+// The fit decides whether the change was real (refit_verdict in
+// warmup_fit.cpp: the restored state's misfit persists over the window, and
+// the fit removes most of it);
 // otherwise, and where the wait for the error to settle ends sooner, the wait
 // stays. The window is the longest memory of the submodels (the data their
 // recursive estimates rest on), at most the warm-up window. A divergence soon
@@ -239,8 +240,8 @@ bool RecursiveEstimator::Impl::keep_for_refit(const Sample& s, bool bad_values) 
   return buffered == window_samples;
 }
 
-// The window is complete and the error has not settled: fit it from the last
-// good state (theta is that state while settling: no update meanwhile).
+// The window is complete: fit it from the last good state (theta is that
+// state while settling: no update meanwhile).
 void RecursiveEstimator::Impl::begin_refit() {
   refit_context->noise_variance = e_var_good;
   AdditiveModel& start = refit_context->initial;

@@ -28,9 +28,9 @@ inline constexpr char kResetDegenerate[] = "non-finite or degenerate update (NaN
 inline constexpr char kResetRefit[] =
     "output error diverged (residual RMS above divergence_ratio x its last good value): refit on a new warm-up window";
 
-// The warm-up's buffer holds a refit's window too (may_refit()): its fitted
-// part, at most a warm-up window, after the transient at its start, up to this
-// many warm-up windows.
+// The warm-up's buffer holds a refit's window too (may_refit()): the samples
+// before the reset that drive its prefilters, then its fitted part (at most a
+// warm-up window), up to this many warm-up windows more than the warm-up's.
 inline constexpr int kRefitTransientWindows = 3;
 // A refit whose window the plant still changed in is tried again on the next
 // window this many times.
