@@ -22,6 +22,23 @@ inline ExperimentSpec open_loop_prbs(double T, double duration, std::uint64_t se
   return e;
 }
 
+// Open loop, a multisine of `rms` on the grid k / period_s inside [f_min_hz,
+// f_max_hz], its phases drawn from `seed`.
+inline ExperimentSpec open_loop_multisine(double T, double duration, std::uint64_t seed, double f_min_hz,
+                                          double f_max_hz, double period_s, double rms) {
+  ExperimentSpec e;
+  e.sample_time = T;
+  e.duration = duration;
+  e.seed = seed;
+  e.excitation.kind = SignalSpec::Kind::multisine;
+  e.excitation.f_min_hz = f_min_hz;
+  e.excitation.f_max_hz = f_max_hz;
+  e.excitation.period_s = period_s;
+  e.excitation.rms = rms;
+  e.excitation.seed = seed;
+  return e;
+}
+
 // A plant of plain modes named mode1, mode2, ..., with output noise at snr_db.
 inline PlantSpec plant_of(const std::vector<ModalParameters>& modes, double snr_db) {
   PlantSpec p;

@@ -175,7 +175,7 @@ TEST(ConfigErrors, NamesRequiredUniqueAndSafe) {
             "'-' (got \"a,b\")");
   EXPECT_EQ(
       parse_error(edit(kBase, "  submodels:\n", "  submodels: []\n  old:\n")),
-      "test.yaml:5: key 'model.old': unknown key for model (allowed: loop, output_hold, inputs, submodels, modes)");
+      "test.yaml:5: key 'model.old': unknown key for model (allowed: loop, output, output_hold, inputs, submodels, modes)");
 }
 
 TEST(ConfigErrors, EmptySubmodelList) {

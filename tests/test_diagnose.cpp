@@ -13,6 +13,8 @@
 
 #include <gtest/gtest.h>
 
+#include "simulation_support.hpp"
+
 #include "modalwatch/diagnose.hpp"
 #include "modalwatch/initial_modes.hpp"
 #include "modalwatch/io/config.hpp"
@@ -51,18 +53,9 @@ DiscreteTransferFunction pd_controller() {
 }
 
 Record make_record(const PlantSpec& plant, bool closed, std::uint64_t seed, double duration) {
-  ExperimentSpec ex;
-  ex.sample_time = kT;
-  ex.duration = duration;
-  ex.seed = seed;
+  ExperimentSpec ex = test_support::open_loop_multisine(kT, duration, seed, 0.1, 10.0, 10.0, 1.0);
   ex.closed_loop = closed;
   if (closed) ex.controller = pd_controller();
-  ex.excitation.kind = SignalSpec::Kind::multisine;
-  ex.excitation.f_min_hz = 0.1;
-  ex.excitation.f_max_hz = 10.0;
-  ex.excitation.period_s = 10.0;
-  ex.excitation.rms = 1.0;
-  ex.excitation.seed = seed;
   return simulate(plant, ex).record;
 }
 

@@ -5,11 +5,16 @@
 //
 //   u_p(t_k) = u(t_{k-d}) + u_off - Fc sign(y_k - y_{k-1}) - c y_m^3   (held over [t_k, t_k+1))
 //   y_m      = 1.5 y_k - 0.5 y_{k-1}
-//   y(t_k)   = sum_i G_i(p) u_p + y_off + drift (t_k - t_0)
+//   y(t_k)   = p^z sum_i G_i(p) u_p + y_off + drift (t_k - t_0)
 //
-// with y_k the noise-free output of the submodels at t_k before the input
-// sample acts: y_k itself for strictly proper submodels, without the
-// feedthrough for a biproper one. The nonlinear branches (Coulomb, cubic) are
+// with y_k the noise-free position response of the submodels, sum_i B_i/(p^l_i A_i) u_p,
+// at t_k before the input sample acts: the output itself for a position sensor
+// and strictly proper submodels, without the feedthrough for a biproper one.
+// With a velocity or acceleration sensor (Submodel::output_derivatives) y_k is
+// still that position, from the same filter states as the measured output
+// p^z sum_i G_i u_p: the cubic stiffness acts on the structure's displacement
+// and the Coulomb friction on the sign of its velocity, while the offset and
+// the drift stay on the measured output. The nonlinear branches (Coulomb, cubic) are
 // thereby sampled and held like the input, and the loop through them stays
 // explicit without an extra sample of delay. The cubic branch takes y
 // extrapolated to the middle of the hold interval: held at y_k its stiffness
@@ -27,7 +32,7 @@ struct PlantEffects {
   double drift = 0.0;          // y units per s, from the first sample
   int input_delay = 0;         // d, samples
   double coulomb = 0.0;        // Fc >= 0, u units
-  double cubic = 0.0;          // c, u units per y unit cubed (> 0: hardening)
+  double cubic = 0.0;          // c, u units per position unit cubed (y units s^z; > 0: hardening)
   // The branches that feed the plant output back into its input.
   bool feeds_back() const { return coulomb != 0.0 || cubic != 0.0; }
   bool operator==(const PlantEffects&) const = default;

@@ -6,7 +6,10 @@
 // (instrument eq. 29 from z = S_uo(q, t_k) r, a noise-free simulation of the
 // loop with the known controller and the current model); rigid-body submodels
 // (eqs. 32-33); stability projection of every A_i before it is used as a
-// prefilter or auxiliary model; output subsampling (section 4.7).
+// prefilter or auxiliary model; output subsampling (section 4.7). A velocity
+// or acceleration output (Submodel::output_derivatives = z) takes b_k's
+// regressor from the prefiltered input's (k+z)-th derivative; an EstimatorState
+// does not hold z, restore() takes it from this estimator's model.
 //
 // A plain class: no I/O, no threads, no exceptions and no heap allocation in
 // step() once warm-up is over. Everything a caller needs to know about bad

@@ -15,6 +15,9 @@
 // surroundings (in |H|, not in dB: ripples where |H| is small rank low): damping from
 // the half-power bandwidth (default_zeta when the peak is not resolved), gain
 // from the peak, b0 = -2 zeta Im H(j wn) for b0 / (p^2/wn^2 + 2 zeta/wn p + 1).
+// A velocity or acceleration sensor (z = 1, 2) peaks at the same wn, but its
+// response is (j w)^z times the position's: the gain is read from H / (j wn)^z.
+#include <complex>
 #include <string>
 #include <vector>
 
@@ -71,16 +74,25 @@ struct PeakOptions {
   double min_share = 0.01;
 };
 
-// The `count` most prominent resonances of H (fewer when the data show fewer), ascending in wn.
-std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int count, const PeakOptions& options = {});
+// The DC gain b0 of a mode at wn, zeta whose measured response at its peak is
+// h = (j wn)^z b0 / (j 2 zeta): -2 zeta Im(h / (j wn)^z), or 2 zeta |h| / wn^z
+// when that is zero.
+double resonance_gain(std::complex<double> h, double wn, double zeta, int output_derivatives = 0);
+
+// The `count` most prominent resonances of H (fewer when the data show fewer),
+// ascending in wn; the gains of a sensor measuring the z-th derivative.
+std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int count, const PeakOptions& options = {},
+                                             int output_derivatives = 0);
 
 // The additive model of those resonances, named mode1..modeN in ascending
 // frequency. With several inputs each resonance is one submodel per input, of
 // the same wn and zeta and that input's residue, named mode<k>_<input> after
-// `inputs` (the model's input names; u1, u2, ... when not given).
+// `inputs` (the model's input names; u1, u2, ... when not given). The modes
+// measure the z-th derivative of their position (Submodel::output_derivatives).
 AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOptions& options = {},
-                            const std::vector<std::string>& inputs = {});
+                            const std::vector<std::string>& inputs = {}, int output_derivatives = 0);
 // The same from a record's frequency_response (held input, default segments).
-AdditiveModel initial_modes(const Record& data, int count, bool closed_loop, const PeakOptions& options = {});
+AdditiveModel initial_modes(const Record& data, int count, bool closed_loop, const PeakOptions& options = {},
+                            int output_derivatives = 0);
 
 }  // namespace modalwatch

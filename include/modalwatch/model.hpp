@@ -7,8 +7,15 @@
 //
 // with l_i poles at the origin for rigid-body submodels (section 4.6).
 // Coefficients are in physical units (time in seconds).
+//
+// The sensor may measure a derivative of the position: the output is then
+// p^z G_i u (z = 1 velocity, z = 2 acceleration). B_i, A_i and l_i keep
+// describing the position response, so that wn, zeta and the DC gain b_0 keep
+// their meaning whatever the sensor (b_0 in output units * s^z per input unit).
 #include <complex>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <Eigen/Core>
@@ -26,11 +33,21 @@ struct ModalParameters {
   bool operator==(const ModalParameters&) const = default;
 };
 
+// What the sensor measures: the position response differentiated z times.
+inline constexpr int kMaxOutputDerivatives = 2;
+// "position", "velocity", "acceleration" for z = 0, 1, 2.
+const char* output_kind_name(int output_derivatives);
+// z of a kind's name; none for another name.
+std::optional<int> output_derivatives_of(std::string_view kind);
+
 struct Submodel {
   std::string name;
   int n = 2;            // order of A
-  int m = 0;            // order of B, m <= n (+l for rigid bodies)
+  int m = 0;            // order of B, m + z <= n + l
   int rigid_poles = 0;  // l: poles at the origin
+  // z: the measured output is p^z B / (p^l A) u, the position response
+  // differentiated z times (0 position, 1 velocity, 2 acceleration).
+  int output_derivatives = 0;
   Eigen::VectorXd a;    // a_1 .. a_n
   Eigen::VectorXd b;    // b_0 .. b_m
   // The measured input that drives this submodel: an index into the model's
@@ -46,27 +63,36 @@ struct Submodel {
   Eigen::VectorXd a_polynomial() const;
   // Ascending coefficients of the full denominator p^l A(p).
   Eigen::VectorXd denominator() const;
+  // Ascending coefficients of the measured output's numerator p^z B(p)
+  // (size m + z + 1): over denominator() it gives the output from the same
+  // filter states as the position B / (p^l A), exactly, also where p^z and
+  // p^l cancel (the top derivative of 1/(p^l A) is algebraic in the input).
+  Eigen::VectorXd output_numerator() const;
 
-  // G_i(j w), w in rad/s.
+  // The measured response p^z G_i(p) at p = j w, w in rad/s, with the common
+  // powers of p cancelled (a rigid body b0/p^2 measured as acceleration is b0 at w = 0 too).
   std::complex<double> response(double w) const;
 
-  // True when this is a plain second-order mode (n = 2, m = 0, no rigid poles).
+  // True when this is a plain second-order mode (n = 2, m = 0, no rigid poles),
+  // whatever the sensor measures.
   bool is_mode() const { return n == 2 && m == 0 && rigid_poles == 0; }
   // True for a mode with a real residue (is_mode) or a complex one, numerator
   // b0 + b1 p: a resonance that modal_parameters describes by wn, zeta and DC gain.
   bool is_resonance() const { return n == 2 && m <= 1 && rigid_poles == 0; }
-  // True for a constant G = b0 (no poles at all): a static gain, or feedthrough.
-  bool is_feedthrough() const { return n == 0 && m == 0 && rigid_poles == 0; }
-  // Throws std::invalid_argument when the sizes do not match n, m.
+  // True for a constant measured response b0 (no poles left after p^z cancels
+  // p^l): a static gain, feedthrough, or a rigid body seen by an accelerometer.
+  bool is_feedthrough() const { return n == 0 && m == 0 && rigid_poles == output_derivatives; }
+  // Throws std::invalid_argument when the sizes do not match n, m, or the
+  // measured response p^z B / (p^l A) is improper.
   void check() const;
-  // Same name, orders, coefficients and input.
+  // Same name, orders, output kind, coefficients and input.
   bool operator==(const Submodel& other) const;
 };
 
-// A resonant mode b0 / (p^2/wn^2 + 2 zeta/wn p + 1).
-Submodel make_mode(const std::string& name, const ModalParameters& modal);
+// A resonant mode b0 / (p^2/wn^2 + 2 zeta/wn p + 1), measured as its z-th derivative.
+Submodel make_mode(const std::string& name, const ModalParameters& modal, int output_derivatives = 0);
 // A rigid body b0 / p^l; with l = 0 the feedthrough b0.
-Submodel make_rigid_body(const std::string& name, double gain, int rigid_poles = 2);
+Submodel make_rigid_body(const std::string& name, double gain, int rigid_poles = 2, int output_derivatives = 0);
 
 // The modal view of a second-order submodel (n = 2). For m > 0 the gain is b0,
 // still the DC gain. For a rigid body, wn and zeta are those of A (0 if n < 2).
@@ -95,6 +121,8 @@ struct AdditiveModel {
   // indexes; empty for a single input, which is then unnamed.
   std::vector<std::string> inputs;
 
+  // z of the submodels (one sensor: all measure the same kind); 0 without submodels.
+  int output_derivatives() const { return submodels.empty() ? 0 : submodels.front().output_derivatives; }
   // Number of measured inputs: 1 when `inputs` is empty.
   int n_inputs() const { return inputs.empty() ? 1 : static_cast<int>(inputs.size()); }
   // The name of input j, or `fallback` when the model names none.

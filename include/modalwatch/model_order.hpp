@@ -31,6 +31,8 @@ struct OrderOptions {
   PhysicalOptions physical;
   // Several inputs in the record: their names (initial_modes), one submodel per input and mode.
   std::vector<std::string> inputs;
+  // What the sensor measures: the z-th derivative of the position (Submodel::output_derivatives).
+  int output_derivatives = 0;
 };
 
 struct StabilisedMode {

@@ -121,6 +121,7 @@ int fit(const FitArgs& args) {
     const Eigen::Index used = data.size() - settle;
     // Modes from the data: --modes, or model.modes without submodels.
     const std::optional<int> modes = args.modes ? args.modes : config.model_modes;
+    const int output = output_kind(config, args.output, args.max_modes || modes);
     const int nb = args.max_modes ? 3 : modes ? 3 * *modes : config.model.n_beta();
     if (used < 2 * nb + 2)
       throw InputError(args.data, std::to_string(used) + " samples (rows) for " + std::to_string(nb) +
@@ -138,10 +139,12 @@ int fit(const FitArgs& args) {
     if (args.max_modes) {
       OrderOptions order;
       order.max_modes = *args.max_modes;
+      order.output_derivatives = output;
       if (data.inputs() > 1) order.inputs = config.model.inputs.empty() ? inputs : config.model.inputs;
       // One hold for every order: the one of the largest start.
       options.output_hold = output_hold(
-          config, initial_modes(data.segment(settle, used), order.max_modes, config.closed_loop, order.peaks), T);
+          config, initial_modes(data.segment(settle, used), order.max_modes, config.closed_loop, order.peaks, output),
+          T);
       OrderSelection selection = select_order(data, options, order);
       print_order_selection(selection, in_samples);
       if (!args.stabilisation.empty())
@@ -157,7 +160,7 @@ int fit(const FitArgs& args) {
     } else {
       const AdditiveModel start =
           modes ? modes_from_data(data.segment(settle, used), *modes, config.closed_loop, args.data, in_samples,
-                                  config.model.inputs.empty() ? inputs : config.model.inputs)
+                                  config.model.inputs.empty() ? inputs : config.model.inputs, output)
                 : config.model;
       options.output_hold = output_hold(config, start, T);
       result = fit_physical(data, start, options, findings);

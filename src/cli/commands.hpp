@@ -27,6 +27,7 @@ struct FitArgs {
   int max_iterations = 200;
   std::optional<int> modes;        // start this many modes from the data (else model.modes or the submodels)
   std::optional<int> max_modes;    // choose the number of modes from the data, up to this
+  std::optional<std::string> output;  // what the sensor measures, for modes from the data (else model.output)
   std::string stabilisation;       // with max_modes: the stabilisation diagram's tables here
   std::string plot_script;         // scripts/plot/plot_stabilisation.py, run on them when given
   ColumnArgs columns;
@@ -72,6 +73,7 @@ struct DiagnoseArgs {
   double min_improvement = 0.10;
   int max_delay = 10;
   std::optional<int> modes;  // start this many modes from the data (else model.modes or the submodels)
+  std::optional<std::string> output;  // what the sensor measures, for modes from the data (else model.output)
 };
 
 int simulate(const SimulateArgs& args);

@@ -39,6 +39,8 @@ void write_test(JsonWriter& j, const ResidualTest& t) {
 void write_submodel(JsonWriter& j, const Submodel& s, const ModalParameters& sd, const std::string& input) {
   j.begin_object().key("name").value(s.name);
   if (!input.empty()) j.key("input").value(input);
+  // A velocity or acceleration sensor; wn, zeta and gain stay the position response's.
+  if (s.output_derivatives != 0) j.key("output").value(output_kind_name(s.output_derivatives));
   if (s.is_resonance()) {
     const ModalParameters p = modal_parameters(s);
     j.key("kind").value("mode").key("wn").value(p.wn).key("zeta").value(p.zeta).key("gain").value(p.gain);
@@ -154,7 +156,8 @@ std::string model_table(const AdditiveModel& m) {
     const std::string input = inputs ? " " + m.input_name(sm.input) + " |" : "";
     if (sm.is_resonance()) {
       const ModalParameters p = modal_parameters(sm);
-      s += "| " + sm.name + (sm.m == 1 ? " | mode, b0 + b1 p | " : " | mode | ") + format_number(p.hz(), 6) + " | " +
+      const std::string kind = sm.output_derivatives != 0 ? std::string(", ") + output_kind_name(sm.output_derivatives) : "";
+      s += "| " + sm.name + (sm.m == 1 ? " | mode, b0 + b1 p" : " | mode") + kind + " | " + format_number(p.hz(), 6) + " | " +
            format_number(p.wn, 6) + " | " + format_number(p.zeta, 4) + " | " + format_number(p.gain, 5) +
            (sm.m == 1 ? ", b1 = " + format_number(sm.b(1), 5) : "") + " |" + input + "\n";
     } else {
@@ -163,7 +166,8 @@ std::string model_table(const AdditiveModel& m) {
       for (int j = 0; j < sm.n_theta(); ++j)
         c += (j ? ", " : "") + std::string(j < sm.n ? "a" : "b") + std::to_string(j < sm.n ? j + 1 : j - sm.n) + " = " +
              format_number(th(j), 6);
-      s += "| " + sm.name + " | l = " + std::to_string(sm.rigid_poles) + ", n = " + std::to_string(sm.n) + " | | | | " +
+      s += "| " + sm.name + " | l = " + std::to_string(sm.rigid_poles) + ", n = " + std::to_string(sm.n) +
+           (sm.output_derivatives != 0 ? ", z = " + std::to_string(sm.output_derivatives) : "") + " | | | | " +
            c + " |" + input + "\n";
     }
   }

@@ -63,6 +63,11 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 64))
       ->excludes(fit_modes);
   fit_cmd
+      ->add_option("--output", fit_args.output,
+                   "what the sensor measures, for modes from the data (--modes, --max-modes, model.modes): "
+                   "position, velocity or acceleration (overrides model.output)")
+      ->check(CLI::IsMember({"position", "velocity", "acceleration"}));
+  fit_cmd
       ->add_option("--stabilisation", fit_args.stabilisation,
                    "with --max-modes: write stabilisation.csv and frf.csv into this directory")
       ->needs("--max-modes");
@@ -127,6 +132,11 @@ int main(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   diagnose_cmd->add_option("--modes", diag.modes, "start this many modes from the data (overrides model:)")
       ->check(CLI::Range(1, 64));
+  diagnose_cmd
+      ->add_option("--output", diag.output,
+                   "what the sensor measures, for modes from the data (--modes, model.modes): position, velocity "
+                   "or acceleration (overrides model.output)")
+      ->check(CLI::IsMember({"position", "velocity", "acceleration"}));
   WatchArgs watch_args;
   auto* watch_cmd = app.add_subcommand("watch", "Print the daemon's estimates and fault status as they arrive (LCM)");
   watch_cmd->add_option("--config,-c", watch_args.config, "YAML whose lcm: section names the URL and channels")

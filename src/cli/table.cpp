@@ -21,8 +21,9 @@ void print_physical_findings(const std::vector<ModeFinding>& findings) {
 }
 
 AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name,
-                              bool in_samples, const std::vector<std::string>& inputs) {
-  const AdditiveModel start = initial_modes(frequency_response(data, closed_loop), count, {}, inputs);
+                              bool in_samples, const std::vector<std::string>& inputs, int output_derivatives) {
+  const AdditiveModel start =
+      initial_modes(frequency_response(data, closed_loop), count, {}, inputs, output_derivatives);
   if (start.submodels.empty())
     throw InputError(data_name, "no resonance peak in the frequency response estimate: no mode to start from");
   const char* estimate = closed_loop ? "S_yr/S_ur" : data.inputs() > 1 ? "|H|, H = S_yu S_uu^-1" : "H1 = S_yu/S_uu";
@@ -41,6 +42,17 @@ AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, c
   return start;
 }
 
+int output_kind(const Config& config, const std::optional<std::string>& option, bool from_data) {
+  if (!option) return config.output_derivatives;
+  const std::optional<int> z = output_derivatives_of(*option);
+  if (!z) throw InputError("--output", "'" + *option + "' is not position, velocity or acceleration");
+  if (!from_data && *z != config.output_derivatives)
+    throw InputError("--output", std::string("the configured submodels measure ") +
+                                     output_kind_name(config.output_derivatives) + " (model.output in " +
+                                     config.source + "); --output is for modes started from the data (--modes)");
+  return *z;
+}
+
 Hold output_hold(const Config& config, const AdditiveModel& start, double sample_time) {
   if (config.output_hold) return *config.output_hold;
   const Hold hold = batch_output_hold(start, sample_time);
@@ -52,6 +64,10 @@ Hold output_hold(const Config& config, const AdditiveModel& start, double sample
 void print_modal_table(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>& covariances, bool in_samples) {
   // Several inputs: a last column names each submodel's input.
   const bool inputs = model.n_inputs() > 1;
+  // A velocity or acceleration sensor: the gains stay the position response's DC gains.
+  if (const int z = model.output_derivatives(); z != 0)
+    std::printf("\noutput: %s; gain is the position response's DC gain b0 (output units %s per input unit)",
+                output_kind_name(z), in_samples ? (z == 1 ? "* samples" : "* samples^2") : (z == 1 ? "* s" : "* s^2"));
   std::printf("\n%-10s %11s %10s %12s %10s %9s %9s %12s %10s%s\n", "submodel", in_samples ? "f [1/sample]" : "f [Hz]",
               "+-", in_samples ? "wn [rad/smp]" : "wn [rad/s]", "+-", "zeta", "+-", "gain", "+-",
               inputs ? "  input" : "");
@@ -69,6 +85,7 @@ void print_modal_table(const AdditiveModel& model, const std::vector<Eigen::Matr
     // Rigid bodies and general transfer functions: their coefficients, and the
     // resonances of A when it has any.
     std::printf("%-10s n=%d m=%d l=%d", s.name.c_str(), s.n, s.m, s.rigid_poles);
+    if (s.output_derivatives != 0) std::printf(" z=%d", s.output_derivatives);
     const Eigen::VectorXd th = s.theta();
     for (int j = 0; j < s.n_theta(); ++j) {
       const bool is_a = j < s.n;

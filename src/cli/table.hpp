@@ -4,6 +4,8 @@
 // general transfer functions their coefficients and resonances; and the
 // warnings of `fit` and `diagnose` about submodels that are no physical mode;
 // their starting modes from the data and the output hold of their fits.
+#include <optional>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
@@ -27,8 +29,16 @@ void print_physical_findings(const std::vector<ModeFinding>& findings);
 // Throws InputError (naming `data`) when they show none. With several inputs
 // in the record each mode is one submodel per input, the model's inputs named
 // `inputs`.
+// `output_derivatives`: what the sensor measures (output_kind below).
 AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name,
-                              bool in_samples, const std::vector<std::string>& inputs = {});
+                              bool in_samples, const std::vector<std::string>& inputs = {},
+                              int output_derivatives = 0);
+
+// What the sensor measures as z (Submodel::output_derivatives): `--output`
+// when given, else model.output. `--output` is for modes started from the data
+// (`from_data`); configured submodels keep model.output, and an `--output`
+// that contradicts them is an InputError.
+int output_kind(const Config& config, const std::optional<std::string>& option, bool from_data);
 
 // The output hold that `fit` and `diagnose` assume: model.output_hold when
 // given, else batch_output_hold of the start (srivc.hpp), with a line saying

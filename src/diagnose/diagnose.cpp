@@ -237,10 +237,10 @@ Candidate candidate_modes_per_input(const AugmentedModel& current, const Eigen::
     ModalParameters start;
     start.wn = 2.0 * std::numbers::pi * h.frequency_hz(peak);
     start.zeta = 0.05;
-    start.gain = -2.0 * start.zeta * h.input_response(j)(peak).imag();
-    if (start.gain == 0.0) start.gain = 2.0 * start.zeta * std::abs(h.input_response(j)(peak));
+    start.gain = resonance_gain(h.input_response(j)(peak), start.wn, start.zeta, current.linear.output_derivatives());
     if (start.gain == 0.0) continue;
-    m.linear.submodels.push_back(make_mode(name + "_" + current.linear.input_name(j), start));
+    m.linear.submodels.push_back(
+        make_mode(name + "_" + current.linear.input_name(j), start, current.linear.output_derivatives()));
     m.linear.submodels.back().input = j;
   }
   Candidate c = finish(EffectKind::mode, fit_structure(m, ctx.est, ctx.options, true), ctx);
@@ -266,11 +266,12 @@ Candidate candidate_mode(const AugmentedModel& current, const Eigen::VectorXd& y
   ModalParameters start;
   start.wn = 2.0 * std::numbers::pi * sp.frequency_hz(peak);
   start.zeta = 0.05;
-  // At resonance b0 / (j 2 zeta) = H: b0 = -2 zeta Im(H).
-  start.gain = -2.0 * start.zeta * sp.cross(peak).imag();
-  if (start.gain == 0.0) start.gain = 2.0 * start.zeta * sp.residual_to_input(peak);
+  // At resonance (j wn)^z b0 / (j 2 zeta) = H.
+  const int z = current.linear.output_derivatives();
+  start.gain = resonance_gain(sp.cross(peak), start.wn, start.zeta, z);
+  if (start.gain == 0.0) start.gain = 2.0 * start.zeta * sp.residual_to_input(peak) / std::pow(start.wn, z);
   AugmentedModel m = current;
-  m.linear.submodels.push_back(make_mode(next_mode_name(current.linear), start));
+  m.linear.submodels.push_back(make_mode(next_mode_name(current.linear), start, z));
   Candidate c = finish(EffectKind::mode, fit_structure(m, ctx.est, ctx.options, true), ctx);
   if (c.valid) {
     const ModalParameters p = modal_parameters(c.model.linear.submodels.back());
@@ -282,11 +283,14 @@ Candidate candidate_mode(const AugmentedModel& current, const Eigen::VectorXd& y
 Candidate candidate_rigid_body(const AugmentedModel& current, const Eigen::VectorXd& y0, const Context& ctx) {
   for (const auto& s : current.linear.submodels)
     if (s.rigid_poles > 0) return invalid(EffectKind::rigid_body, "the model has a rigid body");
+  const int z = current.linear.output_derivatives();
+  if (z == 2) return invalid(EffectKind::rigid_body, "an accelerometer sees a rigid body as the feedthrough b0");
   const Record& d = ctx.est.data;
   const double D = d.t(d.size() - 1) - d.t(0);
-  const double h = 1e-3 * rms_or_one(d.y) / (rms_or_one(d.u) * std::max(D * D, 1e-12));
+  // b0 / p^2 measured as p^z: a response growing as t^(2-z).
+  const double h = 1e-3 * rms_or_one(d.y) / (rms_or_one(d.u) * std::max(z == 0 ? D * D : std::pow(D, 2 - z), 1e-12));
   AugmentedModel m = current;
-  m.linear.submodels.push_back(make_rigid_body("rigid", h, 2));
+  m.linear.submodels.push_back(make_rigid_body("rigid", h, 2, z));
   double g = gauss_newton_start(m, y0, h, ctx.est);
   if (g == 0.0) return invalid(EffectKind::rigid_body, "no sensitivity");
   m.linear.submodels.back().b(0) = g;
@@ -300,13 +304,14 @@ Candidate candidate_complex_modes(const AugmentedModel& current, const Context& 
   AugmentedModel m = current;
   int modes = 0;
   for (Submodel& s : m.linear.submodels) {
-    if (!s.is_mode()) continue;
+    // (b0 + b1 p) p^z / A must stay proper: not for an acceleration.
+    if (!s.is_mode() || 1 + s.output_derivatives > s.n) continue;
     s.m = 1;
     s.b.conservativeResize(2);
     s.b(1) = 0.0;
     ++modes;
   }
-  if (modes == 0) return invalid(EffectKind::complex_modes, "no mode with a real residue");
+  if (modes == 0) return invalid(EffectKind::complex_modes, "no mode with a real residue that may take b1 p (none as acceleration)");
   Candidate c = finish(EffectKind::complex_modes, fit_structure(m, ctx.est, ctx.options, true), ctx);
   if (c.valid) c.params = {{"modes", static_cast<double>(modes)}};
   return c;
@@ -317,7 +322,9 @@ Candidate candidate_feedthrough(const AugmentedModel& current, const Eigen::Vect
     if (s.is_feedthrough()) return invalid(EffectKind::feedthrough, "the model has a feedthrough");
   const double h = 1e-3 * rms_or_one(ctx.est.data.y) / rms_or_one(ctx.est.data.u);
   AugmentedModel m = current;
-  m.linear.submodels.push_back(make_rigid_body(next_mode_name(current.linear), h, 0));
+  // A constant measured response: with a derivative output, b0 / p^z.
+  const int z = current.linear.output_derivatives();
+  m.linear.submodels.push_back(make_rigid_body(next_mode_name(current.linear), h, z, z));
   const double g = gauss_newton_start(m, y0, h, ctx.est);
   if (g == 0.0) return invalid(EffectKind::feedthrough, "no sensitivity");
   m.linear.submodels.back().b(0) = g;

@@ -63,8 +63,9 @@ double time_scale(const Submodel& s) {
   return 1.0;
 }
 
-// B(p)/(p^l A(p)) under ZOH. With p = ws p' the filter runs in t' = ws t and
+// p^z B(p)/(p^l A(p)) under ZOH. With p = ws p' the filter runs in t' = ws t and
 // coefficient j is multiplied by ws^(j-l), which leaves the output unchanged.
+// The position B/(p^l A), which the effects act on, comes from the same states.
 class SubmodelRunner {
  public:
   SubmodelRunner(const Submodel& s, double T) {
@@ -72,12 +73,17 @@ class SubmodelRunner {
     order_ = s.n + l;
     // Order 0 is a feedthrough: the filter passes w through and b_0 scales it.
     if (order_ < 0 || order_ > kMaxFilterOrder) throw std::invalid_argument("diagnose: submodel order out of range");
+    s.check();
     const double ws = time_scale(s);
-    const Eigen::VectorXd den = s.denominator();
+    const Eigen::VectorXd den = s.denominator(), num = s.output_numerator();
     Eigen::VectorXd d = Eigen::VectorXd::Zero(order_ + 1);
     b_ = Eigen::VectorXd::Zero(order_ + 1);
     for (Eigen::Index j = 0; j < den.size(); ++j) d(j) = den(j) * std::pow(ws, double(j - l));
-    for (Eigen::Index j = 0; j < s.b.size(); ++j) b_(j) = s.b(j) * std::pow(ws, double(j - l));
+    for (Eigen::Index j = 0; j < num.size(); ++j) b_(j) = num(j) * std::pow(ws, double(j - l));
+    if (s.output_derivatives > 0) {
+      x_ = Eigen::VectorXd::Zero(order_ + 1);
+      for (Eigen::Index j = 0; j < s.b.size(); ++j) x_(j) = s.b(j) * std::pow(ws, double(j - l));
+    }
     filter_ = Prefilter(d, ws * T, Hold::zoh);
     feed_ = b_(order_) / d(order_);
   }
@@ -87,6 +93,8 @@ class SubmodelRunner {
     filter_.complete(0.0);
     return filter_.combine(b_);
   }
+  // The position at t_k for a zero input sample (after advance()); the output itself for z = 0.
+  double position(double output) const { return x_.size() == 0 ? output : filter_.combine(x_); }
   // Output for the input sample w at t_k (after advance()).
   double complete(double w) {
     filter_.complete(w);
@@ -98,6 +106,7 @@ class SubmodelRunner {
   int order_ = 0;
   Prefilter filter_;
   Eigen::VectorXd b_;
+  Eigen::VectorXd x_;  // the position's numerator when z > 0
   double feed_ = 0.0;
 };
 
@@ -146,12 +155,14 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
     // Move every submodel to t_k: for strictly proper submodels their output
     // y_k is then known before the input sample u_k, which the nonlinear
     // branches use (sampled and held like the input).
-    double y_free = 0.0, feed = 0.0;
+    double y_free = 0.0, x_free = 0.0, feed = 0.0;
     for (SubmodelRunner& r : runners) {
-      y_free += r.advance();
+      const double y_r = r.advance();
+      y_free += y_r;
+      x_free += r.position(y_r);
       feed += r.feedthrough();
     }
-    const double branches = effects.branches(y_free);
+    const double branches = effects.branches(x_free);
     const double out_terms = effects.output_terms(data.t(k) - t0);
     double u = data.u(k);
     if (loop.closed) {
@@ -180,14 +191,14 @@ Eigen::VectorXd simulate_augmented(const AugmentedModel& model, const Record& da
     y(k) = y_plant + out_terms;
     if (loop.closed) controller.step(data.r(k) - y(k));
     if (u_sim) (*u_sim)(k) = u;
-    effects.end_sample(u, y_free);
+    effects.end_sample(u, x_free);
     for (int sub = 1; sub < substeps; ++sub) {
-      double y_sub = 0.0;
-      for (SubmodelRunner& r : runners) y_sub += r.advance();
-      const double b = effects.branches(y_sub);
+      double x_sub = 0.0;
+      for (SubmodelRunner& r : runners) x_sub += r.position(r.advance());
+      const double b = effects.branches(x_sub);
       for (std::size_t i = 0; i < runners.size(); ++i)
         runners[i].complete(further[i] ? further_held(*further[i], sub) : held(sub) + b);
-      effects.end_substep(y_sub);
+      effects.end_substep(x_sub);
     }
   }
   return y;

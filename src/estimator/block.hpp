@@ -89,7 +89,12 @@ struct BlockFilters {
 
 struct Block {
   int n = 0, m = 0, l = 0, nt = 0;
-  bool biproper = false;  // m = n + l: the output has a direct feedthrough
+  int z = 0;              // the output is p^z times the position response (Submodel::output_derivatives)
+  bool biproper = false;  // m + z = n + l: the output has a direct feedthrough
+  // The common cases without loops: B = b0 on a position output (output()),
+  // and a mode so (fill()).
+  bool b0_position = true;    // m = 0, z = 0
+  bool position_mode = true;  // n = 2, m = 0, z = 0
   double ws = 1.0, lambda = 1.0;
   double random_walk = 0.0;  // relative std of theta's drift per update (Q, CONTSID's Kalman-filter adaptation)
   // update_divisor T / min_memory (s): 1 - lambda may not exceed this times
@@ -129,6 +134,13 @@ struct Block {
     const double root = std::sqrt(disc);
     return ws * (which == Pole::slowest ? a1 - root : a1 + root) / (2.0 * a2);
   }
+  // theta' = scale .* theta for the time scale ws (t' = ws t): a_j ws^j and
+  // b_k ws^(k+z-l).
+  void set_scale() {
+    scale.resize(nt);
+    for (int j = 1; j <= n; ++j) scale(j - 1) = std::pow(ws, j);
+    for (int k = 0; k <= m; ++k) scale(n + k) = std::pow(ws, k + z - l);
+  }
   FilterVector a_poly() const {
     FilterVector c(n + 1);
     c(0) = 1.0;
@@ -140,17 +152,18 @@ struct Block {
     c.tail(n + 1) = a_poly();
     return c;
   }
-  // B/(p^l A) w from the filter's derivatives d = [w_f, p w_f, ...].
+  // p^z B/(p^l A) w from the filter's derivatives d = [w_f, p w_f, ...].
   MODALWATCH_HOT double output(const double* d) const {
-    if (m == 0) return theta(n) * d[0];  // a mode's B = b0 (the common case)
+    if (b0_position) return theta(n) * d[0];  // a mode's B = b0 (the common case)
     double s = 0.0;
-    for (int j = 0; j <= m; ++j) s += theta(n + j) * d[j];
+    for (int k = z; k <= m + z; ++k) s += theta(n - z + k) * d[k];  // b_j on p^(j+z)
     return s;
   }
   // Regressor (eqs. 19, 33) and instrument (eqs. 20, 29, 32) from the filtered
-  // residual output dy, auxiliary output dx, input du and instrument input dz.
+  // residual output dy, auxiliary output dx, input du and instrument input dz;
+  // b_k's are the input's (k+z)-th derivatives.
   MODALWATCH_HOT void fill(const double* dy, const double* dx, const double* du, const double* dz) {
-    if (n == 2 && m == 0) {  // a mode (the common case), without the loops
+    if (position_mode) {  // a mode (the common case), without the loops
       phi(0) = -dy[1];
       phi(1) = -dy[2];
       phi(2) = du[0];
@@ -163,9 +176,9 @@ struct Block {
       phi(j - 1) = -dy[j];
       psi(j - 1) = -dx[j];
     }
-    for (int j = 0; j <= m; ++j) {
-      phi(n + j) = du[j];
-      psi(n + j) = dz[j];
+    for (int k = z; k <= m + z; ++k) {  // b_j on p^(j+z)
+      phi(n - z + k) = du[k];
+      psi(n - z + k) = dz[k];
     }
   }
   MODALWATCH_HOT double feedthrough() const { return biproper ? theta(n + m) / (n > 0 ? theta(n - 1) : 1.0) : 0.0; }

@@ -60,16 +60,17 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.n = s.n;
     b.m = s.m;
     b.l = s.rigid_poles;
+    b.z = s.output_derivatives;
     b.nt = s.n_theta();
-    b.biproper = b.m == b.n + b.l;
+    b.biproper = b.m + b.z == b.n + b.l;
+    b.b0_position = b.m == 0 && b.z == 0;
+    b.position_mode = b.n == 2 && b.b0_position;
     b.ws = time_scale(s);
     b.lambda = cfg.forgetting.empty() ? 1.0 : cfg.forgetting[i];
     b.random_walk = cfg.random_walks.empty() ? cfg.random_walk : cfg.random_walks[i];
     const double min_memory = cfg.min_memories.empty() ? cfg.min_memory : cfg.min_memories[i];
     b.forget_per_decay = min_memory > 0.0 ? cfg.update_divisor * T / min_memory : 0.0;
-    b.scale.resize(b.nt);
-    for (int j = 1; j <= b.n; ++j) b.scale(j - 1) = std::pow(b.ws, j);
-    for (int k = 0; k <= b.m; ++k) b.scale(b.n + k) = std::pow(b.ws, k - b.l);
+    b.set_scale();
     b.theta = s.theta().cwiseProduct(Eigen::VectorXd(b.scale));
     // P(t0): given, from the warm-up fit, or relative to the parameter size.
     b.P = ThetaMat::Zero(b.nt, b.nt);

@@ -260,12 +260,16 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
   next.fit_pending = next.fit_taken = false;
   ++next.fit_generation;
   if (st.warmed_up_) {
-    next.build(st.model_, nullptr, 0.0, 1.0);  // structure, prefilters at rest; theta, P below
+    // What the sensor measures is the configuration's, as the forgetting
+    // factors are (the checkpoint's fingerprint holds both): the state keeps none.
+    AdditiveModel restored = st.model_;
+    for (std::size_t i = 0; i < K; ++i)
+      restored.submodels[i].output_derivatives = m.initial.submodels[i].output_derivatives;
+    next.build(restored, nullptr, 0.0, 1.0);  // structure, prefilters at rest; theta, P below
     for (std::size_t i = 0; i < K; ++i) {
       Block& b = next.blocks[i];
       b.ws = st.time_scale_[i];
-      for (int j = 1; j <= b.n; ++j) b.scale(j - 1) = std::pow(b.ws, j);
-      for (int k = 0; k <= b.m; ++k) b.scale(b.n + k) = std::pow(b.ws, k - b.l);
+      b.set_scale();
       b.theta = st.model_.submodels[i].theta().cwiseProduct(Eigen::VectorXd(b.scale));
       if (!b.scale.allFinite() || !b.theta.allFinite() || (b.scale.array() == 0.0).any())
         fail("submodel " + std::to_string(i + 1) + ": time_scale out of range for its coefficients");

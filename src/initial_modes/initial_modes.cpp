@@ -141,13 +141,8 @@ struct Resonance {
   Eigen::Index bin = 0;
 };
 
-// b0 = -2 zeta Im H(j wn) of one input's response at the peak bin.
-double peak_gain(const Eigen::VectorXcd& response, Eigen::Index k, double zeta) {
-  const double gain = -2.0 * zeta * response(k).imag();
-  return gain != 0.0 ? gain : 2.0 * zeta * std::abs(response(k));
-}
-
-std::vector<Resonance> find_resonances(const FrequencyResponse& h, int count, const PeakOptions& options) {
+std::vector<Resonance> find_resonances(const FrequencyResponse& h, int count, const PeakOptions& options,
+                                       int output_derivatives) {
   const Eigen::Index F = h.frequency_hz.size();
   std::vector<Resonance> out;
   if (count <= 0 || F < 4) return out;
@@ -212,7 +207,7 @@ std::vector<Resonance> find_resonances(const FrequencyResponse& h, int count, co
     m.wn = kTwoPi * f0;
     // A bandwidth under two bins is the Hann window's, not the mode's.
     m.zeta = width > 2.0 * df ? width / (2.0 * f0) : options.default_zeta;
-    m.gain = peak_gain(h.response, k, m.zeta);
+    m.gain = resonance_gain(h.response(k), m.wn, m.zeta, output_derivatives);
     out.push_back({m, k});
   }
   std::sort(out.begin(), out.end(), [](const Resonance& a, const Resonance& b) { return a.modal.wn < b.modal.wn; });
@@ -221,24 +216,34 @@ std::vector<Resonance> find_resonances(const FrequencyResponse& h, int count, co
 
 }  // namespace
 
-std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int count, const PeakOptions& options) {
+double resonance_gain(std::complex<double> h, double wn, double zeta, int output_derivatives) {
+  // The peak of (j w)^z b0 / (p^2/wn^2 + ...) at wn: the position's h / (j wn)^z.
+  const std::complex<double> position =
+      output_derivatives == 0 ? h : h / std::pow(std::complex<double>(0.0, wn), output_derivatives);
+  const double gain = -2.0 * zeta * position.imag();
+  return gain != 0.0 ? gain : 2.0 * zeta * std::abs(position);
+}
+
+std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int count, const PeakOptions& options,
+                                             int output_derivatives) {
   std::vector<ModalParameters> out;
-  for (const Resonance& r : find_resonances(h, count, options)) out.push_back(r.modal);
+  for (const Resonance& r : find_resonances(h, count, options, output_derivatives)) out.push_back(r.modal);
   return out;
 }
 
-AdditiveModel initial_modes(const Record& data, int count, bool closed_loop, const PeakOptions& options) {
-  return initial_modes(frequency_response(data, closed_loop), count, options);
+AdditiveModel initial_modes(const Record& data, int count, bool closed_loop, const PeakOptions& options,
+                            int output_derivatives) {
+  return initial_modes(frequency_response(data, closed_loop), count, options, {}, output_derivatives);
 }
 
 AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOptions& options,
-                            const std::vector<std::string>& inputs) {
-  const std::vector<Resonance> peaks = find_resonances(h, count, options);
+                            const std::vector<std::string>& inputs, int output_derivatives) {
+  const std::vector<Resonance> peaks = find_resonances(h, count, options, output_derivatives);
   AdditiveModel model;
   const int m = h.inputs();
   if (m == 1) {
     for (std::size_t i = 0; i < peaks.size(); ++i)
-      model.submodels.push_back(make_mode("mode" + std::to_string(i + 1), peaks[i].modal));
+      model.submodels.push_back(make_mode("mode" + std::to_string(i + 1), peaks[i].modal, output_derivatives));
     return model;
   }
   for (int j = 0; j < m; ++j)
@@ -247,8 +252,9 @@ AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOpt
   for (std::size_t i = 0; i < peaks.size(); ++i)
     for (int j = 0; j < m; ++j) {
       ModalParameters p = peaks[i].modal;
-      p.gain = peak_gain(h.input_response(j), peaks[i].bin, p.zeta);
-      model.submodels.push_back(make_mode("mode" + std::to_string(i + 1) + "_" + model.input_name(j), p));
+      p.gain = resonance_gain(h.input_response(j)(peaks[i].bin), p.wn, p.zeta, output_derivatives);
+      model.submodels.push_back(
+          make_mode("mode" + std::to_string(i + 1) + "_" + model.input_name(j), p, output_derivatives));
       model.submodels.back().input = j;
     }
   return model;

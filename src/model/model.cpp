@@ -12,6 +12,24 @@ namespace modalwatch {
 
 double ModalParameters::hz() const { return wn / (2.0 * std::numbers::pi); }
 
+const char* output_kind_name(int output_derivatives) {
+  switch (output_derivatives) {
+    case 0:
+      return "position";
+    case 1:
+      return "velocity";
+    case 2:
+      return "acceleration";
+  }
+  return "?";
+}
+
+std::optional<int> output_derivatives_of(std::string_view kind) {
+  for (int z = 0; z <= kMaxOutputDerivatives; ++z)
+    if (kind == output_kind_name(z)) return z;
+  return std::nullopt;
+}
+
 Eigen::VectorXd Submodel::theta() const {
   Eigen::VectorXd t(n_theta());
   t << a, b;
@@ -37,13 +55,20 @@ Eigen::VectorXd Submodel::denominator() const {
   return c;
 }
 
+Eigen::VectorXd Submodel::output_numerator() const {
+  Eigen::VectorXd c = Eigen::VectorXd::Zero(m + output_derivatives + 1);
+  c.tail(m + 1) = b;
+  return c;
+}
+
 std::complex<double> Submodel::response(double w) const {
   const std::complex<double> p(0.0, w);
-  const Eigen::VectorXd d = denominator();
+  // p^z / p^l with the common powers cancelled: exact at w = 0.
+  const int l = std::max(rigid_poles - output_derivatives, 0), z = std::max(output_derivatives - rigid_poles, 0);
   std::complex<double> num = 0.0, den = 0.0, pk = 1.0;
-  for (Eigen::Index k = 0; k < std::max<Eigen::Index>(d.size(), m + 1); ++k) {
-    if (k <= m) num += b(k) * pk;
-    if (k < d.size()) den += d(k) * pk;
+  for (Eigen::Index k = 0; k < std::max<Eigen::Index>(n + l + 1, m + z + 1); ++k) {
+    if (k >= z && k <= m + z) num += b(k - z) * pk;
+    if (k >= l && k <= n + l) den += (k == l ? 1.0 : a(k - l - 1)) * pk;
     pk *= p;
   }
   return num / den;
@@ -51,13 +76,19 @@ std::complex<double> Submodel::response(double w) const {
 
 void Submodel::check() const {
   if (n < 0 || m < 0 || rigid_poles < 0) throw std::invalid_argument(name + ": negative order");
-  if (m > n + rigid_poles) throw std::invalid_argument(name + ": m > n + l (improper)");
+  if (output_derivatives < 0 || output_derivatives > kMaxOutputDerivatives)
+    throw std::invalid_argument(name + ": the output is position, velocity or acceleration (z = 0, 1, 2)");
+  if (m + output_derivatives > n + rigid_poles)
+    throw std::invalid_argument(name + (output_derivatives == 0 ? ": m > n + l (improper)"
+                                                                 : ": m + z > n + l (improper as " +
+                                                                       std::string(output_kind_name(output_derivatives)) + ")"));
   if (a.size() != n || b.size() != m + 1) throw std::invalid_argument(name + ": coefficient sizes do not match n, m");
 }
 
-Submodel make_mode(const std::string& name, const ModalParameters& modal) {
+Submodel make_mode(const std::string& name, const ModalParameters& modal, int output_derivatives) {
   Submodel s;
   s.name = name;
+  s.output_derivatives = output_derivatives;
   s.n = 2;
   s.m = 0;
   s.a.resize(2);
@@ -67,9 +98,10 @@ Submodel make_mode(const std::string& name, const ModalParameters& modal) {
   return s;
 }
 
-Submodel make_rigid_body(const std::string& name, double gain, int rigid_poles) {
+Submodel make_rigid_body(const std::string& name, double gain, int rigid_poles, int output_derivatives) {
   Submodel s;
   s.name = name;
+  s.output_derivatives = output_derivatives;
   s.n = 0;
   s.m = 0;
   s.rigid_poles = rigid_poles;
@@ -192,6 +224,7 @@ std::complex<double> AdditiveModel::response(double w, int input) const {
 
 bool Submodel::operator==(const Submodel& other) const {
   return name == other.name && n == other.n && m == other.m && rigid_poles == other.rigid_poles &&
+         output_derivatives == other.output_derivatives &&
          a.size() == other.a.size() && b.size() == other.b.size() && a == other.a && b == other.b &&
          input == other.input;
 }

@@ -40,7 +40,7 @@ OrderSelection select_order(const Record& data, const SrivcOptions& options, con
   const FrequencyResponse h = frequency_response(used, options.closed_loop);  // one estimate serves every order
   OrderSelection out;
   for (int k = 1; k <= order.max_modes; ++k) {
-    const AdditiveModel start = initial_modes(h, k, order.peaks, order.inputs);
+    const AdditiveModel start = initial_modes(h, k, order.peaks, order.inputs, order.output_derivatives);
     // The data show no further resonance (one submodel per input and resonance).
     if (static_cast<int>(start.submodels.size()) < k * h.inputs()) break;
     OrderFit f;

@@ -100,10 +100,12 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
                            : std::string("roots of A in the right half plane: reflected into the left half plane");
   }
 
-  // Feedthrough: a mode above Nyquist, or a constant on the band within its uncertainty.
+  // Feedthrough: a mode above Nyquist, or a constant on the band within its
+  // uncertainty. Not for a velocity or acceleration sensor: there such a mode
+  // is b0 p^z on the band, no constant, and stays a mode.
   for (int i = 0; i < K; ++i) {
     Submodel& s = subs[i];
-    if (!s.is_mode()) continue;
+    if (!s.is_mode() || s.output_derivatives != 0) continue;
     ModeFinding& f = out.findings[i];
     const ModalParameters p = modal_parameters(s);
     std::string why;
@@ -158,7 +160,7 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
     const double larger = std::abs(pi.gain) > std::abs(pj.gain) ? pi.gain : pj.gain;
     if (std::abs(merged.gain) < 1e-3 * std::abs(larger)) merged.gain = larger;
     const int input = subs[best_i].input;
-    subs[best_i] = make_mode(subs[best_i].name, merged);
+    subs[best_i] = make_mode(subs[best_i].name, merged, subs[best_i].output_derivatives);
     subs[best_i].input = input;
     removed[best_j] = true;
     ModeFinding& f = out.findings[best_j];

@@ -36,7 +36,7 @@ Submodel submodel_at(const PlantMode& mode, double t) {
   ModalParameters p = modal_at(mode, t);
   if (!(p.wn > 0.0) || !std::isfinite(p.wn) || !(p.zeta >= 0.0) || !std::isfinite(p.gain))
     throw std::invalid_argument("simulate: mode '" + mode.submodel.name + "' needs wn > 0, zeta >= 0, finite gain");
-  return make_mode(mode.submodel.name, p);
+  return make_mode(mode.submodel.name, p, mode.submodel.output_derivatives);
 }
 
 // Coefficient j of a polynomial in p, times ws^(j-l): with p = ws p' the
@@ -56,19 +56,23 @@ double time_scale(const PlantMode& mode, const Submodel& s) {
   return 1.0;
 }
 
-// One plant submodel simulated exactly under ZOH in normalised time.
+// One plant submodel simulated exactly under ZOH in normalised time. The
+// filter 1/(p^l A) gives the measured output p^z B/(p^l A) u and, from the same
+// states, the position B/(p^l A) u that the nonlinear effects act on.
 class ModeSimulator {
  public:
   ModeSimulator(const PlantMode& mode, double T) : mode_(mode) {
     const Submodel s = submodel_at(mode, 0.0);
     s.check();
     l_ = s.rigid_poles;
+    z_ = s.output_derivatives;
     order_ = s.n + s.rigid_poles;
     if (order_ > kMaxFilterOrder) throw std::invalid_argument("simulate: submodel '" + s.name + "' order too high");
     ws_ = time_scale(mode, s);
     current_ = modal_at(mode, 0.0);
     d_ = scale_coefficients(s.denominator(), ws_, l_, order_ + 1);
-    b_ = scale_coefficients(s.b, ws_, l_, order_ + 1);
+    b_ = scale_coefficients(s.output_numerator(), ws_, l_, order_ + 1);
+    if (z_ > 0) x_ = scale_coefficients(s.b, ws_, l_, order_ + 1);
     filter_ = Prefilter(d_, ws_ * T, Hold::zoh);
   }
 
@@ -81,15 +85,24 @@ class ModeSimulator {
       d_ = scale_coefficients(s.denominator(), ws_, l_, order_ + 1);
       filter_.set_denominator(d_);
     }
-    b_(0) = p.gain;
+    if (z_ == 0) {
+      b_(0) = p.gain;
+    } else {
+      b_(z_) = p.gain * std::pow(ws_, z_);
+      x_(0) = p.gain;
+    }
     current_ = p;
   }
 
-  // Output at t_k if the input sample were 0, leaving the state untouched.
-  double free_output() const {
+  // Output and position at t_k if the input sample were 0, leaving the state untouched.
+  struct Free {
+    double output, position;
+  };
+  Free free() const {
     Prefilter probe = filter_;
     probe.step(0.0);
-    return probe.combine(b_);
+    const double y = probe.combine(b_);
+    return {y, z_ == 0 ? y : probe.combine(x_)};
   }
   // d output / d u_k: nonzero only for a biproper submodel.
   double feedthrough() const { return b_(order_) / d_(order_); }
@@ -102,11 +115,13 @@ class ModeSimulator {
  private:
   const PlantMode& mode_;
   int l_ = 0;
+  int z_ = 0;  // derivatives of the position the sensor measures
   int order_ = 0;
   double ws_ = 1.0;
   ModalParameters current_;
   Eigen::VectorXd d_;  // scaled denominator, ascending
-  Eigen::VectorXd b_;  // scaled numerator, padded to order_ + 1
+  Eigen::VectorXd b_;  // scaled output numerator p^z B, padded to order_ + 1
+  Eigen::VectorXd x_;  // scaled position numerator B when z > 0
   Prefilter filter_;
 };
 
@@ -129,16 +144,16 @@ Signals run_open_loop(const PlantSpec& plant, const Eigen::VectorXd& t, double T
   Signals s{u, Eigen::VectorXd::Zero(t.size()), Eigen::VectorXd()};
   const bool nonlinear = plant.effects.feeds_back();
   for (Eigen::Index k = 0; k < t.size(); ++k) {
-    double y_free = 0.0;
+    double x_free = 0.0;  // the position the effects act on
     for (ModeSimulator& m : modes) {
       m.set_time(t(k));
-      if (nonlinear) y_free += m.free_output();
+      if (nonlinear) x_free += m.free().position;
     }
-    const double u_plant = effects.delayed(u(k)) + effects.branches(y_free);
+    const double u_plant = effects.delayed(u(k)) + effects.branches(x_free);
     double y_plant = 0.0;
     for (ModeSimulator& m : modes)
       y_plant += m.step(m.input() == 0 ? u_plant : further_u[static_cast<std::size_t>(m.input() - 1)](k));
-    effects.end_sample(u(k), y_free);
+    effects.end_sample(u(k), x_free);
     s.y_clean(k) = y_plant + effects.output_terms(t(k) - t(0));
   }
   s.y = s.y_clean + noise;
@@ -157,15 +172,16 @@ Signals run_closed_loop(const PlantSpec& plant, const ExperimentSpec& ex, const 
   EffectState effects(plant.effects);
   Signals s{Eigen::VectorXd(t.size()), Eigen::VectorXd(t.size()), Eigen::VectorXd(t.size())};
   for (Eigen::Index k = 0; k < t.size(); ++k) {
-    double y_free = 0.0, feed = 0.0;
+    double y_free = 0.0, x_free = 0.0, feed = 0.0;
     for (ModeSimulator& m : modes) {
       m.set_time(t(k));
-      y_free += m.free_output();
+      const ModeSimulator::Free f = m.free();
+      y_free += f.output;
+      x_free += f.position;
       feed += m.feedthrough();
     }
     // With a delay u_k does not reach y_k; without, y_k depends on u_k through D.
-    const double branches = effects.branches(y_free);
-    const double y_zero_input = y_free;
+    const double branches = effects.branches(x_free);
     y_free += feed * effects.known_input(branches);
     const double direct = effects.delays() ? 0.0 : feed;
     const double loop = 1.0 + c0 * direct;
@@ -176,7 +192,7 @@ Signals run_closed_loop(const PlantSpec& plant, const ExperimentSpec& ex, const 
     const double u_plant = effects.delayed(u) + branches;
     double y_plant = 0.0;
     for (ModeSimulator& m : modes) y_plant += m.step(u_plant);
-    effects.end_sample(u, y_zero_input);
+    effects.end_sample(u, x_free);
     s.u(k) = u;
     s.y_clean(k) = y_plant + y_out;
     s.y(k) = s.y_clean(k) + noise(k);

@@ -14,8 +14,9 @@ namespace modalwatch {
 namespace {
 
 // Per-submodel time normalisation: with t' = ws t a mode's
-// coefficients become a'_j = a_j ws^j and b'_k = b_k ws^(k-l), so a'_n is of
-// order one whether the mode sits at 1 rad/s or at 700 Hz.
+// coefficients become a'_j = a_j ws^j and b'_k = b_k ws^(k+z-l) (p^z B over
+// p^l A, z the output's derivatives), so a'_n is of order one whether the
+// mode sits at 1 rad/s or at 700 Hz.
 double time_scale(const Submodel& s) {
   if (s.n > 0 && s.a(s.n - 1) != 0.0) return std::pow(std::abs(s.a(s.n - 1)), -1.0 / s.n);
   return 1.0;
@@ -25,12 +26,12 @@ double time_scale(const Submodel& s) {
 Eigen::VectorXd scaling(const Submodel& s, double ws) {
   Eigen::VectorXd d(s.n_theta());
   for (int j = 1; j <= s.n; ++j) d(j - 1) = std::pow(ws, j);
-  for (int k = 0; k <= s.m; ++k) d(s.n + k) = std::pow(ws, k - s.rigid_poles);
+  for (int k = 0; k <= s.m; ++k) d(s.n + k) = std::pow(ws, k + s.output_derivatives - s.rigid_poles);
   return d;
 }
 
 // One submodel in normalised time: the filter 1/(p^l A') on a signal, and its
-// output B'/(p^l A') w.
+// measured output p^z B'/(p^l A') w.
 struct ScaledSubmodel {
   const Submodel* shape = nullptr;
   double ws = 1.0;
@@ -47,11 +48,16 @@ struct ScaledSubmodel {
     c.tail(shape->n + 1) = a_poly();
     return c;
   }
-  Eigen::VectorXd b() const { return theta.tail(shape->m + 1); }
-  // Feedthrough of B'/(p^l A'): nonzero only when biproper.
+  // p^z B': the output's numerator over the filter 1/(p^l A').
+  Eigen::VectorXd b() const {
+    Eigen::VectorXd c = Eigen::VectorXd::Zero(shape->m + shape->output_derivatives + 1);
+    c.tail(shape->m + 1) = theta.tail(shape->m + 1);
+    return c;
+  }
+  // Feedthrough of p^z B'/(p^l A'): nonzero only when biproper.
   double feedthrough() const {
     const int N = shape->n + shape->rigid_poles;
-    return shape->m == N ? theta(shape->n + shape->m) / denominator()(N) : 0.0;
+    return shape->m + shape->output_derivatives == N ? theta(shape->n + shape->m) / denominator()(N) : 0.0;
   }
 };
 
@@ -122,6 +128,8 @@ void simulate_loop_scaled(const std::vector<ScaledSubmodel>& model, DiscreteTran
 
 // Filtered signals of one submodel for one SRIVC iteration (eqs. 18-20, 33):
 // regressor phi, instrument psi (both n_theta wide) and filtered output y_f.
+// With a derivative output p^z the regressor of b_k is the prefiltered input's
+// (k+z)-th derivative, p^(k+z) u / (p^l A), the top one algebraic when m + z = n + l.
 struct Filtered {
   Eigen::MatrixXd phi, psi;
   Eigen::VectorXd y_f;
@@ -130,6 +138,7 @@ struct Filtered {
 Filtered filter_block(const ScaledSubmodel& s, const Eigen::VectorXd& y_tilde, const Eigen::VectorXd& u,
                       const Eigen::VectorXd& x_hat, const Eigen::VectorXd& z, double T, Hold output_hold) {
   const int n = s.shape->n, m = s.shape->m, nt = s.shape->n_theta();
+  const int derivatives = s.shape->output_derivatives;  // z of p^z
   const double Ts = s.ws * T;
   const Eigen::VectorXd a = s.a_poly(), den = s.denominator();
   Prefilter fy(a, Ts, output_hold), fx(a, Ts, output_hold);
@@ -151,8 +160,8 @@ Filtered filter_block(const ScaledSubmodel& s, const Eigen::VectorXd& y_tilde, c
       out.psi(k, j - 1) = -dx(j);
     }
     for (int j = 0; j <= m; ++j) {
-      out.phi(k, n + j) = du(j);
-      out.psi(k, n + j) = dz(j);
+      out.phi(k, n + j) = du(j + derivatives);
+      out.psi(k, n + j) = dz(j + derivatives);
     }
   }
   return out;
@@ -256,6 +265,7 @@ bool unfactored_start(const Record& data, const AdditiveModel& initial, const Sr
   all.a = A.tail(n);
   all.b = B;
   all.input = initial.submodels[0].input;
+  all.output_derivatives = initial.output_derivatives();
   AdditiveModel k1;
   k1.submodels = {all};
   SrivcOptions o = options;

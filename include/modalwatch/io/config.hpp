@@ -78,6 +78,10 @@ struct Config {
   // `model.modes`, given instead of submodels: the number of modes that `fit`
   // and `diagnose` start from the data (model then has no submodels).
   std::optional<int> model_modes;
+  // `model.output`: what the sensor measures, as z, the derivatives of the
+  // position (0 position, 1 velocity, 2 acceleration). Every submodel of
+  // `model` and of `plant` carries it.
+  int output_derivatives = 0;
   std::vector<SubmodelSettings> submodel_settings;  // one per submodel
   bool closed_loop = false;
   DiscreteTransferFunction controller;

@@ -242,6 +242,12 @@ std::uint64_t checkpoint_fingerprint(const Config& config) {
     f.u64(static_cast<std::uint64_t>(s.n));
     f.u64(static_cast<std::uint64_t>(s.m));
     f.u64(static_cast<std::uint64_t>(s.rigid_poles));
+    // The sensor when it is not a position one: position adds nothing, so that
+    // a position model's fingerprint does not depend on the key.
+    if (s.output_derivatives != 0) {
+      f.str("output");
+      f.u64(static_cast<std::uint64_t>(s.output_derivatives));
+    }
     const double lambda = i < config.estimator.forgetting.size() ? config.estimator.forgetting[i]
                           : i < config.submodel_settings.size()  ? config.submodel_settings[i].forgetting
                                                                  : 1.0;

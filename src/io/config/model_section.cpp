@@ -19,7 +19,7 @@ namespace modalwatch::config_detail {
 
 namespace {
 
-Submodel parse_transfer_function(const Map& m, const std::string& name, int rigid_poles) {
+Submodel parse_transfer_function(const Map& m, const std::string& name, int rigid_poles, int output_derivatives) {
   const Value a_value = m.require("a", "kind transfer_function");
   const Value b_value = m.require("b", "kind transfer_function");
   const std::vector<double> a = a_value.numbers();
@@ -34,8 +34,13 @@ Submodel parse_transfer_function(const Map& m, const std::string& name, int rigi
   if (mm > n + rigid_poles)
     b_value.fail("m = " + std::to_string(mm) + " (length of b - 1) exceeds n + l = " + std::to_string(n) + " + " +
                  std::to_string(rigid_poles) + " (n = length of a, l = rigid_poles): improper");
+  if (mm + output_derivatives > n + rigid_poles)
+    b_value.fail("m + z = " + std::to_string(mm) + " + " + std::to_string(output_derivatives) + " exceeds n + l = " +
+                 std::to_string(n) + " + " + std::to_string(rigid_poles) + ": p^z B / (p^l A) is improper for model.output " +
+                 output_kind_name(output_derivatives));
   Submodel s;
   s.name = name;
+  s.output_derivatives = output_derivatives;
   s.n = n;
   s.m = mm;
   s.rigid_poles = rigid_poles;
@@ -78,7 +83,7 @@ Keys submodel_keys(const std::string& kind, const Keys& extra) {
 
 }  // namespace
 
-SubmodelEntry parse_submodel(const Map& m, const Keys& extra) {
+SubmodelEntry parse_submodel(const Map& m, const Keys& extra, int output_derivatives) {
   const std::string kind = m.get("kind") ? m.get("kind")->choice({"mode", "rigid_body", "feedthrough", "transfer_function"}) : "mode";
   if (kind != "mode")
     if (const auto t = m.get("trajectory"))
@@ -96,13 +101,22 @@ SubmodelEntry parse_submodel(const Map& m, const Keys& extra) {
     if (rigid_poles != 0) poles->fail("a mode has no poles at the origin; use kind transfer_function");
     e.mode = true;
     e.modal = parse_modal(m);
-    e.submodel = make_mode(name, e.modal);
+    e.submodel = make_mode(name, e.modal, output_derivatives);
   } else if (kind == "rigid_body") {
-    e.submodel = make_rigid_body(name, m.require("gain", "kind rigid_body").nonzero(), rigid_poles);
+    if (rigid_poles < output_derivatives)
+      (poles ? *poles : m.self())
+          .fail("a rigid body b0 / p^" + std::to_string(rigid_poles) + " measured as " +
+                output_kind_name(output_derivatives) + " is improper (rigid_poles >= " +
+                std::to_string(output_derivatives) + ")");
+    e.submodel =
+        make_rigid_body(name, m.require("gain", "kind rigid_body").nonzero(), rigid_poles, output_derivatives);
   } else if (kind == "feedthrough") {
-    e.submodel = make_rigid_body(name, m.require("gain", "kind feedthrough").nonzero(), 0);
+    // A constant measured response: with a derivative output, the rigid body
+    // b0 / p^z (an accelerometer sees a rigid body's acceleration b0 u).
+    e.submodel = make_rigid_body(name, m.require("gain", "kind feedthrough").nonzero(), output_derivatives,
+                                 output_derivatives);
   } else {
-    e.submodel = parse_transfer_function(m, name, rigid_poles);
+    e.submodel = parse_transfer_function(m, name, rigid_poles, output_derivatives);
   }
   return e;
 }
@@ -171,8 +185,10 @@ int parse_submodel_input(const Map& m, const std::vector<std::string>& inputs) {
 }  // namespace
 
 void parse_model(const Map& model, Config& config) {
-  model.allow({"loop", "output_hold", "inputs", "submodels", "modes"}, "model");
+  model.allow({"loop", "output", "output_hold", "inputs", "submodels", "modes"}, "model");
   if (const auto loop = model.get("loop")) config.closed_loop = loop->choice({"open", "closed"}) == "closed";
+  if (const auto output = model.get("output"))
+    config.output_derivatives = *output_derivatives_of(output->choice({"position", "velocity", "acceleration"}));
   if (const auto hold = model.get("output_hold"))
     config.output_hold = hold->choice({"zoh", "foh"}) == "foh" ? Hold::foh : Hold::zoh;
   if (const auto inputs = model.get("inputs")) config.model.inputs = parse_inputs(*inputs, config.closed_loop);
@@ -189,7 +205,8 @@ void parse_model(const Map& model, Config& config) {
   for (const auto& item : items) {
     const Map m(item);
     entries.push_back(
-        parse_submodel(m, {"input", "forgetting", "random_walk", "stabilisation", "min_memory", "initial_covariance"}));
+        parse_submodel(m, {"input", "forgetting", "random_walk", "stabilisation", "min_memory", "initial_covariance"},
+                       config.output_derivatives));
     entries.back().submodel.input = parse_submodel_input(m, config.model.inputs);
     SubmodelSettings settings;
     if (const auto f = m.get("forgetting")) {

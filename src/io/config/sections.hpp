@@ -15,8 +15,9 @@ struct SubmodelEntry {
   ModalParameters modal;
   int line = 0;  // of the name, for duplicate-name messages
 };
-// A submodel entry; `extra` are the keys the caller reads itself (forgetting, trajectory).
-SubmodelEntry parse_submodel(const Map& m, const Keys& extra);
+// A submodel entry; `extra` are the keys the caller reads itself (forgetting,
+// trajectory). The submodel measures the z-th derivative of its position (model.output).
+SubmodelEntry parse_submodel(const Map& m, const Keys& extra, int output_derivatives);
 // Modal parameters (wn or frequency_hz, zeta, gain).
 ModalParameters parse_modal(const Map& m);
 // Names are unique within a list; `items` locate the entries in messages.
@@ -25,7 +26,8 @@ void check_unique_names(const std::vector<Value>& items, const std::vector<Submo
 // model: (the submodels, their settings and the loop) into config.
 void parse_model(const Map& model, Config& config);
 DiscreteTransferFunction parse_controller(const Map& c);
-PlantSpec parse_plant(const Map& plant);
+// The plant is measured by the model's sensor: its modes take model.output's z.
+PlantSpec parse_plant(const Map& plant, int output_derivatives);
 // simulation: signal files are read relative to `dir` (CSV or LCM log, records.hpp).
 ExperimentSpec parse_simulation(const Map& sim, const Config& config, const std::filesystem::path& dir);
 void parse_estimator(const Map& est, double sample_time, EstimatorSettings& e);

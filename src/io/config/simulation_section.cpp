@@ -47,7 +47,7 @@ void parse_trajectory(const Map& m, PlantMode& mode) {
 
 }  // namespace
 
-PlantSpec parse_plant(const Map& plant) {
+PlantSpec parse_plant(const Map& plant, int output_derivatives) {
   plant.allow({"modes", "noise_variance", "snr_db", "output_offset", "input_offset", "input_delay", "coulomb", "cubic"},
               "plant");
   PlantSpec spec;
@@ -57,7 +57,7 @@ PlantSpec parse_plant(const Map& plant) {
   std::vector<SubmodelEntry> entries;
   for (const auto& item : items) {
     const Map m(item);
-    entries.push_back(parse_submodel(m, {"trajectory"}));
+    entries.push_back(parse_submodel(m, {"trajectory"}, output_derivatives));
     PlantMode mode;
     mode.submodel = entries.back().submodel;
     mode.resonant = entries.back().mode;
