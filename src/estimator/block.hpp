@@ -119,7 +119,7 @@ struct Block {
   ThetaMat good_P;
   ThetaVec phi, psi;
   // The output error's correlation with this block's instrument over e_short's
-  // window, the instrument's own, and their score test: which blocks a change
+  // window, the instrument's own (upper triangle), and their score test: which blocks a change
   // of the output error belongs to (boost_changed_blocks).
   ThetaVec score;
   ThetaMat score_info;

@@ -170,7 +170,7 @@ void RecursiveEstimator::Impl::boost_changed_blocks() {
   double largest = 0.0;
   bool boosted = false;
   for (auto& b : blocks) {
-    const detail::ThetaVec x = b.score_info.ldlt().solve(b.score);
+    const detail::ThetaVec x = b.score_info.selfadjointView<Eigen::Upper>().ldlt().solve(b.score);
     const double t = b.score.dot(x) / (e_var_good * b.nt);
     b.score_test = std::isfinite(t) ? t : 0.0;
     largest = std::max(largest, b.score_test);

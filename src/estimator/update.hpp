@@ -150,8 +150,8 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
     double* score = b.score.data();
     double* info = b.score_info.data();
     for (int i = 0; i < nt; ++i) score[i] = rho * score[i] + psi[i] * eps;
-    for (int j = 0; j < nt; ++j)
-      for (int i = 0; i < nt; ++i) info[i + j * nt] = rho * info[i + j * nt] + psi[i] * psi[j];
+    for (int j = 0; j < nt; ++j)  // the upper triangle: it is symmetric
+      for (int i = 0; i <= j; ++i) info[i + j * nt] = rho * info[i + j * nt] + psi[i] * psi[j];
   }
   if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), lambda, y_f)) return false;
   // Stabilised forgetting on one block per update and one of its coordinates
