@@ -111,7 +111,9 @@ const std::string kEstimator =
     "  outlier_sigma: 6\n"                  // 27
     "  residual_window: 30\n"               // 28
     "  low_excitation_ratio: 0.2\n"         // 29
-    "  low_excitation_window: 8\n";         // 30
+    "  low_excitation_window: 8\n"          // 30
+    "  change_ratio: 3\n"                   // 31
+    "  change_threshold: 12\n";             // 32
 
 [[maybe_unused]] void expect_estimator_defaults(const modalwatch::EstimatorSettings& e, int warmup_samples) {
   const modalwatch::EstimatorSettings d;
@@ -130,6 +132,8 @@ const std::string kEstimator =
   EXPECT_EQ(e.residual_window, d.residual_window);
   EXPECT_EQ(e.low_excitation_ratio, d.low_excitation_ratio);
   EXPECT_EQ(e.low_excitation_window, d.low_excitation_window);
+  EXPECT_EQ(e.change_ratio, d.change_ratio);
+  EXPECT_EQ(e.change_threshold, d.change_threshold);
 }
 
 // Every `estimator:` key with a value other than its default; appended to

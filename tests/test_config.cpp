@@ -104,6 +104,8 @@ TEST(Config, EstimatorParsesEveryKey) {
   EXPECT_DOUBLE_EQ(e.residual_window, 30.0);
   EXPECT_DOUBLE_EQ(e.low_excitation_ratio, 0.2);
   EXPECT_DOUBLE_EQ(e.low_excitation_window, 8.0);
+  EXPECT_DOUBLE_EQ(e.change_ratio, 3.0);
+  EXPECT_DOUBLE_EQ(e.change_threshold, 12.0);
   // Still completed from the other sections.
   EXPECT_DOUBLE_EQ(e.sample_time, 0.05);
   EXPECT_EQ(e.forgetting, (std::vector<double>{0.99, 1.0}));
@@ -119,13 +121,15 @@ TEST(Config, EstimatorParsesEveryKey) {
             "test.yaml:11: key 'model.submodels[0].random_walk': must be >= 0 (got -1)");
   // Boundary values that are allowed.
   const std::string edge =
-      edit(edit(edit(edit(edit(kEstimator, "refinements: 2", "refinements: 0"), "warmup: 12.5", "warmup: 0"),
-                     "random_walk: 1.0e-4", "random_walk: 0"),
-                "low_excitation_ratio: 0.2", "low_excitation_ratio: 0"),
-           "residual_window: 30", "residual_window: 0");
+      edit(edit(edit(edit(edit(edit(kEstimator, "refinements: 2", "refinements: 0"), "warmup: 12.5", "warmup: 0"),
+                          "random_walk: 1.0e-4", "random_walk: 0"),
+                     "low_excitation_ratio: 0.2", "low_excitation_ratio: 0"),
+                "residual_window: 30", "residual_window: 0"),
+           "change_ratio: 3", "change_ratio: 0");
   const Config z = parse_config(kBase + edge, "test.yaml");
   EXPECT_EQ(z.estimator.refinements, 0);
   EXPECT_EQ(z.estimator.warmup_samples, 0);
+  EXPECT_EQ(z.estimator.change_ratio, 0.0);
   EXPECT_EQ(z.estimator.random_walk, 0.0);
   EXPECT_EQ(z.estimator.low_excitation_ratio, 0.0);
   EXPECT_EQ(z.estimator.residual_window, 0.0);

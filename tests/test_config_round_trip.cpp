@@ -105,6 +105,8 @@ void expect_same_config(const Config& a, const Config& b) {
   EXPECT_EQ(sa.random_walk, sb.random_walk);
   EXPECT_EQ(sa.covariance_bound, sb.covariance_bound);
   EXPECT_EQ(sa.divergence_ratio, sb.divergence_ratio);
+  EXPECT_EQ(sa.change_ratio, sb.change_ratio);
+  EXPECT_EQ(sa.change_threshold, sb.change_threshold);
   EXPECT_EQ(sa.gap_factor, sb.gap_factor);
   EXPECT_EQ(sa.outlier_sigma, sb.outlier_sigma);
   EXPECT_EQ(sa.residual_window, sb.residual_window);

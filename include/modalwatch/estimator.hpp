@@ -102,6 +102,17 @@ struct EstimatorSettings {
   // Per submodel (empty: min_memory for every one), as random_walks.
   std::vector<double> min_memories;
   double divergence_ratio = 10.0;      // residual RMS this many times its last good value: reset
+  // A change of the plant that the model no longer fits, long before the error
+  // diverges: Page's CUSUM (Basseville & Nikiforov 1993, sec. 2.2) for the
+  // output error's variance going from its last good value to change_ratio
+  // times it, with the alarm at change_threshold h (the log-likelihood ratio;
+  // on a white Gaussian residual about e^h / 0.32 samples between false alarms,
+  // 2e8 at 18 for a ratio 4, whatever the plant). On the alarm the submodels the error correlates with
+  // (their instruments' score test) get their covariance multiplied by
+  // kChangeBoost, so that they follow within a tenth of a memory where
+  // forgetting takes one. 0: off.
+  double change_ratio = 4.0;
+  double change_threshold = 18.0;
   // A time step above gap_factor T is a gap. In closed loop, one shorter than
   // a quarter of the model's shortest decay time is bridged: the controller
   // and the model run the loop over the missing samples, and updates go on
@@ -127,6 +138,7 @@ struct EstimatorStatus {
   std::uint64_t projections = 0;
   std::uint64_t covariance_clamps = 0;
   std::uint64_t resets = 0;  // returns to the last good state
+  std::uint64_t boosts = 0;  // covariance boosts after a change of the output error (change_ratio)
   const char* last_reset_reason = "";
   bool warming_up = true;
   bool low_excitation = false;

@@ -611,6 +611,7 @@ int track(const TrackArgs& args) {
                    st.last_reset_reason);
     else
       std::fprintf(stderr, "  resets: 0\n");
+    std::fprintf(stderr, "  covariance boosts on a change: %llu\n", static_cast<unsigned long long>(st.boosts));
     std::fprintf(stderr, "  rejected non-finite: %llu\n", static_cast<unsigned long long>(st.rejected_nonfinite));
     std::fprintf(stderr, "  rejected out-of-order: %llu\n", static_cast<unsigned long long>(st.rejected_out_of_order));
     std::fprintf(stderr, "  gaps: %llu\n", static_cast<unsigned long long>(st.gaps));

@@ -118,6 +118,12 @@ struct Block {
   ThetaVec good_theta;
   ThetaMat good_P;
   ThetaVec phi, psi;
+  // The output error's correlation with this block's instrument over e_short's
+  // window, the instrument's own (upper triangle), and their score test: which blocks a change
+  // of the output error belongs to (boost_changed_blocks).
+  ThetaVec score;
+  ThetaMat score_info;
+  double score_test = 0.0;
 
   // Decay rate (1/s) of the slowest pole of A when A is of first or second
   // order, stable, and the submodel has no rigid poles; else 0 (no such bound).

@@ -45,7 +45,8 @@ bool EstimatorSettings::operator==(const EstimatorSettings& o) const {
          initial_covariance_relative == o.initial_covariance_relative && random_walk == o.random_walk &&
          random_walks == o.random_walks && covariance_bound == o.covariance_bound && stabilisation == o.stabilisation &&
          stabilisations == o.stabilisations && min_memory == o.min_memory && min_memories == o.min_memories &&
-         divergence_ratio == o.divergence_ratio && gap_factor == o.gap_factor &&
+         divergence_ratio == o.divergence_ratio && change_ratio == o.change_ratio &&
+         change_threshold == o.change_threshold && gap_factor == o.gap_factor &&
          outlier_sigma == o.outlier_sigma && residual_window == o.residual_window &&
          low_excitation_ratio == o.low_excitation_ratio && low_excitation_window == o.low_excitation_window;
 }
@@ -92,6 +93,8 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.filters.init(b.a_poly(), b.denominator(), b.ws * T, cfg.output_hold, b.biproper);
     b.phi.resize(b.nt);
     b.psi.resize(b.nt);
+    b.score = ThetaVec::Zero(b.nt);
+    b.score_info = ThetaMat::Zero(b.nt, b.nt);
     blocks.push_back(std::move(b));
   }
   snapshot.resize(blocks.size());
@@ -167,6 +170,8 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
     throw std::invalid_argument("estimator: M_l >= 1, M_s >= 0 and the update divisor >= 1");
   if (settings.closed_loop && settings.controller.empty())
     throw std::invalid_argument("estimator: closed loop needs the controller");
+  if (!(settings.change_ratio == 0.0 || settings.change_ratio > 1.0) || !(settings.change_threshold > 0.0))
+    throw std::invalid_argument("estimator: change_ratio 0 (off) or > 1, change_threshold > 0");
   m.cfg.forgetting.resize(initial.submodels.size(), 1.0);
   if (settings.forgetting.empty()) std::fill(m.cfg.forgetting.begin(), m.cfg.forgetting.end(), 1.0);
 
@@ -176,6 +181,10 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
                                                          : (lambda_min < 1.0 ? 1.0 / (1.0 - lambda_min) : 1000.0);
   m.e_alpha = 1.0 - 1.0 / std::max(e_window, 2.0);
   m.e_short_alpha = 1.0 - 1.0 / std::max(0.05 * e_window, 2.0);
+  if (settings.change_ratio > 1.0) {
+    m.change_drift = -0.5 * std::log(settings.change_ratio);
+    m.change_gain = 0.5 * (1.0 - 1.0 / settings.change_ratio);
+  }
   double w_min = std::numeric_limits<double>::infinity();
   for (const auto& s : initial.submodels)
     if (s.n == 2 && s.a(1) > 0.0) w_min = std::min(w_min, 1.0 / std::sqrt(s.a(1)));

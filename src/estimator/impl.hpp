@@ -102,6 +102,8 @@ struct RecursiveEstimator::Impl {
   double e_short = 0.0;  // the same over a few samples: divergence detector
   double e_short_alpha = 0.0;
   double e_var_good = 0.0;      // e_var when the last good state was saved
+  double change_cusum = 0.0;    // Page's CUSUM on e^2 / e_var_good (EstimatorSettings::change_ratio)
+  double change_drift = 0.0, change_gain = 0.0;  // its increment: drift + gain e^2 / e_var_good
   std::uint64_t rearm = 0;      // samples until the divergence detector is armed again
   std::uint64_t settling = 0;   // after a filter restart: samples left to catch up (no update meanwhile)
   std::uint64_t transient = 0;  // ... of which the first ones, while the modes' free response dies out
@@ -138,6 +140,7 @@ struct RecursiveEstimator::Impl {
   double shortest_decay_time() const;
   void save_good();
   void restore_good(const char* reason);
+  void boost_changed_blocks();
   int refit_samples() const;
   bool may_refit() const;
   void buffer_window_sample(const Sample& s) {

@@ -188,6 +188,17 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   constexpr double kSettledRatio = 1.25;
   const bool diverging =
       allow_update && e_var_good > 0.0 && e_short > cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
+  // A change below the divergence: the CUSUM's increment is the log-likelihood
+  // ratio of e between N(0, kappa e_var_good) and N(0, e_var_good),
+  // -ln(kappa)/2 + (1 - 1/kappa) e^2 / (2 e_var_good) (kappa = change_ratio), on the
+  // samples an update may take (not an outlier, not while settling or rearming).
+  bool changed = false;
+  if (cfg.change_ratio > 1.0 && settling == 0 && rearm == 0 && update && e_var_good > 0.0 && std::isfinite(s.y)) {
+    change_cusum = std::max(0.0, change_cusum + change_drift + change_gain * e * e / e_var_good);
+    changed = change_cusum > cfg.change_threshold;
+  } else {
+    change_cusum = 0.0;
+  }
   if (settling > 0) {
     if (transient > 0) --transient;
     const bool settled = transient == 0 && !(e_short > kSettledRatio * kSettledRatio * e_var_good);
@@ -198,6 +209,9 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   } else if (diverging) {
     restore_good(kResetDiverged);
     return flags | kReset;
+  } else if (changed) {
+    change_cusum = 0.0;
+    boost_changed_blocks();
   }
   // 3. Excitation: without input power the update only winds P up.
   pow_short = pow_count == 0 ? z * z : pow_alpha * pow_short + (1.0 - pow_alpha) * z * z;

@@ -140,6 +140,19 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
     const double rate = b.decay_rate();
     if (rate > 0.0) lambda = std::max(lambda, 1.0 - b.forget_per_decay * rate);
   }
+  // The score test's sums (boost_changed_blocks), with the error before this update.
+  {
+    const double* phi = b.phi.data();
+    const double* psi = b.psi.data();
+    double eps = y_f;
+    for (int i = 0; i < nt; ++i) eps -= phi[i] * theta[i];
+    const double rho = e_short_alpha;
+    double* score = b.score.data();
+    double* info = b.score_info.data();
+    for (int i = 0; i < nt; ++i) score[i] = rho * score[i] + psi[i] * eps;
+    for (int j = 0; j < nt; ++j)  // the upper triangle: it is symmetric
+      for (int i = 0; i <= j; ++i) info[i + j * nt] = rho * info[i + j * nt] + psi[i] * psi[j];
+  }
   if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), lambda, y_f)) return false;
   // Stabilised forgetting on one block per update and one of its coordinates
   // per round, in turn (the same for every refinement of a sample), with K nt
