@@ -78,7 +78,9 @@ std::vector<Excursion> track_excursions(bool plain) {
   }
   EXPECT_EQ(est.status().resets, 0u);
   // Healthy: no change of the output error for the CUSUM to find (40 min, 48,000 samples).
-  if (!plain) EXPECT_EQ(est.status().boosts, 0u);
+  if (!plain) {
+    EXPECT_EQ(est.status().boosts, 0u);
+  }
   return worst;
 }
 
