@@ -87,6 +87,30 @@ struct BlockFilters {
   }
 };
 
+// Per-direction bound on a symmetric P (nt x nt, column-major): D P D with
+// D = diag(min(1, sqrt(bound/P_jj))) keeps P symmetric positive definite while
+// stopping wind-up in unexcited directions. D_jj scales row j and mirrors it
+// into column j, and P_jj becomes D_jj^2 P_jj = bound_j. N > 0 fixes nt at
+// compile time (as iv_update). True when a direction was bounded.
+template <int N>
+MODALWATCH_HOT bool bound_covariance(double* P, const double* bound, int nt_runtime) {
+  const int nt = N > 0 ? N : nt_runtime;
+  bool clamped = false;
+  for (int j = 0; j < nt; ++j) {
+    if (P[j + j * nt] > bound[j]) {
+      const double f = std::sqrt(bound[j] / P[j + j * nt]);
+      for (int k = 0; k < nt; ++k) {
+        if (k == j) continue;
+        P[j + k * nt] *= f;
+        P[k + j * nt] = P[j + k * nt];
+      }
+      P[j + j * nt] = bound[j];
+      clamped = true;
+    }
+  }
+  return clamped;
+}
+
 struct Block {
   int n = 0, m = 0, l = 0, nt = 0;
   int z = 0;              // the output is p^z times the position response (Submodel::output_derivatives)
@@ -119,11 +143,10 @@ struct Block {
   ThetaMat good_P;
   ThetaVec phi, psi;
   // The output error's correlation with this block's instrument over e_short's
-  // window, the instrument's own (upper triangle), and their score test: which blocks a change
-  // of the output error belongs to (boost_changed_blocks).
+  // window, and the instrument's own (upper triangle): the score test's sums,
+  // which blocks a change of the output error belongs to (boost_changed_blocks).
   ThetaVec score;
   ThetaMat score_info;
-  double score_test = 0.0;
 
   // Decay rate (1/s) of the slowest pole of A when A is of first or second
   // order, stable, and the submodel has no rigid poles; else 0 (no such bound).

@@ -167,14 +167,14 @@ void RecursiveEstimator::Impl::save_good() {
 // boosted blocks move.
 void RecursiveEstimator::Impl::boost_changed_blocks() {
   constexpr double kChangeBoost = 10.0, kShareOfLargest = 0.5, kWait = 0.1;
-  double largest = 0.0;
-  bool boosted = false;
-  for (auto& b : blocks) {
+  const auto score_test = [this](const detail::Block& b) {
     const detail::ThetaVec x = b.score_info.selfadjointView<Eigen::Upper>().ldlt().solve(b.score);
     const double t = b.score.dot(x) / (e_var_good * b.nt);
-    b.score_test = std::isfinite(t) ? t : 0.0;
-    largest = std::max(largest, b.score_test);
-  }
+    return std::isfinite(t) ? t : 0.0;
+  };
+  double largest = 0.0;
+  for (const auto& b : blocks) largest = std::max(largest, score_test(b));
+  bool boosted = false;
   for (auto& b : blocks) {
     // No shorter than the memory floor (min_memory decay times): faster, the
     // boosted mode winds up with its own prefilters (on the flexible beam's
@@ -185,16 +185,10 @@ void RecursiveEstimator::Impl::boost_changed_blocks() {
       const double floor_forget = b.forget_per_decay * rate;  // 1 - lambda at the floor
       boost = std::clamp(floor_forget / std::min(1.0 - b.lambda, floor_forget), 1.0, kChangeBoost);
     }
-    if (b.score_test >= kShareOfLargest * largest && boost > 1.0) {
+    if (boost > 1.0 && score_test(b) >= kShareOfLargest * largest) {
       boosted = true;
       b.P *= boost;
-      for (Eigen::Index j = 0; j < b.nt; ++j) {
-        if (b.P(j, j) > b.p_bound(j)) {
-          const double f = std::sqrt(b.p_bound(j) / b.P(j, j));
-          b.P.row(j) *= f;
-          b.P.col(j) *= f;
-        }
-      }
+      detail::bound_covariance<0>(b.P.data(), b.p_bound.data(), b.nt);
     }
     b.score.setZero();
     b.score_info.setZero();

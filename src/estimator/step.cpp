@@ -268,6 +268,9 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
       Block& b = blocks[i];
       const ThetaVec theta_bar = b.theta;
       const ThetaMat P_bar = b.P;
+      // The score test's sums take this sample once, whatever the refinements.
+      const ThetaVec score_bar = b.score;
+      const ThetaMat score_info_bar = b.score_info;
       ThetaVec theta_iter = theta_bar;
       ThetaMat P_iter = P_bar;
       for (int s_it = 0; s_it <= cfg.refinements; ++s_it) {
@@ -290,6 +293,8 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
         b.fill(dy, dx, du, dz);
         b.theta = theta_bar;
         b.P = P_bar;
+        b.score = score_bar;
+        b.score_info = score_info_bar;
         if (!update_block(b, dy[0])) {
           healthy = false;
           break;

@@ -181,25 +181,7 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
     const double q2 = b.random_walk * b.random_walk / e_var;  // Q_jj = q2 theta_j^2
     for (int j = 0; j < nt; ++j) P[j + j * nt] += q2 * theta[j] * theta[j];
   }
-  // Per-direction bound: D P D with D = diag(min(1, sqrt(bound/P_jj))) keeps P
-  // symmetric positive definite while stopping wind-up in unexcited directions.
-  // P is symmetric here, so D_jj scales row j and mirrors it into column j, and
-  // P_jj becomes D_jj^2 P_jj = bound_j.
-  bool clamped = false;
-  const double* bound = b.p_bound.data();
-  for (int j = 0; j < nt; ++j) {
-    if (P[j + j * nt] > bound[j]) {
-      const double f = std::sqrt(bound[j] / P[j + j * nt]);
-      for (int k = 0; k < nt; ++k) {
-        if (k == j) continue;
-        P[j + k * nt] *= f;
-        P[k + j * nt] = P[j + k * nt];
-      }
-      P[j + j * nt] = bound[j];
-      clamped = true;
-    }
-  }
-  if (clamped) ++status.covariance_clamps;
+  if (detail::bound_covariance<N>(P, b.p_bound.data(), nt)) ++status.covariance_clamps;
   double trace = 0.0;
   for (int j = 0; j < nt; ++j) trace += P[j + j * nt] + theta[j];
   return std::isfinite(trace);
