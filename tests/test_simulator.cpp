@@ -229,6 +229,28 @@ TEST(SimulatorOpenLoop, RigidBodyStepResponses) {
   }
 }
 
+// A mass against a cubic spring is pushed by a constant force to x = (F/c)^(1/3),
+// where the local stiffness 3 c x^2 gives wn T = 12: the explicit sampled loop
+// rings up and overflows. The simulator refuses it at the sample it does, naming
+// the cubic; the same mass with a soft spring stays bounded.
+TEST(SimulatorOpenLoop, ADivergingCubicStiffnessIsRefusedNotWrittenAsNaN) {
+  PlantSpec plant;
+  plant.modes = {fixed(make_rigid_body("rigid", 0.5, 2))};
+  plant.effects.cubic = 1e24;
+  try {
+    simulate(plant, open_loop(1e-3, Eigen::VectorXd::Ones(2000)));
+    FAIL() << "a diverging simulation was returned";
+  } catch (const std::domain_error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("diverged at t = "), std::string::npos) << what;
+    EXPECT_NE(what.find("cubic"), std::string::npos) << what;
+  }
+  plant.effects.cubic = 1.0;
+  const SimulationResult r = simulate(plant, open_loop(1e-3, Eigen::VectorXd::Ones(2000)));
+  EXPECT_TRUE(r.y_clean.allFinite());
+  EXPECT_LT(r.y_clean.cwiseAbs().maxCoeff(), 2.0);  // x^3 ~ F/c = 1 within a factor
+}
+
 // Least-squares amplitude and phase of y_k = A sin(w t_k + phi) over samples.
 std::complex<double> fit_sinusoid(const Eigen::VectorXd& y, const Eigen::VectorXd& t, double w) {
   Eigen::MatrixXd X(y.size(), 2);

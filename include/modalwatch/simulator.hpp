@@ -74,6 +74,8 @@ struct SimulationResult {
   double noise_variance = 0.0;  // the variance actually used
 };
 
+// Throws std::invalid_argument on an inconsistent spec and std::domain_error
+// when the simulated output diverges (naming the time it does).
 SimulationResult simulate(const PlantSpec& plant, const ExperimentSpec& experiment);
 
 // The plant's model at time t (the truth the estimators are judged against).

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <random>
 #include <stdexcept>
+#include <string>
 
 #include "modalwatch/prefilter.hpp"
 
@@ -208,10 +209,27 @@ Eigen::VectorXd excitation(const ExperimentSpec& ex, const Eigen::VectorXd& t) {
   return ex.excitation_samples;
 }
 
+// An unstable experiment (an unstable mode or loop, or a cubic stiffness whose
+// local stiffness 3 c x^2 outgrows what the explicit sampled loop can carry)
+// overflows; it is refused where it starts rather than written as NaN.
+void check_bounded(const PlantSpec& plant, const ExperimentSpec& ex, const Eigen::VectorXd& t, const Signals& s) {
+  for (Eigen::Index k = 0; k < t.size(); ++k) {
+    if (std::isfinite(s.y_clean(k)) && std::isfinite(s.u(k))) continue;
+    std::string cause = ex.closed_loop ? "an unstable mode or closed loop" : "an unstable mode";
+    if (plant.effects.cubic != 0.0)
+      cause += ", or the cubic stiffness (explicit in the sampled loop: a stiffer cubic or a larger"
+               " position needs a higher sample rate)";
+    throw std::domain_error("simulate: the plant's output diverged at t = " + std::to_string(t(k)) + " s (sample " +
+                            std::to_string(k) + "): " + cause);
+  }
+}
+
 Signals run(const PlantSpec& plant, const ExperimentSpec& ex, const Eigen::VectorXd& t, const Eigen::VectorXd& w,
             const Eigen::VectorXd& noise) {
-  if (ex.closed_loop) return run_closed_loop(plant, ex, t, w, noise);
-  return run_open_loop(plant, t, ex.sample_time, w, ex.further_input_samples, noise);
+  Signals s = ex.closed_loop ? run_closed_loop(plant, ex, t, w, noise)
+                             : run_open_loop(plant, t, ex.sample_time, w, ex.further_input_samples, noise);
+  check_bounded(plant, ex, t, s);
+  return s;
 }
 
 // Unit-variance white Gaussian samples; scaled by the caller.
