@@ -38,6 +38,32 @@ inline PlantSpec time_invariant(PlantSpec p, double noise_variance) {
   return p;
 }
 
+// The paper's closed loop at 60 dB below its output (noise variance 1e-6),
+// time-invariant but for mode 3's wn stepping by `step` at t = `at` (600 s in
+// all), with lambda 0.999 for every submodel and the warm-up fit: `config`
+// carries those settings, so the daemon and a RecursiveEstimator run the same.
+struct PaperModeThreeStep {
+  Config config;
+  Record record;
+  double wn_after = 0.0;
+  std::vector<double> wn_others;
+};
+
+inline PaperModeThreeStep paper_mode_three_step(double step = -0.03, double at = 400.0) {
+  PaperModeThreeStep out;
+  out.config = paper_config();
+  Config& c = out.config;
+  PlantSpec plant = time_invariant(*c.plant, 1e-6);
+  out.wn_after = (1.0 + step) * plant.modes[2].modal.wn;
+  plant.modes[2].wn.points = {{at, plant.modes[2].modal.wn}, {at + 1.0 / 64, out.wn_after}};
+  for (int i = 0; i < 2; ++i) out.wn_others.push_back(plant.modes[static_cast<std::size_t>(i)].modal.wn);
+  ExperimentSpec e = *c.experiment;
+  e.duration = 600.0;
+  out.record = simulate(plant, e).record;
+  c.estimator = with_warmup_fit(settings_for(c, {0.999, 0.999, 0.999}, 1000));
+  return out;
+}
+
 inline SignalSpec prbs(double amplitude, int bits = 12, int clock = 2) {
   SignalSpec s;
   s.kind = SignalSpec::Kind::prbs;

@@ -34,6 +34,7 @@
 #include <sstream>
 
 #include "daemon_support.hpp"
+#include "estimator_support.hpp"
 
 #include "daemon/loop_probe.hpp"
 #include "modalwatch/daemon/daemon.hpp"
@@ -203,6 +204,25 @@ TEST_F(DaemonInProcess, ARefitAfterAModeStepRunsOnTheFitterThreadAndMatchesTrack
   EXPECT_LT(worst, 1e-12) << "daemon estimates differ from modalwatch track";
   // 2.5 s after the step (the transient 1.22 s, the window 0.49 s, the fit).
   EXPECT_NEAR(flex_hz_after, 82.8, 0.8);
+}
+
+// The paper's loop with mode 3's wn stepping -3 % at 400 s, below the
+// divergence reset: the daemon counts the change test's covariance boosts
+// (modalwatch_change_boosts_total), as many as the estimator's step() reports
+// on the same samples, and no reset.
+TEST_F(DaemonInProcess, CountsTheChangeTestsCovarianceBoostsAsTheEstimatorMakesThem) {
+  const test_support::PaperModeThreeStep loop = test_support::paper_mode_three_step();
+  const Record& r = loop.record;
+  RecursiveEstimator est(loop.config.model, loop.config.estimator);
+  std::uint64_t boosts = 0;
+  for (Eigen::Index k = 0; k < r.size(); ++k)
+    if (est.step(Sample{r.t(k), r.u(k), r.y(k), r.r(k)}) & kChangeBoost) ++boosts;
+  ASSERT_GT(boosts, 0u);
+  Received rx;
+  const DaemonCounters counters = run_in_process(loop.config, r, rx);
+  EXPECT_EQ(counters.samples_processed, static_cast<std::uint64_t>(r.size()));
+  EXPECT_EQ(counters.change_boosts, boosts);
+  EXPECT_EQ(counters.resets, 0u);
 }
 
 // The warm-up fit runs on the fitter thread, not the estimation loop: a fit

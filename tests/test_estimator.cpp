@@ -616,33 +616,29 @@ TEST(RecursiveEstimator, AWindowThatLeavesADirectionOpenIsRefittedWithTheRestore
 // it); the other modes keep their estimates.
 struct ModeThreeStep {
   double first_boost = NAN, halfway = NAN, end_error = NAN, others_worst = 0.0;
+  std::uint64_t boost_flags = 0;  // samples whose step() said kChangeBoost
   EstimatorStatus status;
 };
 
 ModeThreeStep follow_mode_three_step(double change_ratio) {
-  const Config c = test_support::paper_config();
-  PlantSpec plant = test_support::time_invariant(*c.plant, 1e-6);
   constexpr double kStep = -0.03, kAt = 400.0;
-  const double after = (1.0 + kStep) * plant.modes[2].modal.wn;
-  plant.modes[2].wn.points = {{kAt, plant.modes[2].modal.wn}, {kAt + 1.0 / 64, after}};
-  ExperimentSpec e = *c.experiment;
-  e.duration = 600.0;
-  const Record r = simulate(plant, e).record;
-  EstimatorSettings s = test_support::with_warmup_fit(test_support::settings_for(c, {0.999, 0.999, 0.999}, 1000));
+  const test_support::PaperModeThreeStep loop = test_support::paper_mode_three_step(kStep, kAt);
+  const Record& r = loop.record;
+  EstimatorSettings s = loop.config.estimator;
   s.change_ratio = change_ratio;
-  RecursiveEstimator est(c.model, s);
+  RecursiveEstimator est(loop.config.model, s);
   ModeThreeStep out;
   for (Eigen::Index k = 0; k < r.size(); ++k) {
     const std::uint64_t boosts = est.status().boosts;
-    est.step(Sample{r.t(k), r.u(k), r.y(k), r.r(k)});
+    if (est.step(Sample{r.t(k), r.u(k), r.y(k), r.r(k)}) & kChangeBoost) ++out.boost_flags;
     if (r.t(k) < kAt) continue;
     if (std::isnan(out.first_boost) && est.status().boosts > boosts) out.first_boost = r.t(k) - kAt;
-    if (std::isnan(out.halfway) && std::abs(est.mode(2).value.wn / after - 1.0) < 0.5 * std::abs(kStep))
+    if (std::isnan(out.halfway) && std::abs(est.mode(2).value.wn / loop.wn_after - 1.0) < 0.5 * std::abs(kStep))
       out.halfway = r.t(k) - kAt;
     for (int i = 0; i < 2; ++i)
-      out.others_worst = std::max(out.others_worst, std::abs(est.mode(i).value.wn / plant.modes[i].modal.wn - 1.0));
+      out.others_worst = std::max(out.others_worst, std::abs(est.mode(i).value.wn / loop.wn_others[i] - 1.0));
   }
-  out.end_error = est.mode(2).value.wn / after - 1.0;
+  out.end_error = est.mode(2).value.wn / loop.wn_after - 1.0;
   out.status = est.status();
   std::printf("change_ratio %g: first boost %.2f s after the step, halfway %.2f s after it, mode 3's wn at the end "
               "%+.4f %% of the new value, the other modes' worst %.4f %%, boosts %llu, resets %llu\n",
@@ -659,6 +655,7 @@ TEST(RecursiveEstimator, AChangeBelowTheDivergenceIsFollowedAfterABoostOfItsMode
   EXPECT_LT(std::abs(boosted.end_error), 1e-3);
   EXPECT_LT(boosted.others_worst, 1e-3);
   EXPECT_EQ(boosted.status.resets, 0u);
+  EXPECT_EQ(boosted.boost_flags, boosted.status.boosts);  // step() says so on the sample it happens
 }
 
 // The same record without the CUSUM (change_ratio 0): forgetting alone.

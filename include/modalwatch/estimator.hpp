@@ -163,6 +163,9 @@ enum StepFlags : unsigned {
   // defer_warmup_fit: the warm-up window is complete and its fit pending. Until
   // apply_warmup_fit(), step() takes no sample (it returns this flag alone).
   kWarmupFitPending = 1u << 8,
+  // The change test (change_ratio) alarmed and boosted the covariance of at
+  // least one submodel (EstimatorStatus::boosts).
+  kChangeBoost = 1u << 9,
 };
 
 // The instruction set of step()'s arithmetic (RecursiveEstimator::set_step_kernel).

@@ -173,6 +173,11 @@ void Publisher::log_repeated(const DaemonCounters& c, std::int64_t now) {
     spdlog::warn("estimator reset to its last good state (last: {}): {}{}, {} resets so far", last_reset_reason_, n,
                  in(over), total);
   });
+  warn_repeated(boosts_, c.change_boosts, now, [&](std::uint64_t n, double over, std::uint64_t total) {
+    spdlog::info("change test: the output error changed, covariance of the submodels it points to boosted: {}{}, "
+                 "{} so far",
+                 n, in(over), total);
+  });
   warn_repeated(lost_, c.samples_lost, now, [&](std::uint64_t n, double over, std::uint64_t total) {
     spdlog::warn("samples lost in transport (sequence numbers that never arrived): {}{}, {} so far", n, in(over),
                  total);

@@ -165,7 +165,7 @@ void RecursiveEstimator::Impl::save_good() {
 // rests on a tenth of a memory and follows the change; the others keep theirs.
 // The divergence test and the CUSUM wait a tenth of a memory, while the
 // boosted blocks move.
-void RecursiveEstimator::Impl::boost_changed_blocks() {
+bool RecursiveEstimator::Impl::boost_changed_blocks() {
   constexpr double kChangeBoost = 10.0, kShareOfLargest = 0.5, kWait = 0.1;
   const auto score_test = [this](const detail::Block& b) {
     const detail::ThetaVec x = b.score_info.selfadjointView<Eigen::Upper>().ldlt().solve(b.score);
@@ -195,6 +195,7 @@ void RecursiveEstimator::Impl::boost_changed_blocks() {
   }
   rearm = static_cast<std::uint64_t>(kWait / (1.0 - e_alpha));
   if (boosted) ++status.boosts;
+  return boosted;
 }
 
 void RecursiveEstimator::Impl::restore_good(const char* reason) {

@@ -140,7 +140,7 @@ struct RecursiveEstimator::Impl {
   double shortest_decay_time() const;
   void save_good();
   void restore_good(const char* reason);
-  void boost_changed_blocks();
+  bool boost_changed_blocks();  // true when a block was boosted
   int refit_samples() const;
   bool may_refit() const;
   void buffer_window_sample(const Sample& s) {

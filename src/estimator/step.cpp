@@ -211,7 +211,7 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     return flags | kReset;
   } else if (changed) {
     change_cusum = 0.0;
-    boost_changed_blocks();
+    if (boost_changed_blocks()) flags |= kChangeBoost;
   }
   // 3. Excitation: without input power the update only winds P up.
   pow_short = pow_count == 0 ? z * z : pow_alpha * pow_short + (1.0 - pow_alpha) * z * z;
