@@ -47,8 +47,22 @@ namespace {
 //   count as settled.
 enum class RefitVerdict { accepted, refused, unsettled };
 
+// The restored state's simulation over the window, the yardstick of every
+// candidate fit.
+Eigen::VectorXd simulate_start(const Record& window, const AdditiveModel& start, const EstimatorSettings& cfg) {
+  Eigen::VectorXd y_start;
+  if (cfg.closed_loop) {
+    Eigen::VectorXd z;
+    simulate_loop(start, cfg.controller, window.r, window.sample_time(), z, y_start);
+  } else {
+    y_start = simulate_model(start, window.u, window.sample_time());
+  }
+  return y_start;
+}
+
 RefitVerdict refit_verdict(const Record& window, Eigen::Index settle, const AdditiveModel& start,
-                           double noise_variance, const FitResult& fit, const EstimatorSettings& cfg) {
+                           const Eigen::VectorXd& y_start, double noise_variance, const FitResult& fit,
+                           const EstimatorSettings& cfg) {
   constexpr auto refused = RefitVerdict::refused;
   constexpr double kRefitFrequencyRatio = 1.5;
   const auto& before = start.submodels;
@@ -62,16 +76,8 @@ RefitVerdict refit_verdict(const Record& window, Eigen::Index settle, const Addi
           (modal_parameters(before[j]).wn < w0) != (modal_parameters(after[j]).wn < w1))
         return refused;
   }
-  const double T = window.sample_time();
-  Eigen::VectorXd y_start;
-  if (cfg.closed_loop) {
-    Eigen::VectorXd z;
-    simulate_loop(start, cfg.controller, window.r, T, z, y_start);
-  } else {
-    y_start = simulate_model(start, window.u, T);
-  }
   const Eigen::Index n = window.y.size() - settle;
-  if (n < 2 || fit.simulated.size() != window.y.size()) return refused;
+  if (n < 2 || fit.simulated.size() != window.y.size() || y_start.size() != window.y.size()) return refused;
   const Eigen::Index half = n / 2;
   const double e_first = (window.y.segment(settle, half) - y_start.segment(settle, half)).squaredNorm() / half;
   const double e_second = (window.y.tail(n - half) - y_start.tail(n - half)).squaredNorm() / (n - half);
@@ -119,11 +125,13 @@ void WarmupFit::run() noexcept {
         o.output_hold = cfg.output_hold;
         o.max_iterations = cfg.warmup_iterations;
         o.settle_samples = settle_;
+        Eigen::VectorXd y_start;  // simulated once, for the first candidate that gets that far
         const auto usable = [&](const FitResult& f) {
           bool ok = f.model.beta().allFinite() && f.covariance.allFinite() && f.noise_variance > 0.0;
           for (const auto& s : f.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
           if (!ok || !refit_) return ok;
-          const RefitVerdict v = refit_verdict(window, settle_, initial, context_->noise_variance, f, cfg);
+          if (y_start.size() == 0) y_start = simulate_start(window, initial, cfg);
+          const RefitVerdict v = refit_verdict(window, settle_, initial, y_start, context_->noise_variance, f, cfg);
           unsettled_ = unsettled_ || v == RefitVerdict::unsettled;
           return v == RefitVerdict::accepted;
         };
