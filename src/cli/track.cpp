@@ -629,7 +629,7 @@ int track(const TrackArgs& args) {
       std::fprintf(stderr, "  warm-up fit: used (%d samples)\n", settings.warmup_samples);
     else
       std::fprintf(stderr, "  warm-up fit: not used (%s; initial model from %s)\n",
-                   settings.fit_on_warmup ? "the fit failed" : "fit_on_warmup is off", config.source.c_str());
+                   settings.fit_on_warmup ? "the fit failed, or moved a mode by 2x or past another" : "fit_on_warmup is off", config.source.c_str());
 
     std::printf("modalwatch track: %llu samples, final estimate at t = %.6g s\n", static_cast<unsigned long long>(n),
                 last_t);

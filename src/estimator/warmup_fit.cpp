@@ -47,6 +47,28 @@ namespace {
 //   count as settled.
 enum class RefitVerdict { accepted, refused, unsettled };
 
+// The warm-up fit starts from the configured model, rougher than a last good
+// state: its modes may move by up to this factor (a start 50 % off the plant's
+// frequency converges).
+constexpr double kWarmupFrequencyRatio = 2.0;
+
+// Each resonance of `after` keeps its place in frequency order among the
+// resonances of `before` and moves by less than `ratio` either way.
+bool keeps_the_modes(const AdditiveModel& before_model, const AdditiveModel& after_model, double ratio) {
+  const auto& before = before_model.submodels;
+  const auto& after = after_model.submodels;
+  for (std::size_t i = 0; i < before.size(); ++i) {
+    if (!before[i].is_resonance() || !after[i].is_resonance()) continue;
+    const double w0 = modal_parameters(before[i]).wn, w1 = modal_parameters(after[i]).wn;
+    if (!(w1 < ratio * w0 && w0 < ratio * w1)) return false;
+    for (std::size_t j = 0; j < i; ++j)
+      if (before[j].is_resonance() && after[j].is_resonance() &&
+          (modal_parameters(before[j]).wn < w0) != (modal_parameters(after[j]).wn < w1))
+        return false;
+  }
+  return true;
+}
+
 // The restored state's simulation over the window, the yardstick of every
 // candidate fit.
 Eigen::VectorXd simulate_start(const Record& window, const AdditiveModel& start, const EstimatorSettings& cfg) {
@@ -65,17 +87,7 @@ RefitVerdict refit_verdict(const Record& window, Eigen::Index settle, const Addi
                            const EstimatorSettings& cfg) {
   constexpr auto refused = RefitVerdict::refused;
   constexpr double kRefitFrequencyRatio = 1.5;
-  const auto& before = start.submodels;
-  const auto& after = fit.model.submodels;
-  for (std::size_t i = 0; i < before.size(); ++i) {
-    if (!before[i].is_resonance() || !after[i].is_resonance()) continue;
-    const double w0 = modal_parameters(before[i]).wn, w1 = modal_parameters(after[i]).wn;
-    if (!(w1 < kRefitFrequencyRatio * w0 && w0 < kRefitFrequencyRatio * w1)) return refused;
-    for (std::size_t j = 0; j < i; ++j)
-      if (before[j].is_resonance() && after[j].is_resonance() &&
-          (modal_parameters(before[j]).wn < w0) != (modal_parameters(after[j]).wn < w1))
-        return refused;
-  }
+  if (!keeps_the_modes(start, fit.model, kRefitFrequencyRatio)) return refused;
   const Eigen::Index n = window.y.size() - settle;
   if (n < 2 || fit.simulated.size() != window.y.size() || y_start.size() != window.y.size()) return refused;
   const Eigen::Index half = n / 2;
@@ -129,7 +141,11 @@ void WarmupFit::run() noexcept {
         const auto usable = [&](const FitResult& f) {
           bool ok = f.model.beta().allFinite() && f.covariance.allFinite() && f.noise_variance > 0.0;
           for (const auto& s : f.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
-          if (!ok || !refit_) return ok;
+          if (!ok) return false;
+          // The configured modes name the plant's: a fit that puts one of them
+          // on another's frequency (or on none) describes a different plant,
+          // and every estimate and flag of that mode would be another's.
+          if (!refit_) return keeps_the_modes(initial, f.model, kWarmupFrequencyRatio);
           if (y_start.size() == 0) y_start = simulate_start(window, initial, cfg);
           const RefitVerdict v = refit_verdict(window, settle_, initial, y_start, context_->noise_variance, f, cfg);
           unsettled_ = unsettled_ || v == RefitVerdict::unsettled;
@@ -143,6 +159,12 @@ void WarmupFit::run() noexcept {
         bool ok = usable(fit);
         if (!ok && refit_ && initial.submodels.size() >= 2) {
           o.unfactored_start = true;
+          fit = fit_srivc(window, initial, o);
+          ok = usable(fit);
+        } else if (!ok && !refit_ && fit.start == "unfactored") {
+          // The unfactored start won on output error but moved the modes: the
+          // start from the configured modes alone.
+          o.unfactored_start = false;
           fit = fit_srivc(window, initial, o);
           ok = usable(fit);
         }
