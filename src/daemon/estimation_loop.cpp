@@ -312,6 +312,7 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
   snap.low_excitation = st.low_excitation;
   snap.reset_reason = st.last_reset_reason;
   snap.warmup_fit_seconds = fitter_.last_fit_seconds();
+  snap.warmup_fit_used = st.warmup_fit_used;
   warming_up_.store(st.warming_up, std::memory_order_relaxed);
   for (int i = 0; i < K && !fit_in_flight_; ++i) {
     const auto k = static_cast<std::size_t>(i);

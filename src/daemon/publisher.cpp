@@ -318,9 +318,16 @@ void Publisher::log_snapshot(const Snapshot& s) {
     logged_warmup_over_ = true;
     if (restored_)
       spdlog::info("estimating from the restored checkpoint (no warm-up)");
+    else if (s.warmup_fit_used || !config_.estimator.fit_on_warmup)
+      spdlog::info("warm-up over after {} samples; estimating from {} (the fit took {:.2f} s; {} samples held "
+                   "meanwhile)",
+                   s.counters.samples_processed,
+                   s.warmup_fit_used ? "the fit on the warm-up window" : "the configured model (fit_on_warmup off)",
+                   s.warmup_fit_seconds, s.counters.samples_held);
     else
-      spdlog::info("warm-up over after {} samples; estimating (the fit took {:.2f} s; {} samples held meanwhile)",
-                   s.counters.samples_processed, s.warmup_fit_seconds, s.counters.samples_held);
+      spdlog::warn("warm-up over after {} samples; the fit on the warm-up window failed, or moved a mode by 2x or "
+                   "past another: estimating from the configured model ({} samples held meanwhile)",
+                   s.counters.samples_processed, s.counters.samples_held);
   }
   if (s.counters.held_dropped != logged_held_dropped_) {
     logged_held_dropped_ = s.counters.held_dropped;

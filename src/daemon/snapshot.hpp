@@ -38,6 +38,7 @@ struct Snapshot {
   double residual_rms = 0.0;
   const char* reset_reason = "";    // static string from the estimator
   double warmup_fit_seconds = 0.0;  // how long the last warm-up fit took
+  bool warmup_fit_used = false;     // the estimate started from that fit (else from the configured model)
   // The fault detector's state, and its flag changes in this publish period.
   std::array<ModeStatus, kMaxModes> modes{};
   int n_changes = 0;
