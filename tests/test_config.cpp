@@ -333,6 +333,28 @@ TEST(ConfigErrors, Lcm) {
             "test.yaml:17: key 'lcm.channels.samples': expected a non-empty string (got \"\")");
 }
 
+// A resonance with a complex residue ((b0 + b1 p) / (1 + a1 p + a2 p^2), as
+// diagnose's complex modes write it) is watched as a mode is: its baseline is
+// (wn, zeta, DC gain b0). A rigid body has none.
+TEST(Config, AComplexResidueResonanceTakesABaselineARigidBodyDoesNot) {
+  const std::string model =
+      "sample_rate_hz: 20\n"                                                     // 1
+      "model:\n"                                                                 // 2
+      "  loop: open\n"                                                           // 3
+      "  submodels:\n"                                                           // 4
+      "    - {name: c1, kind: transfer_function, a: [0.05, 0.25], b: [2, 0.1]}\n"  // 5
+      "    - {name: r1, kind: rigid_body, gain: 0.5}\n"                           // 6
+      "faults:\n"                                                                // 7
+      "  baselines:\n";                                                          // 8
+  const Config c = parse_config(model + "    c1: {wn: 2, zeta: 0.05, gain: 2}\n", "test.yaml");
+  ASSERT_TRUE(c.faults.baselines[0]);
+  EXPECT_DOUBLE_EQ(c.faults.baselines[0]->wn, 2.0);
+  EXPECT_FALSE(c.faults.baselines[1]);
+  EXPECT_EQ(parse_error(model + "    r1: {wn: 2, zeta: 0.05, gain: 2}\n"),
+            "test.yaml:9: key 'faults.baselines.r1': unknown key for faults.baselines (the model's modes) "
+            "(allowed: c1)");
+}
+
 TEST(Config, DaemonAndFaultDefaults) {
   const Config c = parse_config(kBase, "test.yaml");
   EXPECT_DOUBLE_EQ(c.daemon.loop_rate_hz, 1000.0);

@@ -93,17 +93,18 @@ void print_identifiability(const FitResult& result) {
   }
 }
 
-// A commissioning fit as the fault detector's baselines: every mode's (wn,
-// zeta, gain) with its standard deviations from the fit's covariance, which the
-// detector takes as the baseline's covariance C0. Other submodels keep what the
-// config gave them (a rigid body has no baseline).
+// A commissioning fit as the fault detector's baselines: every resonance's
+// (wn, zeta, DC gain), a mode's or a complex-residue one's, with its standard
+// deviations from the fit's covariance, which the detector takes as the
+// baseline's covariance C0. Other submodels keep what the config gave them (a
+// rigid body has no baseline).
 void set_baselines(Config& config, const AdditiveModel& fitted, const std::vector<Eigen::MatrixXd>& covariances) {
   const std::size_t K = fitted.submodels.size();
   config.faults.baselines.resize(K);
   config.faults.baseline_std.resize(K);
   for (std::size_t i = 0; i < K; ++i) {
     const Submodel& s = fitted.submodels[i];
-    if (!s.is_mode()) continue;
+    if (!s.is_resonance()) continue;
     config.faults.baselines[i] = modal_parameters(s);
     config.faults.baseline_std[i] = modal_std(s, covariances[i]);
   }

@@ -207,7 +207,7 @@ void parse_faults(const Map& f, Config& config) {
     const Map m(*b);
     Keys modes;
     for (const auto& sub : config.model.submodels)
-      if (sub.is_mode()) modes.push_back(sub.name);
+      if (sub.is_resonance()) modes.push_back(sub.name);
     m.allow(modes, "faults.baselines (the model's modes)");
     for (std::size_t i = 0; i < config.model.submodels.size(); ++i)
       if (const auto v = m.get(config.model.submodels[i].name)) {
