@@ -338,14 +338,14 @@ TEST(ConfigErrors, Lcm) {
 // (wn, zeta, DC gain b0). A rigid body has none.
 TEST(Config, AComplexResidueResonanceTakesABaselineARigidBodyDoesNot) {
   const std::string model =
-      "sample_rate_hz: 20\n"                                                     // 1
-      "model:\n"                                                                 // 2
-      "  loop: open\n"                                                           // 3
-      "  submodels:\n"                                                           // 4
+      "sample_rate_hz: 20\n"                                                       // 1
+      "model:\n"                                                                   // 2
+      "  loop: open\n"                                                             // 3
+      "  submodels:\n"                                                             // 4
       "    - {name: c1, kind: transfer_function, a: [0.05, 0.25], b: [2, 0.1]}\n"  // 5
-      "    - {name: r1, kind: rigid_body, gain: 0.5}\n"                           // 6
-      "faults:\n"                                                                // 7
-      "  baselines:\n";                                                          // 8
+      "    - {name: r1, kind: rigid_body, gain: 0.5}\n"                            // 6
+      "faults:\n"                                                                  // 7
+      "  baselines:\n";                                                            // 8
   const Config c = parse_config(model + "    c1: {wn: 2, zeta: 0.05, gain: 2}\n", "test.yaml");
   ASSERT_TRUE(c.faults.baselines[0]);
   EXPECT_DOUBLE_EQ(c.faults.baselines[0]->wn, 2.0);

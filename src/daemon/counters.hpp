@@ -23,9 +23,9 @@ struct SubscriberCounters {
 };
 
 struct LoopCounters {
-  Counter samples_nonfinite{0}, samples_duplicate{0}, samples_out_of_order{0}, samples_processed{0}, gaps{0}, resets{0}, change_boosts{0},
-      overruns{0}, sender_restarts{0}, samples_held{0}, held_dropped{0}, snapshots{0}, snapshots_dropped{0},
-      flag_changes{0};
+  Counter samples_nonfinite{0}, samples_duplicate{0}, samples_out_of_order{0}, samples_processed{0}, gaps{0}, resets{0},
+      change_boosts{0}, overruns{0}, sender_restarts{0}, samples_held{0}, held_dropped{0}, snapshots{0},
+      snapshots_dropped{0}, flag_changes{0};
 };
 
 struct PublisherCounters {

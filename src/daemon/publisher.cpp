@@ -174,9 +174,10 @@ void Publisher::log_repeated(const DaemonCounters& c, std::int64_t now) {
                  in(over), total);
   });
   warn_repeated(boosts_, c.change_boosts, now, [&](std::uint64_t n, double over, std::uint64_t total) {
-    spdlog::info("change test: the output error changed, covariance of the submodels it points to boosted: {}{}, "
-                 "{} so far",
-                 n, in(over), total);
+    spdlog::info(
+        "change test: the output error changed, covariance of the submodels it points to boosted: {}{}, "
+        "{} so far",
+        n, in(over), total);
   });
   warn_repeated(lost_, c.samples_lost, now, [&](std::uint64_t n, double over, std::uint64_t total) {
     spdlog::warn("samples lost in transport (sequence numbers that never arrived): {}{}, {} so far", n, in(over),
@@ -319,15 +320,17 @@ void Publisher::log_snapshot(const Snapshot& s) {
     if (restored_)
       spdlog::info("estimating from the restored checkpoint (no warm-up)");
     else if (s.warmup_fit_used || !config_.estimator.fit_on_warmup)
-      spdlog::info("warm-up over after {} samples; estimating from {} (the fit took {:.2f} s; {} samples held "
-                   "meanwhile)",
-                   s.counters.samples_processed,
-                   s.warmup_fit_used ? "the fit on the warm-up window" : "the configured model (fit_on_warmup off)",
-                   s.warmup_fit_seconds, s.counters.samples_held);
+      spdlog::info(
+          "warm-up over after {} samples; estimating from {} (the fit took {:.2f} s; {} samples held "
+          "meanwhile)",
+          s.counters.samples_processed,
+          s.warmup_fit_used ? "the fit on the warm-up window" : "the configured model (fit_on_warmup off)",
+          s.warmup_fit_seconds, s.counters.samples_held);
     else
-      spdlog::warn("warm-up over after {} samples; the fit on the warm-up window failed, or moved a mode by 2x or "
-                   "past another: estimating from the configured model ({} samples held meanwhile)",
-                   s.counters.samples_processed, s.counters.samples_held);
+      spdlog::warn(
+          "warm-up over after {} samples; the fit on the warm-up window failed, or moved a mode by 2x or "
+          "past another: estimating from the configured model ({} samples held meanwhile)",
+          s.counters.samples_processed, s.counters.samples_held);
   }
   if (s.counters.held_dropped != logged_held_dropped_) {
     logged_held_dropped_ = s.counters.held_dropped;

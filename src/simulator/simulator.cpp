@@ -217,8 +217,9 @@ void check_bounded(const PlantSpec& plant, const ExperimentSpec& ex, const Eigen
     if (std::isfinite(s.y_clean(k)) && std::isfinite(s.u(k))) continue;
     std::string cause = ex.closed_loop ? "an unstable mode or closed loop" : "an unstable mode";
     if (plant.effects.cubic != 0.0)
-      cause += ", or the cubic stiffness (explicit in the sampled loop: a stiffer cubic or a larger"
-               " position needs a higher sample rate)";
+      cause +=
+          ", or the cubic stiffness (explicit in the sampled loop: a stiffer cubic or a larger"
+          " position needs a higher sample rate)";
     throw std::domain_error("simulate: the plant's output diverged at t = " + std::to_string(t(k)) + " s (sample " +
                             std::to_string(k) + "): " + cause);
   }
