@@ -47,9 +47,11 @@ namespace {
 //   count as settled.
 enum class RefitVerdict { accepted, refused, unsettled };
 
-// The warm-up fit starts from the configured model, rougher than a last good
-// state: its modes may move by up to this factor (a start 50 % off the plant's
-// frequency converges).
+// How far a fit's modes may move from its start: a refit's start is the last
+// good state (a third of the stiffness moves wn by 18 %); the warm-up fit's is
+// the configured model, rougher (a start 50 % off the plant's frequency
+// converges).
+constexpr double kRefitFrequencyRatio = 1.5;
 constexpr double kWarmupFrequencyRatio = 2.0;
 
 // Each resonance of `after` keeps its place in frequency order among the
@@ -86,7 +88,6 @@ RefitVerdict refit_verdict(const Record& window, Eigen::Index settle, const Addi
                            const Eigen::VectorXd& y_start, double noise_variance, const FitResult& fit,
                            const EstimatorSettings& cfg) {
   constexpr auto refused = RefitVerdict::refused;
-  constexpr double kRefitFrequencyRatio = 1.5;
   if (!keeps_the_modes(start, fit.model, kRefitFrequencyRatio)) return refused;
   const Eigen::Index n = window.y.size() - settle;
   if (n < 2 || fit.simulated.size() != window.y.size() || y_start.size() != window.y.size()) return refused;
