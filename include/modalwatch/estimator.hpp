@@ -142,7 +142,7 @@ struct EstimatorStatus {
   const char* last_reset_reason = "";
   bool warming_up = true;
   bool low_excitation = false;
-  bool warmup_fit_used = false;  // theta(t0) from the offline fit on the warm-up window
+  bool warmup_fit_used = false;  // theta(t0) from the offline fit on the warm-up window (else kWarmupFitNotUsed)
   std::uint64_t fits = 0;  // windows whose fit has ended (the warm-up's, refits; used or not)
   // s of data the last (re)fit's estimate rests on, the fitted part of its
   // window; 0 before the first and after a refit that was refused. A fault detector may count a hold from its
@@ -150,6 +150,11 @@ struct EstimatorStatus {
   double fitted_window = 0.0;
 };
 
+// Why the estimator starts from the configured model although fit_on_warmup
+// is on (EstimatorStatus::warmup_fit_used false): the fit failed or describes
+// another plant than the configured one.
+inline constexpr const char* kWarmupFitNotUsed =
+    "the fit failed, or moved a mode by 2x or past another, or gave one no gain";
 // What step() did with a sample (bit flags).
 enum StepFlags : unsigned {
   kUpdated = 1u << 0,

@@ -628,10 +628,8 @@ int track(const TrackArgs& args) {
     else if (st.warmup_fit_used)
       std::fprintf(stderr, "  warm-up fit: used (%d samples)\n", settings.warmup_samples);
     else
-      std::fprintf(
-          stderr, "  warm-up fit: not used (%s; initial model from %s)\n",
-          settings.fit_on_warmup ? "the fit failed, or moved a mode by 2x or past another" : "fit_on_warmup is off",
-          config.source.c_str());
+      std::fprintf(stderr, "  warm-up fit: not used (%s; initial model from %s)\n",
+                   settings.fit_on_warmup ? kWarmupFitNotUsed : "fit_on_warmup is off", config.source.c_str());
 
     std::printf("modalwatch track: %llu samples, final estimate at t = %.6g s\n", static_cast<unsigned long long>(n),
                 last_t);

@@ -328,9 +328,9 @@ void Publisher::log_snapshot(const Snapshot& s) {
           s.warmup_fit_seconds, s.counters.samples_held);
     else
       spdlog::warn(
-          "warm-up over after {} samples; the fit on the warm-up window failed, or moved a mode by 2x or "
-          "past another: estimating from the configured model ({} samples held meanwhile)",
-          s.counters.samples_processed, s.counters.samples_held);
+          "warm-up over after {} samples; the fit on the warm-up window is not used ({}): estimating from the "
+          "configured model ({} samples held meanwhile)",
+          s.counters.samples_processed, kWarmupFitNotUsed, s.counters.samples_held);
   }
   if (s.counters.held_dropped != logged_held_dropped_) {
     logged_held_dropped_ = s.counters.held_dropped;

@@ -61,8 +61,12 @@ bool keeps_the_modes(const AdditiveModel& before_model, const AdditiveModel& aft
   const auto& after = after_model.submodels;
   for (std::size_t i = 0; i < before.size(); ++i) {
     if (!before[i].is_resonance() || !after[i].is_resonance()) continue;
-    const double w0 = modal_parameters(before[i]).wn, w1 = modal_parameters(after[i]).wn;
+    const ModalParameters p0 = modal_parameters(before[i]), p1 = modal_parameters(after[i]);
+    const double w0 = p0.wn, w1 = p1.wn;
     if (!(w1 < ratio * w0 && w0 < ratio * w1)) return false;
+    // A gain of zero or of the other sign: the fit dropped the mode (an
+    // unfactored start splits the plant into fewer modes than configured).
+    if (!(p1.gain * p0.gain > 0.0)) return false;
     for (std::size_t j = 0; j < i; ++j)
       if (before[j].is_resonance() && after[j].is_resonance() &&
           (modal_parameters(before[j]).wn < w0) != (modal_parameters(after[j]).wn < w1))
