@@ -261,16 +261,60 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
     status.warmup_fit_used = true;
     status.fitted_window = (N - fit.settle_) * cfg.sample_time;
   }
+  // A refit's P_i(t0) is the restored state's, carried to the refit's time
+  // scale. The recursion updates each submodel with the others held (eq. 15),
+  // so its P_i is the inverse of that submodel's own information; the window
+  // after a reset has the same excitation and the plant moved little (less
+  // than kRefitFrequencyRatio), so that information is what the recursion
+  // would have gathered there. The fit's covariance is not: its block for
+  // submodel i also holds what the window cannot tell apart between
+  // submodels (two gains that trade against each other at a setpoint's lowest
+  // frequency), and as P_i it makes each submodel's update answer for the
+  // other's share, so that the two run apart along that direction.
+  std::vector<detail::ThetaMat> restored_P;
+  std::vector<detail::ThetaVec> restored_scale, restored_bound;
+  const bool keep_P = refitting && fit.fit_used_;
+  if (keep_P)
+    for (const auto& b : blocks) {
+      restored_P.push_back(b.good_P);
+      restored_scale.push_back(b.scale);
+      restored_bound.push_back(b.p_bound);
+    }
   build(fit.model_, fit.covariance_.empty() ? nullptr : &fit.covariance_, sigma2, fit.y_var_);
+  if (keep_P)
+    for (std::size_t i = 0; i < blocks.size(); ++i) {
+      detail::Block& b = blocks[i];
+      const detail::ThetaVec r = b.scale.cwiseQuotient(restored_scale[i]);
+      b.P = r.asDiagonal() * restored_P[i] * r.asDiagonal();
+      b.p_bound = restored_bound[i].cwiseProduct(r).cwiseProduct(r);
+      b.good_P = b.P;
+    }
   if (sigma2 > 0.0) {
     e_var = e_short = e_var_good = sigma2;
     e_count = 1000;
+  }
+  // A refit's window was cut from a running plant: the replay's filters start
+  // from rest, and their transient is neither noise nor outliers. The replay
+  // waits it out as a restart does (restart_filters()), and the noise level
+  // afterwards is the last good state's: the sensor's noise did not change
+  // with the plant, and the fit's own output error holds its simulation's
+  // start from rest.
+  const double noise_before = refitting && refit_context ? refit_context->noise_variance : 0.0;
+  if (noise_before > 0.0) {
+    e_var = e_var_good = noise_before;
+    e_short = cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
+    transient = static_cast<std::uint64_t>(N);
+    settling = transient + 1;
   }
   // Run the filters over the window with theta(t0), without updating (section 4.7).
   double p = 0.0;
   for (int k = 0; k < N; ++k) {
     advance({wt(k), wu(k), wy(k), cfg.closed_loop ? wr(k) : 0.0}, false);
     p += wu(k) * wu(k);
+  }
+  if (noise_before > 0.0) {
+    settling = transient = 0;
+    e_var = e_short = e_var_good = noise_before;
   }
   pow_ref = p / std::max(N, 1);
   status.warming_up = false;
