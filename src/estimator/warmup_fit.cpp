@@ -271,24 +271,15 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   // submodels (two gains that trade against each other at a setpoint's lowest
   // frequency), and as P_i it makes each submodel's update answer for the
   // other's share, so that the two run apart along that direction.
-  std::vector<detail::ThetaMat> restored_P;
-  std::vector<detail::ThetaVec> restored_scale, restored_bound;
-  const bool keep_P = refitting && fit.fit_used_;
-  if (keep_P)
-    for (const auto& b : blocks) {
-      restored_P.push_back(b.good_P);
-      restored_scale.push_back(b.scale);
-      restored_bound.push_back(b.p_bound);
-    }
+  std::vector<detail::Block> restored;  // a refit's: the last good state, restored at the reset
+  if (refitting) restored = std::exchange(blocks, {});
   build(fit.model_, fit.covariance_.empty() ? nullptr : &fit.covariance_, sigma2, fit.y_var_);
-  if (keep_P)
-    for (std::size_t i = 0; i < blocks.size(); ++i) {
-      detail::Block& b = blocks[i];
-      const detail::ThetaVec r = b.scale.cwiseQuotient(restored_scale[i]);
-      b.P = r.asDiagonal() * restored_P[i] * r.asDiagonal();
-      b.p_bound = restored_bound[i].cwiseProduct(r).cwiseProduct(r);
-      b.good_P = b.P;
-    }
+  for (std::size_t i = 0; i < restored.size(); ++i) {
+    detail::Block& b = blocks[i];
+    const detail::ThetaVec r = b.scale.cwiseQuotient(restored[i].scale);
+    b.P = b.good_P = r.asDiagonal() * restored[i].good_P * r.asDiagonal();
+    b.p_bound = restored[i].p_bound.cwiseProduct(r).cwiseProduct(r);
+  }
   if (sigma2 > 0.0) {
     e_var = e_short = e_var_good = sigma2;
     e_count = 1000;
@@ -299,7 +290,7 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   // afterwards is the last good state's: the sensor's noise did not change
   // with the plant, and the fit's own output error holds its simulation's
   // start from rest.
-  const double noise_before = refitting && refit_context ? refit_context->noise_variance : 0.0;
+  const double noise_before = refitting ? refit_context->noise_variance : 0.0;
   if (noise_before > 0.0) {
     e_var = e_var_good = noise_before;
     e_short = cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
