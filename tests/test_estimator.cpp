@@ -713,7 +713,9 @@ estimator:
                                 "three-sines.yaml");
   const Record r = simulate(*c.plant, *c.experiment).record;
   RecursiveEstimator est(c.model, c.estimator);
-  const double wn1 = 13.943866071458014, gain1 = 0.00014672197426957397, gain2 = 0.00012641672443597783;
+  // The plant after mode 1's ramp.
+  const double wn1 = c.plant->modes[0].wn.points.back().second, gain1 = c.plant->modes[0].gain.points.back().second,
+               gain2 = c.plant->modes[1].modal.gain;
   double refit_at = NAN, noise_at_refit = NAN, worst_wn1 = 0.0, worst_gain1 = 0.0, worst_gain2 = 0.0;
   for (Eigen::Index k = 0; k < r.size(); ++k) {
     const std::uint64_t fits = est.status().fits;
