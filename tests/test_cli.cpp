@@ -219,10 +219,10 @@ TEST_F(CliThreeModes, DiagnoseWithModesOnlyStartsFromTheData) {
 }
 
 // A mode at 0.33 fs: its sampled output is far from held. With no
-// output_hold configured, a starting mode above a quarter of the sampling rate
+// output_hold configured, a starting mode above a tenth of the sampling rate
 // makes `fit` assume foh, and both modes come out within 1 % and 20 %; under
 // zoh the second comes out 4 % low in frequency with 50 % too much damping.
-// The written model keeps the hold unset (the recursive estimator's zoh).
+// The written model keeps the hold unset (the same rule then gives foh again).
 TEST_F(Cli, FitWithoutAnOutputHoldFindsAModeAtAThirdOfTheSamplingRate) {
   const std::string plant =
       "sample_rate_hz: 100\n"
@@ -245,7 +245,7 @@ TEST_F(Cli, FitWithoutAnOutputHoldFindsAModeAtAThirdOfTheSamplingRate) {
   const Outcome fit = run("fit --config " + path("plant.yaml") + " --data " + path("d.csv") + " --modes 2 --out " +
                           path("fitted.yaml"));
   ASSERT_EQ(fit.code, 0) << fit.output;
-  EXPECT_TRUE(contains(fit.output, "output hold foh: a starting mode above 0.25 fs")) << fit.output;
+  EXPECT_TRUE(contains(fit.output, "output hold foh: a starting mode above 0.1 fs")) << fit.output;
   const Config fitted = load_config(path("fitted.yaml"));
   EXPECT_FALSE(fitted.output_hold.has_value());
   ASSERT_EQ(fitted.model.submodels.size(), 2u);
@@ -267,10 +267,12 @@ TEST_F(Cli, FitWithoutAnOutputHoldFindsAModeAtAThirdOfTheSamplingRate) {
 }
 
 // A configured mode far above the Nyquist frequency comes out as a named
-// feedthrough, in the warning and in the written model.
+// feedthrough, in the warning and in the written model. With zoh: under foh
+// (the default here, m3 lies at 0.1 fs) the fit moves that mode down onto m3's.
 TEST_F(CliThreeModes, FitWarnsOfAModeAboveNyquistAndWritesAFeedthrough) {
   std::ofstream(path("model.yaml")) << "sample_rate_hz: 100\n"
                                        "model:\n"
+                                       "  output_hold: zoh\n"
                                        "  submodels:\n"
                                        "    - {name: m1, frequency_hz: 3.1, zeta: 0.03, gain: 0.1}\n"
                                        "    - {name: m2, frequency_hz: 5.5, zeta: 0.05, gain: 0.2}\n"

@@ -11,7 +11,7 @@ TEST(Config, ParsesBase) {
   EXPECT_EQ(c.source, "test.yaml");
   EXPECT_DOUBLE_EQ(c.sample_time, 0.05);
   EXPECT_FALSE(c.closed_loop);
-  // No output_hold given: the recursive estimator assumes zoh, the batch fits batch_output_hold.
+  // No output_hold given: default_output_hold of the modes, zoh for modes at 0.016 and 0.05 fs.
   EXPECT_FALSE(c.output_hold.has_value());
   EXPECT_EQ(c.estimator.output_hold, modalwatch::Hold::zoh);
   ASSERT_EQ(c.model.submodels.size(), 2u);
@@ -31,6 +31,18 @@ TEST(Config, ParsesBase) {
   EXPECT_TRUE(c.controller.empty());
   EXPECT_FALSE(c.plant.has_value());
   EXPECT_FALSE(c.experiment.has_value());
+}
+
+TEST(Config, WithoutAnOutputHoldAModeAtAFifthOfTheSamplingRateGetsFoh) {
+  // m2 at 1 Hz sampled at 5 Hz: its sampled output is far from held.
+  const Config c = parse_config(edit(kBase, "sample_rate_hz: 20", "sample_rate_hz: 5"), "test.yaml");
+  EXPECT_FALSE(c.output_hold.has_value());
+  EXPECT_EQ(c.estimator.output_hold, modalwatch::Hold::foh);
+  // Given, it is kept.
+  const Config z = parse_config(
+      edit(edit(kBase, "sample_rate_hz: 20", "sample_rate_hz: 5"), "  loop: open", "  loop: open\n  output_hold: zoh"),
+      "test.yaml");
+  EXPECT_EQ(z.estimator.output_hold, modalwatch::Hold::zoh);
 }
 
 TEST(Config, ParsesClosedLoopPlantAndSimulation) {

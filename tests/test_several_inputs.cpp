@@ -437,7 +437,7 @@ FlexibleFit fit_flexible(const std::vector<std::string>& inputs) {
   const AdditiveModel start = modalwatch::initial_modes(modalwatch::frequency_response(est, false), 8, {},
                                                         inputs.size() > 1 ? inputs : std::vector<std::string>{});
   modalwatch::SrivcOptions options;
-  options.output_hold = modalwatch::batch_output_hold(start, est.sample_time());
+  options.output_hold = modalwatch::default_output_hold(start, est.sample_time());
   std::vector<modalwatch::ModeFinding> findings;
   FlexibleFit out;
   out.start = start;

@@ -506,19 +506,19 @@ TEST(AdditiveSrivc, FourSineSetpointLeavesTheSeedModelUndeterminedAndSaysWhich) 
 // The batch fits' output hold without a configured one: foh from a starting
 // mode at a quarter of the sampling rate up to Nyquist; a mode above Nyquist
 // (a feedthrough to be) and other submodels do not count.
-TEST(Srivc, BatchOutputHoldIsFohForAStartingModeFromAQuarterOfTheSamplingRateToNyquist) {
+TEST(Srivc, DefaultOutputHoldIsFohForAModeFromATenthOfTheSamplingRateToNyquist) {
   const double T = 0.01;  // fs = 100 Hz
   auto start = [](std::initializer_list<double> hz) {
     AdditiveModel m;
     for (const double f : hz) m.submodels.push_back(make_mode("m", ModalParameters{2 * kPi * f, 0.05, 1.0}));
     return m;
   };
-  EXPECT_EQ(batch_output_hold(start({3, 24.9}), T), Hold::zoh);
-  EXPECT_EQ(batch_output_hold(start({3, 25.0}), T), Hold::foh);
-  EXPECT_EQ(batch_output_hold(start({33, 49.9}), T), Hold::foh);
-  EXPECT_EQ(batch_output_hold(start({3, 50.0}), T), Hold::zoh);
-  EXPECT_EQ(batch_output_hold(start({3, 1e5}), T), Hold::zoh);
-  EXPECT_EQ(batch_output_hold(AdditiveModel{}, T), Hold::zoh);
+  EXPECT_EQ(default_output_hold(start({3, 9.9}), T), Hold::zoh);
+  EXPECT_EQ(default_output_hold(start({3, 10.0}), T), Hold::foh);
+  EXPECT_EQ(default_output_hold(start({33, 49.9}), T), Hold::foh);
+  EXPECT_EQ(default_output_hold(start({3, 50.0}), T), Hold::zoh);
+  EXPECT_EQ(default_output_hold(start({3, 1e5}), T), Hold::zoh);
+  EXPECT_EQ(default_output_hold(AdditiveModel{}, T), Hold::zoh);
 }
 
 TEST(Srivc, RejectsRecordWithFewerSamplesThanParameters) {

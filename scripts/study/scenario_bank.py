@@ -464,7 +464,7 @@ def scenario_files(s, index, seed, scale, loop_name, richness):
                       "forgetting": lam})
     sig = {k: v for k, v in s["excitation"].items() if k != "period_samples"}
     cfg = {"sample_rate_hz": s["fs"],
-           "model": {"loop": loop_name, "output_hold": "zoh", "submodels": model}}
+           "model": {"loop": loop_name, "submodels": model}}
     if s["controller"]:
         cfg["controller"] = {"numerator": s["controller"]["numerator"],
                              "denominator": s["controller"]["denominator"]}

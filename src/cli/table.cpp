@@ -55,7 +55,7 @@ int output_kind(const Config& config, const std::optional<std::string>& option, 
 
 Hold output_hold(const Config& config, const AdditiveModel& start, double sample_time) {
   if (config.output_hold) return *config.output_hold;
-  const Hold hold = batch_output_hold(start, sample_time);
+  const Hold hold = default_output_hold(start, sample_time);
   if (hold == Hold::foh)
     std::printf("output hold foh: a starting mode above %g fs (model.output_hold unset)\n", kFohFromFraction);
   return hold;

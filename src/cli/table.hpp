@@ -41,7 +41,7 @@ AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, c
 int output_kind(const Config& config, const std::optional<std::string>& option, bool from_data);
 
 // The output hold that `fit` and `diagnose` assume: model.output_hold when
-// given, else batch_output_hold of the start (srivc.hpp), with a line saying
+// given, else default_output_hold of the start (srivc.hpp), with a line saying
 // so when that is foh.
 Hold output_hold(const Config& config, const AdditiveModel& start, double sample_time);
 

@@ -461,7 +461,7 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
 
 }  // namespace
 
-Hold batch_output_hold(const AdditiveModel& start, double sample_time) {
+Hold default_output_hold(const AdditiveModel& start, double sample_time) {
   const double fs = 1.0 / sample_time;
   for (const Submodel& s : start.submodels) {
     if (!s.is_mode()) continue;

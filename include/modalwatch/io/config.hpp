@@ -85,8 +85,8 @@ struct Config {
   std::vector<SubmodelSettings> submodel_settings;  // one per submodel
   bool closed_loop = false;
   DiscreteTransferFunction controller;
-  // `model.output_hold` as given; unset, the batch fits take batch_output_hold
-  // (srivc.hpp) of their start and the recursive estimator zoh.
+  // `model.output_hold` as given; unset, the batch fits take default_output_hold
+  // (srivc.hpp) of their start and the recursive estimator of the configured modes.
   std::optional<Hold> output_hold;
   std::optional<PlantSpec> plant;            // `plant:` section (simulate)
   std::optional<ExperimentSpec> experiment;  // `simulation:` section (simulate)

@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "modalwatch/error.hpp"
+#include "modalwatch/srivc.hpp"
 #include "sections.hpp"
 
 namespace modalwatch {
@@ -48,10 +49,8 @@ void complete_estimator(Config& config) {
   e.sample_time = config.sample_time;
   e.closed_loop = config.closed_loop;
   e.controller = config.controller;
-  // Unset: zoh, whatever batch_output_hold (srivc.hpp) gives the batch fits.
-  // The estimator's per-sample cost rests on zoh (one discretisation serves a
-  // mode's whole filter bank).
-  e.output_hold = config.output_hold.value_or(Hold::zoh);
+  // Unset: the batch fits' rule (default_output_hold, srivc.hpp) on the configured modes.
+  e.output_hold = config.output_hold.value_or(default_output_hold(config.model, config.sample_time));
   e.forgetting.clear();
   for (const auto& s : config.submodel_settings) e.forgetting.push_back(s.forgetting);
   e.random_walks.clear();
