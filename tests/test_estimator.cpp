@@ -492,26 +492,14 @@ bool refitted(const EstimatorStatus& st) {
   return st.last_reset_reason && std::string_view(st.last_reset_reason).find("refit") != std::string_view::npos;
 }
 
-// Four modes in closed loop at 623 Hz (3.58 rad/s heavily damped, 7.52 light,
-// 232 and 590), a PI controller and a PRBS setpoint, the configured model a
-// few % off, the warm-up one 50-period memory. The warm-up window's fits lose
-// a mode, and which way depends on the last bits of the machine's libm (the
-// same build gives either on two CPUs): the start from the unfactored fit's
-// partial fractions puts mode1 on the 590 rad/s mode, mode4 beside it with no
-// gain and the slow mode nowhere, or keeps every frequency and gives mode4 a
-// gain of zero; the start from the configured modes puts mode1 on 7.5 rad/s
-// and modes 2 and 3 at 283-296 rad/s with cancelling gains, or again mode4
-// with a gain of zero. None is used: the estimator starts from the configured
-// model and follows each mode (measured at 100 s: -1.3 %, +0.5 %, +0.006 %,
-// +0.04 %; mode1 at 590 rad/s, or mode4's gain at 2e-4 of the truth, when the
-// fit was used).
-TEST(RecursiveEstimator, AWarmupFitThatPutsAModeOnAnothersFrequencyIsNotUsed) {
-  const Config c = parse_config(R"(
+// Four modes in closed loop at 623 Hz, the fastest at 0.15 fs, the configured
+// model a few % off; `hold` is the model's output_hold line, or empty.
+Config four_modes_at_623_hz(const std::string& hold) {
+  return parse_config(R"(
 sample_rate_hz: 623.3375910771862
 model:
   loop: closed
-  output_hold: zoh
-  submodels:
+)" + hold + R"(  submodels:
     - {name: mode1, kind: mode, wn: 3.5395581932713642, zeta: 0.28095164912010373, gain: 3.2839794402491824, forgetting: 0.9999817354934156}
     - {name: mode2, kind: mode, wn: 7.603674066353785, zeta: 0.04248935893168487, gain: 5.4662069790612176, forgetting: 0.9999817354934156}
     - {name: mode3, kind: mode, wn: 231.97295664670568, zeta: 0.038361608526710056, gain: 2.9316004153276602, forgetting: 0.9999817354934156}
@@ -534,7 +522,24 @@ estimator:
   warmup: 87.83522890924179
   fit_on_warmup: true
 )",
-                                "four-modes.yaml");
+                      "four-modes.yaml");
+}
+
+// Four modes in closed loop at 623 Hz (3.58 rad/s heavily damped, 7.52 light,
+// 232 and 590), a PI controller and a PRBS setpoint, the configured model a
+// few % off, the warm-up one 50-period memory. The warm-up window's fits lose
+// a mode, and which way depends on the last bits of the machine's libm (the
+// same build gives either on two CPUs): the start from the unfactored fit's
+// partial fractions puts mode1 on the 590 rad/s mode, mode4 beside it with no
+// gain and the slow mode nowhere, or keeps every frequency and gives mode4 a
+// gain of zero; the start from the configured modes puts mode1 on 7.5 rad/s
+// and modes 2 and 3 at 283-296 rad/s with cancelling gains, or again mode4
+// with a gain of zero. None is used: the estimator starts from the configured
+// model and follows each mode (measured at 100 s: -1.3 %, +0.5 %, +0.006 %,
+// +0.04 %; mode1 at 590 rad/s, or mode4's gain at 2e-4 of the truth, when the
+// fit was used).
+TEST(RecursiveEstimator, AWarmupFitThatPutsAModeOnAnothersFrequencyIsNotUsed) {
+  const Config c = four_modes_at_623_hz("  output_hold: zoh\n");
   const Record r = simulate(*c.plant, *c.experiment).record;
   RecursiveEstimator est(c.model, c.estimator);
   test_support::run(est, r);
@@ -551,34 +556,7 @@ estimator:
 // takes foh there. The warm-up fit then finds all four modes, and every mode
 // ends within 0.1 % of its wn.
 TEST(RecursiveEstimator, WithTheDefaultOutputHoldTheSamePlantsWarmupFitIsUsedAndEveryModeFollowed) {
-  const Config c = parse_config(R"(
-sample_rate_hz: 623.3375910771862
-model:
-  loop: closed
-  submodels:
-    - {name: mode1, kind: mode, wn: 3.5395581932713642, zeta: 0.28095164912010373, gain: 3.2839794402491824, forgetting: 0.9999817354934156}
-    - {name: mode2, kind: mode, wn: 7.603674066353785, zeta: 0.04248935893168487, gain: 5.4662069790612176, forgetting: 0.9999817354934156}
-    - {name: mode3, kind: mode, wn: 231.97295664670568, zeta: 0.038361608526710056, gain: 2.9316004153276602, forgetting: 0.9999817354934156}
-    - {name: mode4, kind: mode, wn: 603.9691457593041, zeta: 0.011199827189399289, gain: 1.088530412612832, forgetting: 0.9999817354934156}
-controller:
-  numerator: [0.008203362039432388, -0.008163996252994556]
-  denominator: [1.0, -1.0]
-plant:
-  noise_variance: 1.0576267692858138e-05
-  modes:
-    - {name: mode1, kind: mode, wn: 3.576673106888613, zeta: 0.26589527619958503, gain: 3.152967350900989}
-    - {name: mode2, kind: mode, wn: 7.51915399435158, zeta: 0.03988784581576824, gain: 5.125326706014377}
-    - {name: mode3, kind: mode, wn: 231.9690688380615, zeta: 0.0341947168986492, gain: 2.920573169018371}
-    - {name: mode4, kind: mode, wn: 590.2650739839806, zeta: 0.010739546670647524, gain: 1.050035995122985}
-simulation:
-  duration: 100
-  seed: 1571346067
-  reference: {type: prbs, register_bits: 12, clock_period: 2, amplitude: 1.0}
-estimator:
-  warmup: 87.83522890924179
-  fit_on_warmup: true
-)",
-                                "four-modes.yaml");
+  const Config c = four_modes_at_623_hz("");
   ASSERT_FALSE(c.output_hold.has_value());
   EXPECT_EQ(c.estimator.output_hold, Hold::foh);
   const Record r = simulate(*c.plant, *c.experiment).record;
