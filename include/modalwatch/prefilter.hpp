@@ -26,6 +26,8 @@
 namespace modalwatch {
 
 enum class Hold { zoh, foh };
+// Its name in the configuration (model.output_hold) and in logs.
+inline const char* hold_name(Hold h) noexcept { return h == Hold::foh ? "foh" : "zoh"; }
 
 // Largest filter order N supported without heap allocation.
 inline constexpr int kMaxFilterOrder = 8;

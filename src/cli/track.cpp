@@ -581,8 +581,7 @@ int track(const TrackArgs& args) {
     const double total = seconds_between(t_start, t_end), loop = seconds_between(t_read, t_end);
     std::fprintf(stderr, "modalwatch track: %llu samples at %g Hz (%s loop, %d submodels, output hold %s%s) -> %s\n",
                  static_cast<unsigned long long>(n), 1.0 / config.sample_time, config.closed_loop ? "closed" : "open",
-                 K, config.estimator.output_hold == Hold::foh ? "foh" : "zoh", config.output_hold ? "" : " by default",
-                 args.out.c_str());
+                 K, hold_name(config.estimator.output_hold), config.output_hold ? "" : " by default", args.out.c_str());
     std::fprintf(stderr, "  time: %.3f s (start-up %.3f s, then read, estimate and write together %.3f s)\n", total,
                  seconds_between(t_start, t_read), loop);
     std::fprintf(stderr, "  samples/s: %.4g end to end, %.4g after start-up\n",

@@ -149,7 +149,7 @@ void Daemon::start() {
       "loop {} Hz, "
       "publish every {} s, heartbeat every {} s; rings {} samples / {} snapshots; checkpoint {}; {}{}",
       c.source, m.loop.restored() ? "resumed from checkpoint" : "fresh start", c.model.submodels.size(),
-      1.0 / c.sample_time, c.closed_loop ? "closed" : "open", c.estimator.output_hold == Hold::foh ? "foh" : "zoh",
+      1.0 / c.sample_time, c.closed_loop ? "closed" : "open", hold_name(c.estimator.output_hold),
       c.output_hold ? "" : " by default", c.lcm.url, c.lcm.samples_channel, c.lcm.batches_channel,
       c.lcm.estimates_channel, c.lcm.fault_status_channel, c.lcm.heartbeat_channel, c.daemon.loop_rate_hz,
       c.daemon.publish_period, c.daemon.heartbeat_period, c.daemon.sample_ring, c.daemon.snapshot_ring,

@@ -151,7 +151,7 @@ void write_model(YamlWriter& w, const Config& config, const AdditiveModel& model
   w.line(0, "model:");
   w.key(1, "loop", config.closed_loop ? "closed" : "open");
   // Only as given: unset resolves per command (fit and track differ).
-  if (config.output_hold) w.key(1, "output_hold", *config.output_hold == Hold::foh ? "foh" : "zoh");
+  if (config.output_hold) w.key(1, "output_hold", hold_name(*config.output_hold));
   // What the sensor measures; position, the default, is not written.
   const int output = model.submodels.empty() ? config.output_derivatives : model.output_derivatives();
   if (output != 0) w.key(1, "output", output_kind_name(output));
