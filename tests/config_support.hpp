@@ -113,7 +113,8 @@ const std::string kEstimator =
     "  low_excitation_ratio: 0.2\n"         // 29
     "  low_excitation_window: 8\n"          // 30
     "  change_ratio: 3\n"                   // 31
-    "  change_threshold: 12\n";             // 32
+    "  change_threshold: 12\n"              // 32
+    "  change_hold: 0.5\n";                 // 33
 
 [[maybe_unused]] void expect_estimator_defaults(const modalwatch::EstimatorSettings& e, int warmup_samples) {
   const modalwatch::EstimatorSettings d;
@@ -134,6 +135,7 @@ const std::string kEstimator =
   EXPECT_EQ(e.low_excitation_window, d.low_excitation_window);
   EXPECT_EQ(e.change_ratio, d.change_ratio);
   EXPECT_EQ(e.change_threshold, d.change_threshold);
+  EXPECT_EQ(e.change_hold, d.change_hold);
 }
 
 // Every `estimator:` key with a value other than its default; appended to

@@ -118,6 +118,7 @@ TEST(Config, EstimatorParsesEveryKey) {
   EXPECT_DOUBLE_EQ(e.low_excitation_window, 8.0);
   EXPECT_DOUBLE_EQ(e.change_ratio, 3.0);
   EXPECT_DOUBLE_EQ(e.change_threshold, 12.0);
+  EXPECT_DOUBLE_EQ(e.change_hold, 0.5);
   // Still completed from the other sections.
   EXPECT_DOUBLE_EQ(e.sample_time, 0.05);
   EXPECT_EQ(e.forgetting, (std::vector<double>{0.99, 1.0}));

@@ -146,24 +146,27 @@ TEST(ConfigErrors, EstimatorValues) {
        "test.yaml:29: key 'estimator.low_excitation_ratio': must be in [0, 1) (got -0.1)"},
       {"low_excitation_window: 8", "low_excitation_window: -8",
        "test.yaml:30: key 'estimator.low_excitation_window': must be >= 0 (got -8)"},
-      {"change_ratio: 3", "change_ratio: 1", "test.yaml:31: key 'estimator.change_ratio': must be 0 (off) or > 1 (got 1)"},
+      {"change_ratio: 3", "change_ratio: 1",
+       "test.yaml:31: key 'estimator.change_ratio': must be 0 (off) or > 1 (got 1)"},
       {"change_threshold: 12", "change_threshold: 0",
        "test.yaml:32: key 'estimator.change_threshold': must be > 0 (got 0)"},
+      {"change_hold: 0.5", "change_hold: -1", "test.yaml:33: key 'estimator.change_hold': must be >= 0 (got -1)"},
   };
   for (const auto& c : cases) EXPECT_EQ(parse_error(kBase + edit(kEstimator, c.from, c.to)), c.message) << c.to;
 }
 
 TEST(ConfigErrors, EstimatorKeysAndShape) {
   const auto unknown = parse_error(kBase + kEstimator + "  forgetting: 0.99\n");
-  EXPECT_EQ(
-      unknown,
-      "test.yaml:33: key 'estimator.forgetting': unknown key for estimator (allowed: block_iterations, "
-      "refinements, update_divisor, warmup, fit_on_warmup, warmup_iterations, initial_covariance_relative, "
-      "random_walk, covariance_bound, stabilisation, min_memory, divergence_ratio, change_ratio, change_threshold, gap_factor, "
-      "outlier_sigma, residual_window, "
-      "low_excitation_ratio, low_excitation_window)");
+  EXPECT_EQ(unknown,
+            "test.yaml:34: key 'estimator.forgetting': unknown key for estimator (allowed: block_iterations, "
+            "refinements, update_divisor, warmup, fit_on_warmup, warmup_iterations, initial_covariance_relative, "
+            "random_walk, covariance_bound, stabilisation, min_memory, divergence_ratio, change_ratio, "
+            "change_threshold, change_hold, "
+            "gap_factor, "
+            "outlier_sigma, residual_window, "
+            "low_excitation_ratio, low_excitation_window)");
   EXPECT_EQ(parse_error(kBase + kEstimator + "  warmup: 3\n"),
-            "test.yaml:33: key 'estimator.warmup': duplicate key (first at line 19)");
+            "test.yaml:34: key 'estimator.warmup': duplicate key (first at line 19)");
   EXPECT_EQ(parse_error(kBase + "estimator: rsrivc\n"),
             "test.yaml:15: key 'estimator': expected a map of keys (got rsrivc)");
   EXPECT_EQ(parse_error(kBase + "estimator:\n"), "test.yaml:15: key 'estimator': expected a map of keys (got null)");

@@ -107,6 +107,7 @@ void expect_same_config(const Config& a, const Config& b) {
   EXPECT_EQ(sa.divergence_ratio, sb.divergence_ratio);
   EXPECT_EQ(sa.change_ratio, sb.change_ratio);
   EXPECT_EQ(sa.change_threshold, sb.change_threshold);
+  EXPECT_EQ(sa.change_hold, sb.change_hold);
   EXPECT_EQ(sa.gap_factor, sb.gap_factor);
   EXPECT_EQ(sa.outlier_sigma, sb.outlier_sigma);
   EXPECT_EQ(sa.residual_window, sb.residual_window);

@@ -113,6 +113,11 @@ struct EstimatorSettings {
   // forgetting takes one. 0: off.
   double change_ratio = 4.0;
   double change_threshold = 18.0;
+  // After such a boost, the submodels the score test did not name keep their
+  // estimates (no update) for change_hold memories of the boosted ones, so
+  // that a neighbour whose instrument is nearly collinear with the changed
+  // mode's does not absorb part of the change. 0: they go on updating.
+  double change_hold = 1.0;
   // A time step above gap_factor T is a gap. In closed loop, one shorter than
   // a quarter of the model's shortest decay time is bridged: the controller
   // and the model run the loop over the missing samples, and updates go on

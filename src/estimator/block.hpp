@@ -147,6 +147,11 @@ struct Block {
   // which blocks a change of the output error belongs to (boost_changed_blocks).
   ThetaVec score;
   ThetaMat score_info;
+  // The change test's last alarm named this block (boost_changed_blocks);
+  // updates left during which it keeps its estimate while named ones
+  // re-converge (held), or during which it re-converges itself (adapting).
+  bool named = false;
+  std::uint64_t held = 0, adapting = 0;
 
   // Decay rate (1/s) of the slowest pole of A when A is of first or second
   // order, stable, and the submodel has no rigid poles; else 0 (no such bound).

@@ -46,7 +46,7 @@ bool EstimatorSettings::operator==(const EstimatorSettings& o) const {
          random_walks == o.random_walks && covariance_bound == o.covariance_bound && stabilisation == o.stabilisation &&
          stabilisations == o.stabilisations && min_memory == o.min_memory && min_memories == o.min_memories &&
          divergence_ratio == o.divergence_ratio && change_ratio == o.change_ratio &&
-         change_threshold == o.change_threshold && gap_factor == o.gap_factor &&
+         change_threshold == o.change_threshold && change_hold == o.change_hold && gap_factor == o.gap_factor &&
          outlier_sigma == o.outlier_sigma && residual_window == o.residual_window &&
          low_excitation_ratio == o.low_excitation_ratio && low_excitation_window == o.low_excitation_window;
 }
@@ -170,8 +170,9 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
     throw std::invalid_argument("estimator: M_l >= 1, M_s >= 0 and the update divisor >= 1");
   if (settings.closed_loop && settings.controller.empty())
     throw std::invalid_argument("estimator: closed loop needs the controller");
-  if (!(settings.change_ratio == 0.0 || settings.change_ratio > 1.0) || !(settings.change_threshold > 0.0))
-    throw std::invalid_argument("estimator: change_ratio 0 (off) or > 1, change_threshold > 0");
+  if (!(settings.change_ratio == 0.0 || settings.change_ratio > 1.0) || !(settings.change_threshold > 0.0) ||
+      !(settings.change_hold >= 0.0))
+    throw std::invalid_argument("estimator: change_ratio 0 (off) or > 1, change_threshold > 0, change_hold >= 0");
   m.cfg.forgetting.resize(initial.submodels.size(), 1.0);
   if (settings.forgetting.empty()) std::fill(m.cfg.forgetting.begin(), m.cfg.forgetting.end(), 1.0);
 

@@ -162,9 +162,15 @@ void RecursiveEstimator::Impl::save_good() {
 // the score test t = s^T F^-1 s / (sigma^2 n_theta): how much of the error
 // that block alone explains, per parameter. Blocks within half of the largest
 // t get P multiplied by kChangeBoost (within the P bound): their estimate then
-// rests on a tenth of a memory and follows the change; the others keep theirs.
-// The divergence test and the CUSUM wait a tenth of a memory, while the
-// boosted blocks move.
+// rests on a tenth of a memory and follows the change. The others keep theirs
+// for change_hold memories of the boosted blocks (no update at all): where two
+// modes' instruments are nearly collinear (a few sines, close modes), the
+// block-coordinate recursion would otherwise let a healthy neighbour absorb
+// part of the change, a bias it then takes tens of memories to undo. A block
+// boosted earlier in the same change (still within its change_hold) is not
+// held by a later boost that names another one: it may be re-converging from
+// a share it took at the first. The divergence test and the CUSUM wait a tenth
+// of a memory, while the boosted blocks move.
 bool RecursiveEstimator::Impl::boost_changed_blocks() {
   constexpr double kChangeBoost = 10.0, kShareOfLargest = 0.5, kWait = 0.1;
   const auto score_test = [this](const detail::Block& b) {
@@ -175,24 +181,34 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
   double largest = 0.0;
   for (const auto& b : blocks) largest = std::max(largest, score_test(b));
   bool boosted = false;
+  std::uint64_t hold = 0;  // updates the blocks not named keep their estimate
   for (auto& b : blocks) {
     // No shorter than the memory floor (min_memory decay times): faster, the
     // boosted mode winds up with its own prefilters (on the flexible beam's
     // lightly damped mode a 1 % step overshot to -8 %).
-    double boost = kChangeBoost;
+    double boost = kChangeBoost, forget = 1.0 - b.lambda;
     const double rate = b.decay_rate();
     if (b.forget_per_decay > 0.0 && rate > 0.0) {
       const double floor_forget = b.forget_per_decay * rate;  // 1 - lambda at the floor
-      boost = std::clamp(floor_forget / std::min(1.0 - b.lambda, floor_forget), 1.0, kChangeBoost);
+      boost = std::clamp(floor_forget / std::min(forget, floor_forget), 1.0, kChangeBoost);
+      forget = std::min(forget, floor_forget);
     }
-    if (boost > 1.0 && score_test(b) >= kShareOfLargest * largest) {
+    b.named = boost > 1.0 && score_test(b) >= kShareOfLargest * largest;
+    if (b.named) {
       boosted = true;
       b.P *= boost;
       detail::bound_covariance<0>(b.P.data(), b.p_bound.data(), b.nt);
+      // Without forgetting there is no memory to hold the others for.
+      const auto own = forget > 0.0 ? static_cast<std::uint64_t>(cfg.change_hold / forget) : 0;
+      b.held = 0;
+      b.adapting = own;
+      hold = std::max(hold, own);
     }
     b.score.setZero();
     b.score_info.setZero();
   }
+  for (auto& b : blocks)
+    if (!b.named && b.adapting == 0) b.held = std::max(b.held, hold);
   rearm = static_cast<std::uint64_t>(kWait / (1.0 - e_alpha));
   if (boosted) ++status.boosts;
   return boosted;
@@ -200,6 +216,7 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
 
 void RecursiveEstimator::Impl::restore_good(const char* reason) {
   for (auto& b : blocks) {
+    b.held = b.adapting = 0;
     b.theta = b.good_theta;
     b.P = b.good_P;
     rediscretise(b);

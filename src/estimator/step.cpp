@@ -321,6 +321,10 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
 // After a healthy update of every block: counted, and now and then the last good state.
 inline unsigned RecursiveEstimator::Impl::finish_update() {
   ++status.updates;
+  for (auto& b : blocks) {
+    if (b.held > 0) --b.held;
+    if (b.adapting > 0) --b.adapting;
+  }
   if (++stabilise_block == blocks.size()) {
     stabilise_block = 0;
     ++stabilise_round;

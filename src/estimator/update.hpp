@@ -153,6 +153,7 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
     for (int j = 0; j < nt; ++j)  // the upper triangle: it is symmetric
       for (int i = 0; i <= j; ++i) info[i + j * nt] = rho * info[i + j * nt] + psi[i] * psi[j];
   }
+  if (b.held > 0) return true;  // another block re-converges after a change (boost_changed_blocks)
   if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), lambda, y_f)) return false;
   // Stabilised forgetting on one block per update and one of its coordinates
   // per round, in turn (the same for every refinement of a sample), with K nt

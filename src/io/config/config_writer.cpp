@@ -270,6 +270,7 @@ void write_estimator(YamlWriter& w, const EstimatorSettings& e, double sample_ti
   w.number(1, "divergence_ratio", e.divergence_ratio);
   w.number(1, "change_ratio", e.change_ratio);
   w.number(1, "change_threshold", e.change_threshold);
+  w.number(1, "change_hold", e.change_hold);
   w.number(1, "gap_factor", e.gap_factor);
   w.number(1, "outlier_sigma", e.outlier_sigma);
   w.number(1, "residual_window", e.residual_window);

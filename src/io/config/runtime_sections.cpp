@@ -21,9 +21,26 @@ namespace {
 
 // The `estimator:` keys; every one is optional and defaults to EstimatorSettings'.
 void parse_estimator(const Map& est, double sample_time, EstimatorSettings& e) {
-  est.allow({"block_iterations", "refinements", "update_divisor", "warmup", "fit_on_warmup", "warmup_iterations",
-             "initial_covariance_relative", "random_walk", "covariance_bound", "stabilisation", "min_memory",
-             "divergence_ratio", "change_ratio", "change_threshold", "gap_factor", "outlier_sigma", "residual_window", "low_excitation_ratio", "low_excitation_window"},
+  est.allow({"block_iterations",
+             "refinements",
+             "update_divisor",
+             "warmup",
+             "fit_on_warmup",
+             "warmup_iterations",
+             "initial_covariance_relative",
+             "random_walk",
+             "covariance_bound",
+             "stabilisation",
+             "min_memory",
+             "divergence_ratio",
+             "change_ratio",
+             "change_threshold",
+             "change_hold",
+             "gap_factor",
+             "outlier_sigma",
+             "residual_window",
+             "low_excitation_ratio",
+             "low_excitation_window"},
             "estimator");
   constexpr long long kIntMax = std::numeric_limits<int>::max();
   const auto count = [&](std::string_view key, long long lo, int& out) {
@@ -52,6 +69,7 @@ void parse_estimator(const Map& est, double sample_time, EstimatorSettings& e) {
     if (!(e.change_ratio == 0.0 || e.change_ratio > 1.0)) v->fail("must be 0 (off) or > 1");
   }
   if (const auto v = est.get("change_threshold")) e.change_threshold = v->positive();
+  if (const auto v = est.get("change_hold")) e.change_hold = v->at_least(0.0);
   if (const auto v = est.get("gap_factor")) e.gap_factor = v->above(1.0);
   if (const auto v = est.get("outlier_sigma")) e.outlier_sigma = v->positive();
   if (const auto v = est.get("residual_window")) e.residual_window = v->at_least(0.0);
