@@ -192,8 +192,11 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   // ratio of e between N(0, kappa e_var_good) and N(0, e_var_good),
   // -ln(kappa)/2 + (1 - 1/kappa) e^2 / (2 e_var_good) (kappa = change_ratio), on the
   // samples an update may take (not an outlier, not while settling or rearming).
+  // Not on a residual at round-off (noise-free data), whose ratio to e_var_good,
+  // round-off too, says nothing about the plant.
   bool changed = false;
-  if (cfg.change_ratio > 1.0 && settling == 0 && rearm == 0 && update && e_var_good > 0.0 && std::isfinite(s.y)) {
+  if (cfg.change_ratio > 1.0 && settling == 0 && rearm == 0 && update && e_var_good > 0.0 && std::isfinite(s.y) &&
+      above_round_off()) {
     change_cusum = std::max(0.0, change_cusum + change_drift + change_gain * e * e / e_var_good);
     changed = change_cusum > cfg.change_threshold;
   } else {
