@@ -67,9 +67,15 @@ struct PhysicalCheck {
 PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd& beta_covariance, double sample_time,
                              const PhysicalOptions& options = {});
 
-// fit_srivc, then check_physical on the result, refitted from the corrected
-// model while the structure changes. `findings` collects the verdicts other
-// than physical of every round.
+// check_physical on a start model (no covariance: the frequency and stability
+// rules), its findings (reasons prefixed "its start: ") appended to `findings`.
+// A start mode above Nyquist is a feedthrough before any fit sees it: under
+// foh a fit would otherwise move it down onto a mode of the data.
+AdditiveModel physical_start(const AdditiveModel& start, double sample_time, std::vector<ModeFinding>& findings);
+
+// fit_srivc from physical_start(initial), then check_physical on the result,
+// refitted from the corrected model while the structure changes. `findings`
+// collects the verdicts other than physical of every round.
 FitResult fit_physical(const Record& data, const AdditiveModel& initial, const SrivcOptions& options,
                        std::vector<ModeFinding>& findings, const PhysicalOptions& physical = {});
 

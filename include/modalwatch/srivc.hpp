@@ -31,10 +31,10 @@ namespace modalwatch {
 // foh the fit reaches 96 % and every mode is followed without a reset. Below
 // 0.1 fs zoh and foh give the same estimates on the scenario bank, and zoh
 // costs a third of the instructions per sample (one discretisation serves a
-// mode's four filters). A start mode above Nyquist is left out of the rule.
-// Under zoh the fit turns it into a feedthrough; under foh it can move down
-// onto a mode of the data instead (a start mode at 1e5 Hz beside modes up to
-// 0.1 fs at 100 Hz took the 10 Hz mode's place).
+// mode's four filters). A start mode above Nyquist is left out of the rule:
+// `fit` and `diagnose` make it a feedthrough before fitting (physical_start),
+// since under foh a fit would move it down onto a mode of the data (a start
+// mode at 1e5 Hz beside modes up to 0.1 fs at 100 Hz took the 10 Hz mode's place).
 inline constexpr double kFohFromFraction = 0.1;
 Hold default_output_hold(const AdditiveModel& start, double sample_time);
 

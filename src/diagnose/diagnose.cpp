@@ -542,12 +542,13 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
   if (loop.closed && loop.controller.empty()) throw std::invalid_argument("diagnose: closed loop needs a controller");
   const Problem est{estimation, loop};
   const Problem val{validation, loop};
-  const Context ctx{est, val, options, initial};
+  std::vector<ModeFinding> findings;
+  const AdditiveModel start = physical_start(initial, estimation.sample_time(), findings);
+  const Context ctx{est, val, options, start};
 
   DiagnoseResult result;
   AugmentedModel configured;
-  configured.linear = initial;
-  std::vector<ModeFinding> findings;
+  configured.linear = start;
   std::vector<ModalParameters> modal_std;
   Refined current = make_physical(fit_structure(configured, est, options, true), est, options, findings, modal_std);
   if (!std::isfinite(current.cost)) throw std::runtime_error("diagnose: the configured model cannot be fitted");

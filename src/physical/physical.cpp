@@ -177,9 +177,19 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
   return out;
 }
 
+AdditiveModel physical_start(const AdditiveModel& start, double sample_time, std::vector<ModeFinding>& findings) {
+  PhysicalCheck check = check_physical(start, Eigen::MatrixXd(), sample_time);
+  for (ModeFinding& f : check.findings) {
+    if (f.verdict == ModeVerdict::physical) continue;
+    f.reason = "its start: " + f.reason;
+    findings.push_back(f);
+  }
+  return check.changed() ? check.model : start;
+}
+
 FitResult fit_physical(const Record& data, const AdditiveModel& initial, const SrivcOptions& options,
                        std::vector<ModeFinding>& findings, const PhysicalOptions& physical) {
-  FitResult result = fit_srivc(data, initial, options);
+  FitResult result = fit_srivc(data, physical_start(initial, data.sample_time(), findings), options);
   // Each refit follows a change of structure that removes a mode or its poles,
   // so the rounds end within the number of submodels.
   for (std::size_t round = 0; round <= initial.submodels.size(); ++round) {
