@@ -11,6 +11,15 @@
 // regressor from the prefiltered input's (k+z)-th derivative; an EstimatorState
 // does not hold z, restore() takes it from this estimator's model.
 //
+// Several measured inputs (open loop, at most kMaxInputs): each block's
+// prefilters take the input its submodel names (Submodel::input), so that its
+// regressor and instrument (eq. 28) come from that input and the other blocks'
+// outputs, each on its own input, are subtracted (eq. 15); the warm-up fit and
+// a refit get the window's further inputs. A Sample carries them in its fixed
+// array, in the model's order; a non-finite or missing one makes the sample a
+// non-finite one. The low-excitation test takes the sum of the inputs' squares.
+// A single-input model runs the same compilation of step() as before.
+//
 // A plain class: no I/O, no threads, no exceptions and no heap allocation in
 // step() once warm-up is over. Everything a caller needs to know about bad
 // input (NaN samples, gaps, outliers, low excitation, resets) is counted in
@@ -235,7 +244,9 @@ class EstimatorState {
   EstimatorState() = default;  // no submodels, not warmed up
 
   bool warmed_up() const noexcept { return warmed_up_; }
-  const AdditiveModel& model() const noexcept { return model_; }  // current theta, physical units
+  // Current theta, physical units; without model.inputs and Submodel::input,
+  // which are the configuration's (restore() takes them from the estimator).
+  const AdditiveModel& model() const noexcept { return model_; }
   const EstimatorStatus& status() const noexcept { return status_; }
   double last_sample_time() const noexcept { return last_t_; }  // s
 
@@ -307,6 +318,7 @@ class WarmupFit {
   std::shared_ptr<const Context> context_;
   std::uint64_t generation_ = 0;
   Eigen::VectorXd t_, u_, y_, r_;
+  std::vector<Eigen::VectorXd> further_u_;  // the inputs after u, with several
   int n_ = 0;
   int settle_ = 0;  // samples at the start that only drive the prefilters (a refit's)
   bool refit_ = false;
@@ -322,7 +334,8 @@ class WarmupFit {
 
 class RecursiveEstimator {
  public:
-  // Throws std::invalid_argument on an inconsistent configuration.
+  // Throws std::invalid_argument on an inconsistent configuration (also more
+  // than kMaxInputs inputs, or several inputs in closed loop).
   RecursiveEstimator(const AdditiveModel& initial, const EstimatorSettings& settings);
   ~RecursiveEstimator();
   RecursiveEstimator(RecursiveEstimator&&) noexcept;

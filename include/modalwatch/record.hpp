@@ -1,6 +1,7 @@
 #pragma once
 // Sampled input/output data: one sample, and a record of many. t, u, y and, in
 // closed loop, the reference r; with several actuators, the further inputs.
+#include <array>
 #include <cstddef>
 #include <vector>
 
@@ -8,9 +9,23 @@
 
 namespace modalwatch {
 
-// One sample as the recursive estimator takes it (t in s).
+// The most measured inputs a Sample carries, and so the most the recursive
+// estimator, `track` and the daemon take (the estimator and the config refuse a
+// model with more). Fixed, so that a sample stays a plain value that is copied
+// and queued without allocation.
+inline constexpr int kMaxInputs = 8;
+
+// One sample as the recursive estimator takes it (t in s). With several
+// measured inputs, u is the first and further_u[0 .. further_inputs) the others,
+// in the model's order (AdditiveModel::inputs).
 struct Sample {
   double t = 0.0, u = 0.0, y = 0.0, r = 0.0;
+  int further_inputs = 0;
+  std::array<double, kMaxInputs - 1> further_u{};
+
+  int inputs() const noexcept { return 1 + further_inputs; }
+  // Input j: u for j = 0, else further_u[j - 1] (j < inputs(), unchecked).
+  double input(int j) const noexcept { return j == 0 ? u : further_u[static_cast<std::size_t>(j - 1)]; }
 };
 
 struct Record {

@@ -114,6 +114,7 @@ MODALWATCH_HOT bool bound_covariance(double* P, const double* bound, int nt_runt
 struct Block {
   int n = 0, m = 0, l = 0, nt = 0;
   int z = 0;              // the output is p^z times the position response (Submodel::output_derivatives)
+  int input = 0;          // the measured input that drives it (Submodel::input)
   bool biproper = false;  // m + z = n + l: the output has a direct feedthrough
   // The common cases without loops: B = b0 on a position output (output()),
   // and a mode so (fill()).

@@ -62,6 +62,7 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.m = s.m;
     b.l = s.rigid_poles;
     b.z = s.output_derivatives;
+    b.input = s.input;
     b.nt = s.n_theta();
     b.biproper = b.m + b.z == b.n + b.l;
     b.b0_position = b.m == 0 && b.z == 0;
@@ -139,13 +140,22 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
   Impl& m = *impl_;
   m.cfg = settings;
   m.initial = initial;
-  m.select_kernel(StepKernel::avx2_fma);  // where the CPU has it; else portable
   if (!(settings.sample_time > 0.0)) throw std::invalid_argument("estimator: sample_time must be > 0");
   if (initial.submodels.empty()) throw std::invalid_argument("estimator: no submodels");
-  if (initial.n_inputs() > 1)
-    throw std::invalid_argument("estimator: the recursive estimator (track, the daemon) takes one input; model.inputs names " +
-                                std::to_string(initial.n_inputs()) + " (several inputs are for fit and diagnose)");
+  const int inputs = initial.n_inputs();
+  if (inputs > kMaxInputs)
+    throw std::invalid_argument("estimator: model.inputs names " + std::to_string(inputs) + " inputs, at most " +
+                                std::to_string(kMaxInputs) + " are supported (a sample carries that many)");
+  // The instrument's loop (eq. 29) has one plant input, the controller's u.
+  if (inputs > 1 && settings.closed_loop)
+    throw std::invalid_argument("estimator: a closed loop has one input (the controller's u); model.inputs names " +
+                                std::to_string(inputs) + " (several inputs need loop: open)");
+  m.further_inputs = inputs - 1;
+  m.select_kernel(StepKernel::avx2_fma);  // where the CPU has it; else portable
   for (const auto& s : initial.submodels) {
+    if (s.input < 0 || s.input >= inputs)
+      throw std::invalid_argument("estimator: submodel '" + s.name + "' is driven by input " +
+                                  std::to_string(s.input + 1) + " of " + std::to_string(inputs));
     s.check();
     if (s.n + s.rigid_poles > kMaxFilterOrder || s.n_theta() > kMaxTheta)
       throw std::invalid_argument("estimator: submodel '" + s.name + "' exceeds the maximum order");
@@ -218,21 +228,27 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
     ++m.status.rejected_nonfinite;
     return kRejectedNonFinite;
   }
-  Sample sample = s;
   unsigned flags = 0;
   // A non-finite value is missing, like a gap, never information: no update
   // on it. Without y the model stands in for it (advance()) and the filters
-  // stay on the sample grid with the true u and r; without u (or r in closed
-  // loop) the filters cannot follow the data, so the sample is skipped and the
-  // filters restart on the next one, as after a gap.
-  const bool inputs_missing = !std::isfinite(s.u) || (m.cfg.closed_loop && !std::isfinite(s.r));
+  // stay on the sample grid with the true u and r; without u, any further
+  // input of the model (a sample that carries fewer inputs than the model
+  // has lacks them) or r in closed loop the filters cannot follow the data,
+  // so the sample is skipped and the filters restart on the next one, as
+  // after a gap.
+  const bool inputs_missing = !std::isfinite(s.u) || (m.cfg.closed_loop && !std::isfinite(s.r)) ||
+                              (m.further_inputs > 0 && m.further_inputs_missing(s));
   const bool bad_values = inputs_missing || !std::isfinite(s.y);
+  const Sample* taken = &s;  // copied only to be patched: a sample is about a hundred bytes
   if (bad_values) {
     ++m.status.rejected_nonfinite;
     flags |= kRejectedNonFinite;
-    sample.y = std::numeric_limits<double>::quiet_NaN();  // replaced by y_hat in advance()
-    if (!std::isfinite(sample.r)) sample.r = m.last_r;    // open loop: r is not used
+    m.patched = s;
+    m.patched.y = std::numeric_limits<double>::quiet_NaN();   // replaced by y_hat in advance()
+    if (!std::isfinite(m.patched.r)) m.patched.r = m.last_r;  // open loop: r is not used
+    taken = &m.patched;
   }
+  const Sample& sample = *taken;
   const double T = m.cfg.sample_time;
   if (m.have_prev) {
     const double dt = s.t - m.t_prev;

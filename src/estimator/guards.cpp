@@ -242,7 +242,7 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
     const auto room = wt.size() - refit_samples() - static_cast<Eigen::Index>(transient);
     const Eigen::Index before = std::max<Eigen::Index>(0, std::min({history, room, wanted}));
     const Eigen::Index first = (ring_head - before + wt.size()) % wt.size();
-    for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) std::rotate(w->data(), w->data() + first, w->data() + w->size());
+    for_each_window_array([&](Eigen::VectorXd& w) { std::rotate(w.data(), w.data() + first, w.data() + w.size()); });
     refit_armed = true;
     refit_retries = 0;
     buffered = static_cast<int>(before);

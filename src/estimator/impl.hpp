@@ -2,6 +2,7 @@
 // The recursive estimator's state (RecursiveEstimator::Impl), shared by its
 // sources: estimator.cpp (construction, step(), the accessors), step.cpp (the
 // per-sample path), guards.cpp, warmup_fit.cpp and state.cpp.
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -76,10 +77,14 @@ struct RecursiveEstimator::Impl {
   }
   EstimatorStatus status;
 
+  // Several measured inputs: the inputs after u (AdditiveModel::n_inputs() - 1).
+  int further_inputs = 0;
   // Warm-up window, preallocated; a WarmupFit job holds it while it runs.
   // Between windows the same arrays keep the latest samples as a ring
   // (keep_history()): a refit's window starts with them (restore_good()).
+  // wfu[j]: the further input j + 1.
   Eigen::VectorXd wt, wu, wy, wr;
+  std::vector<Eigen::VectorXd> wfu;
   int buffered = 0;
   bool keeps_history = false;  // a refit is possible: the ring runs
   Eigen::Index ring_head = 0;  // where the next sample goes
@@ -88,6 +93,7 @@ struct RecursiveEstimator::Impl {
   bool fit_taken = false;            // ... and the window is out in a job
   std::uint64_t fit_generation = 0;  // tells a stale job (restore() since) from the pending one
 
+  Sample patched;  // a sample with a non-finite value, as advance() takes it (step())
   double t_prev = 0.0;
   bool have_prev = false;
   bool just_restored = false;         // restore() ran and no sample has come since
@@ -120,7 +126,7 @@ struct RecursiveEstimator::Impl {
   // The per-sample path, one compilation per instruction set (hot_path.hpp),
   // chosen once: advance() calls through kernel.
   using Kernel = unsigned (Impl::*)(const Sample&, bool);
-  Kernel kernel = &Impl::advance_portable;
+  Kernel kernel = &Impl::advance_portable<false>;
   StepKernel kernel_id = StepKernel::portable;
 
   void build(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>* fit_covariance, double fit_sigma2,
@@ -128,7 +134,16 @@ struct RecursiveEstimator::Impl {
   MODALWATCH_HOT void rediscretise(detail::Block& b);
   void rediscretise_prefilters(detail::Block& b, double Ts);
   void allocate_window() {
-    for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) w->resize((1 + kRefitTransientWindows) * cfg.warmup_samples);
+    const Eigen::Index n = (1 + kRefitTransientWindows) * cfg.warmup_samples;
+    for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) w->resize(n);
+    wfu.resize(static_cast<std::size_t>(further_inputs));
+    for (Eigen::VectorXd& w : wfu) w.resize(n);
+  }
+  // Every array of the window: t, u, y, r and the further inputs.
+  template <class F>
+  void for_each_window_array(F&& f) {
+    for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) f(*w);
+    for (Eigen::VectorXd& w : wfu) f(w);
   }
   void set_reference(detail::Block& b, double stabilisation) const;
   void set_reference_variance(detail::Block& b) const;
@@ -148,6 +163,8 @@ struct RecursiveEstimator::Impl {
     wu(buffered) = s.u;
     wy(buffered) = s.y;
     wr(buffered) = s.r;
+    for (int j = 0; j < further_inputs; ++j)
+      wfu[static_cast<std::size_t>(j)](buffered) = s.further_u[static_cast<std::size_t>(j)];
     ++buffered;
   }
   void keep_history(const Sample& s) {
@@ -155,6 +172,8 @@ struct RecursiveEstimator::Impl {
     wu(ring_head) = s.u;
     wy(ring_head) = s.y;
     wr(ring_head) = s.r;
+    for (int j = 0; j < further_inputs; ++j)
+      wfu[static_cast<std::size_t>(j)](ring_head) = s.further_u[static_cast<std::size_t>(j)];
     if (++ring_head == wt.size()) ring_head = 0;
     if (history < wt.size()) ++history;
   }
@@ -162,9 +181,34 @@ struct RecursiveEstimator::Impl {
   bool keep_for_refit(const Sample& s, bool bad_values);
   void begin_refit();
   unsigned advance(const Sample& s, bool allow_update) { return (this->*kernel)(s, allow_update); }
+  // One compilation per instruction set and per input count (one, several).
+  template <bool kSeveralInputs>
   unsigned advance_portable(const Sample& s, bool allow_update);
+  template <bool kSeveralInputs>
   MODALWATCH_TARGET_AVX2_FMA unsigned advance_avx2_fma(const Sample& s, bool allow_update);
+  template <bool kSeveralInputs>
   MODALWATCH_HOT unsigned advance_body(const Sample& s, bool allow_update);
+  // The input that drives block b: the one its submodel names (open loop).
+  template <bool kSeveralInputs>
+  MODALWATCH_HOT static double block_input(const detail::Block& b, const Sample& s) {
+    return kSeveralInputs ? s.input(b.input) : s.u;
+  }
+  // The excitation with several inputs: the sum of their squares.
+  MODALWATCH_HOT double input_power(const Sample& s) const {
+    double p = s.u * s.u;
+    for (int j = 0; j < further_inputs; ++j) {
+      const double v = s.further_u[static_cast<std::size_t>(j)];
+      p += v * v;
+    }
+    return p;
+  }
+  // Whether an input of the model is missing or not finite in s.
+  bool further_inputs_missing(const Sample& s) const {
+    if (s.further_inputs < further_inputs) return true;
+    for (int j = 0; j < further_inputs; ++j)
+      if (!std::isfinite(s.further_u[static_cast<std::size_t>(j)])) return true;
+    return false;
+  }
   bool select_kernel(StepKernel k) noexcept;
   MODALWATCH_HOT unsigned finish_update();
   MODALWATCH_HOT bool update_block(detail::Block& b, double y_f);

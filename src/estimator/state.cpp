@@ -171,6 +171,10 @@ EstimatorState RecursiveEstimator::state() const {
   EstimatorState st;
   st.warmed_up_ = !m.status.warming_up && !m.blocks.empty();
   st.model_ = model();
+  // The inputs are the configuration's, as the sensor is: the state, written
+  // and read back, carries the estimate, not which input drives what.
+  st.model_.inputs.clear();
+  for (Submodel& s : st.model_.submodels) s.input = 0;
   if (st.warmed_up_) {
     for (const Block& b : m.blocks) {
       st.P_.emplace_back(b.P);
@@ -260,11 +264,15 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
   next.fit_pending = next.fit_taken = false;
   ++next.fit_generation;
   if (st.warmed_up_) {
-    // What the sensor measures is the configuration's, as the forgetting
-    // factors are (the checkpoint's fingerprint holds both): the state keeps none.
+    // What the sensor measures and which input drives each submodel are the
+    // configuration's, as the forgetting factors are (the checkpoint's
+    // fingerprint holds them): the state keeps none.
     AdditiveModel restored = st.model_;
-    for (std::size_t i = 0; i < K; ++i)
+    restored.inputs = m.initial.inputs;
+    for (std::size_t i = 0; i < K; ++i) {
       restored.submodels[i].output_derivatives = m.initial.submodels[i].output_derivatives;
+      restored.submodels[i].input = m.initial.submodels[i].input;
+    }
     next.build(restored, nullptr, 0.0, 1.0);  // structure, prefilters at rest; theta, P below
     for (std::size_t i = 0; i < K; ++i) {
       Block& b = next.blocks[i];

@@ -51,12 +51,12 @@ using namespace detail;
 bool RecursiveEstimator::Impl::select_kernel(StepKernel k) noexcept {
   switch (k) {
     case StepKernel::portable:
-      kernel = &Impl::advance_portable;
+      kernel = further_inputs > 0 ? &Impl::advance_portable<true> : &Impl::advance_portable<false>;
       break;
     case StepKernel::avx2_fma:
 #if MODALWATCH_HAVE_AVX2_FMA
       if (!cpu_has_avx2_fma()) return false;
-      kernel = &Impl::advance_avx2_fma;
+      kernel = further_inputs > 0 ? &Impl::advance_avx2_fma<true> : &Impl::advance_avx2_fma<false>;
       break;
 #else
       return false;
@@ -66,16 +66,22 @@ bool RecursiveEstimator::Impl::select_kernel(StepKernel k) noexcept {
   return true;
 }
 
+template <bool kSeveralInputs>
 unsigned RecursiveEstimator::Impl::advance_portable(const Sample& s, bool allow_update) {
-  return advance_body(s, allow_update);
+  return advance_body<kSeveralInputs>(s, allow_update);
 }
 
 #if MODALWATCH_HAVE_AVX2_FMA
+template <bool kSeveralInputs>
 unsigned RecursiveEstimator::Impl::advance_avx2_fma(const Sample& s, bool allow_update) {
-  return advance_body(s, allow_update);
+  return advance_body<kSeveralInputs>(s, allow_update);
 }
 #endif
 
+// kSeveralInputs: each block takes the input its submodel names (open loop);
+// without, every block takes u, and a single-input model runs the arithmetic
+// it ran before several inputs existed, instruction for instruction.
+template <bool kSeveralInputs>
 inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool allow_update) {
   unsigned flags = 0;
   const bool refine = cfg.refinements > 0 || cfg.block_iterations > 1;
@@ -114,7 +120,7 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     }
   } else {
     for (auto& b : blocks) {
-      b.xu = b.output(b.filters.take_input(kU, s.u));
+      b.xu = b.output(b.filters.take_input(kU, block_input<kSeveralInputs>(b, s)));
       b.xz = b.xu;
       y_hat += b.xu;
     }
@@ -216,13 +222,15 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     change_cusum = 0.0;
     if (boost_changed_blocks()) flags |= kChangeBoost;
   }
-  // 3. Excitation: without input power the update only winds P up.
-  pow_short = pow_count == 0 ? z * z : pow_alpha * pow_short + (1.0 - pow_alpha) * z * z;
+  // 3. Excitation: without input power the update only winds P up. With
+  //    several inputs, the power of all of them (input_power()).
+  const double z2 = kSeveralInputs ? input_power(s) : z * z;
+  pow_short = pow_count == 0 ? z2 : pow_alpha * pow_short + (1.0 - pow_alpha) * z2;
   ++pow_count;
   const bool low = pow_ref > 0.0 && pow_short < cfg.low_excitation_ratio * pow_ref;
   // The reference is the input power over a long window, learned while the
   // excitation is normal (seeded by the warm-up when there is one).
-  if (!low) pow_ref = pow_ref > 0.0 ? pow_ref_alpha * pow_ref + (1.0 - pow_ref_alpha) * z * z : pow_short;
+  if (!low) pow_ref = pow_ref > 0.0 ? pow_ref_alpha * pow_ref + (1.0 - pow_ref_alpha) * z2 : pow_short;
   status.low_excitation = low;
   if (low) {
     ++status.low_excitation_samples;
@@ -285,7 +293,7 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
           b.theta = theta_iter;
           rediscretise(b);
           b.filters.begin_sample();
-          b.filters.take_input(kU, s.u);
+          b.filters.take_input(kU, block_input<kSeveralInputs>(b, s));
           if (cfg.closed_loop) b.filters.take_input(kZ, z);
           b.theta = theta_bar;
         }

@@ -55,7 +55,7 @@ constexpr double kRefitFrequencyRatio = 1.5;
 constexpr double kWarmupFrequencyRatio = 2.0;
 
 // Each resonance of `after` keeps its place in frequency order among the
-// resonances of `before` and moves by less than `ratio` either way.
+// resonances of `before` on its input and moves by less than `ratio` either way.
 bool keeps_the_modes(const AdditiveModel& before_model, const AdditiveModel& after_model, double ratio) {
   const auto& before = before_model.submodels;
   const auto& after = after_model.submodels;
@@ -67,8 +67,11 @@ bool keeps_the_modes(const AdditiveModel& before_model, const AdditiveModel& aft
     // A gain of zero or of the other sign: the fit dropped the mode (an
     // unfactored start splits the plant into fewer modes than configured).
     if (!(p1.gain * p0.gain > 0.0)) return false;
+    // Among the resonances of one input: submodels on different inputs cannot
+    // take each other's place (each sees its own input), and the start gives
+    // one resonance the same frequency on every input it drives.
     for (std::size_t j = 0; j < i; ++j)
-      if (before[j].is_resonance() && after[j].is_resonance() &&
+      if (before[j].input == before[i].input && before[j].is_resonance() && after[j].is_resonance() &&
           (modal_parameters(before[j]).wn < w0) != (modal_parameters(after[j]).wn < w1))
         return false;
   }
@@ -83,7 +86,7 @@ Eigen::VectorXd simulate_start(const Record& window, const AdditiveModel& start,
     Eigen::VectorXd z;
     simulate_loop(start, cfg.controller, window.r, window.sample_time(), z, y_start);
   } else {
-    y_start = simulate_model(start, window.u, window.sample_time());
+    y_start = simulate_model(start, window);  // each submodel on its own input
   }
   return y_start;
 }
@@ -128,6 +131,7 @@ void WarmupFit::run() noexcept {
     window.u = u_.head(N);
     window.y = y_.head(N);
     if (cfg.closed_loop) window.r = r_.head(N);
+    for (const Eigen::VectorXd& v : further_u_) window.further_u.emplace_back(v.head(N));
     const auto fitted = window.y.tail(N - settle_);
     const double y_var = (fitted.array() - fitted.mean()).square().mean();
     AdditiveModel model = initial;
@@ -244,7 +248,7 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
       // The next memory is the next window; this one's end drives its prefilters.
       ++refit_retries;
       const Eigen::Index keep = std::min<Eigen::Index>(window_settle, N);
-      for (Eigen::VectorXd* w : {&wt, &wu, &wy, &wr}) std::copy(w->data() + N - keep, w->data() + N, w->data());
+      for_each_window_array([&](Eigen::VectorXd& w) { std::copy(w.data() + N - keep, w.data() + N, w.data()); });
       buffered = static_cast<int>(keep);
       window_settle = static_cast<int>(keep);
       window_samples = window_settle + refit_samples();
@@ -299,9 +303,17 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   }
   // Run the filters over the window with theta(t0), without updating (section 4.7).
   double p = 0.0;
+  Sample s;
+  s.further_inputs = further_inputs;
   for (int k = 0; k < N; ++k) {
-    advance({wt(k), wu(k), wy(k), cfg.closed_loop ? wr(k) : 0.0}, false);
-    p += wu(k) * wu(k);
+    s.t = wt(k);
+    s.u = wu(k);
+    s.y = wy(k);
+    s.r = cfg.closed_loop ? wr(k) : 0.0;
+    for (int j = 0; j < further_inputs; ++j)
+      s.further_u[static_cast<std::size_t>(j)] = wfu[static_cast<std::size_t>(j)](k);
+    advance(s, false);
+    p += further_inputs > 0 ? input_power(s) : wu(k) * wu(k);  // as advance() measures it
   }
   if (noise_before > 0.0) {
     settling = transient = 0;
@@ -331,6 +343,7 @@ WarmupFit RecursiveEstimator::take_warmup_fit() {
   job.u_.swap(m.wu);
   job.y_.swap(m.wy);
   job.r_.swap(m.wr);
+  job.further_u_.swap(m.wfu);
   m.fit_taken = true;
   return job;
 }
@@ -344,6 +357,7 @@ void RecursiveEstimator::apply_warmup_fit(WarmupFit&& job) {
   m.wu.swap(job.u_);
   m.wy.swap(job.y_);
   m.wr.swap(job.r_);
+  m.wfu.swap(job.further_u_);
   m.fit_pending = m.fit_taken = false;
   try {
     if (job.failed_) throw std::bad_alloc();

@@ -43,7 +43,8 @@ struct Checkpoint {
 };
 
 // What a checkpoint must match: sample time, loop, controller, model structure
-// (names, kinds, orders), forgetting. Not: LCM, thresholds, logging, initial values.
+// (names, kinds, orders, the sensor, with several inputs the input of each),
+// forgetting. Not: LCM, thresholds, logging, initial values.
 // FNV-1a (64 bit) over a canonical little-endian serialisation of those.
 std::uint64_t checkpoint_fingerprint(const Config& config);
 

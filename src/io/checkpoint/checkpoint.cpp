@@ -248,6 +248,13 @@ std::uint64_t checkpoint_fingerprint(const Config& config) {
       f.str("output");
       f.u64(static_cast<std::uint64_t>(s.output_derivatives));
     }
+    // The input that drives it, with several: the state does not say (the
+    // configuration does), and a checkpoint of a model whose submodels changed
+    // inputs is another model's. One input adds nothing, as position does.
+    if (config.model.n_inputs() > 1) {
+      f.str("input");
+      f.str(config.model.input_name(s.input));
+    }
     const double lambda = i < config.estimator.forgetting.size() ? config.estimator.forgetting[i]
                           : i < config.submodel_settings.size()  ? config.submodel_settings[i].forgetting
                                                                  : 1.0;

@@ -3,6 +3,7 @@
 #include "sections.hpp"
 
 #include "modalwatch/polynomial.hpp"
+#include "modalwatch/record.hpp"
 
 #include <algorithm>
 #include <cctype>
@@ -164,6 +165,8 @@ std::vector<std::string> parse_inputs(const Value& v, bool closed_loop) {
   }
   if (closed_loop && names.size() > 1)
     v.fail("a closed loop has one input (the controller's u); several inputs need loop: open");
+  if (names.size() > static_cast<std::size_t>(kMaxInputs))
+    v.fail("at most " + std::to_string(kMaxInputs) + " inputs (what a sample of track and the daemon carries)");
   return names;
 }
 
