@@ -45,7 +45,7 @@ public class Check {
   public static void main(String[] a) throws Exception {
     Class.forName("lcm.spy.Spy");
     Class.forName("info.monitorenter.gui.chart.Chart2D");
-    String[] types = {"sample_t", "sample_batch_t", "mode_estimate_t", "estimates_t", "quantity_status_t", "mode_status_t", "fault_status_t", "heartbeat_t"};
+    String[] types = {"sample_t", "sample_batch_t", "sample2_t", "sample_batch2_t", "mode_estimate_t", "estimates_t", "quantity_status_t", "mode_status_t", "fault_status_t", "heartbeat_t"};
     for (String t : types) {
       Class<?> c = Class.forName("modalwatch." + t);
       long fp = c.getField("LCM_FINGERPRINT").getLong(null);

@@ -9,6 +9,8 @@
 #include <modalwatch/estimates_t.hpp>
 #include <modalwatch/fault_status_t.hpp>
 #include <modalwatch/heartbeat_t.hpp>
+#include <modalwatch/sample2_t.hpp>
+#include <modalwatch/sample_batch2_t.hpp>
 #include <modalwatch/sample_batch_t.hpp>
 #include <modalwatch/sample_t.hpp>
 
@@ -59,20 +61,20 @@ struct Decoded {
 
 enum class Kind { sample, batch, any };
 
-Decoded decode(const Bytes& b, Kind kind, int capacity = 256, bool closed_loop = true, int size = -1) {
+Decoded decode(const Bytes& b, Kind kind, int capacity = 256, bool closed_loop = true, int size = -1, int inputs = 1) {
   Decoded d;
   d.samples.assign(static_cast<std::size_t>(capacity), StampedSample{});
   const int n = size < 0 ? static_cast<int>(b.size()) : size;
   int n_out = -1;
   switch (kind) {
     case Kind::sample:
-      d.result = decode_sample(b.data(), n, closed_loop, d.samples.data(), capacity, n_out);
+      d.result = decode_sample(b.data(), n, closed_loop, d.samples.data(), capacity, n_out, inputs);
       break;
     case Kind::batch:
-      d.result = decode_batch(b.data(), n, closed_loop, d.samples.data(), capacity, n_out);
+      d.result = decode_batch(b.data(), n, closed_loop, d.samples.data(), capacity, n_out, inputs);
       break;
     case Kind::any:
-      d.result = decode_samples(b.data(), n, closed_loop, d.samples.data(), capacity, n_out);
+      d.result = decode_samples(b.data(), n, closed_loop, d.samples.data(), capacity, n_out, inputs);
       break;
   }
   EXPECT_GE(n_out, 0);
@@ -89,7 +91,24 @@ void expect_same(const StampedSample& a, const StampedSample& b) {
   EXPECT_EQ(a.u, b.u);
   EXPECT_EQ(a.y, b.y);
   EXPECT_EQ(a.r, b.r);
+  ASSERT_EQ(a.further_inputs, b.further_inputs);
+  for (int j = 0; j < a.further_inputs; ++j)
+    EXPECT_EQ(a.further_u[static_cast<std::size_t>(j)], b.further_u[static_cast<std::size_t>(j)]) << "input " << j + 2;
 }
+
+// make_samples with `inputs` inputs: input j of sample i is u + j (i + 1).
+std::vector<StampedSample> make_samples(int n, int inputs, std::int64_t utime0, std::int64_t seq0, double period) {
+  std::vector<StampedSample> s = make_samples(n, utime0, seq0, period);
+  for (int i = 0; i < n; ++i) {
+    auto& x = s[static_cast<std::size_t>(i)];
+    x.further_inputs = inputs - 1;
+    for (int j = 1; j < inputs; ++j) x.further_u[static_cast<std::size_t>(j - 1)] = x.u + j * (i + 1);
+  }
+  return s;
+}
+
+// Offsets in the new types: sample2_t's n_inputs, and sample_batch2_t's after its count.
+constexpr int kSample2Inputs = 24, kBatch2Inputs = 36;
 
 }  // namespace
 
@@ -307,6 +326,211 @@ TEST(Messages, PeriodUtimeAndSeqAreValidated) {
   Decoded ok = decode(s, Kind::batch);
   ASSERT_EQ(ok.result, DecodeResult::ok);
   EXPECT_EQ(ok.samples.back().seq, std::numeric_limits<std::int64_t>::max());
+}
+
+// sample2_t and sample_batch2_t carry 1 .. 8 inputs; the generated decoders
+// read the same packets, and a model of that many inputs gets every value.
+TEST(Messages, Sample2AndBatch2RoundTripForEveryInputCount) {
+  const double period = 1.0 / 4096.0;
+  for (int inputs = 1; inputs <= kMaxInputs; ++inputs) {
+    SCOPED_TRACE(inputs);
+    const auto in = make_samples(37, inputs, 1'700'000'000'000'000, 5, period);
+    const Bytes one = encode_sample2(in[3]);
+    ASSERT_EQ(static_cast<int>(one.size()), sample2_wire_size(inputs));
+    for (Kind k : {Kind::sample, Kind::any}) {
+      const Decoded d = decode(one, k, 1, true, -1, inputs);
+      ASSERT_EQ(d.result, DecodeResult::ok) << to_string(d.result);
+      ASSERT_EQ(d.samples.size(), 1u);
+      expect_same(d.samples[0], in[3]);
+    }
+    sample2_t g{};
+    ASSERT_EQ(g.decode(one.data(), 0, static_cast<int>(one.size())), static_cast<int>(one.size()));
+    ASSERT_EQ(g.n_inputs, inputs);
+    EXPECT_EQ(g.u[static_cast<std::size_t>(inputs - 1)], in[3].input(inputs - 1));
+    EXPECT_EQ(g.y, in[3].y);
+
+    const Bytes many = encode_batch2(in, period);
+    ASSERT_EQ(static_cast<std::int64_t>(many.size()), batch2_wire_size(37, inputs));
+    for (Kind k : {Kind::batch, Kind::any}) {
+      const Decoded d = decode(many, k, 37, true, -1, inputs);
+      ASSERT_EQ(d.result, DecodeResult::ok) << to_string(d.result);
+      ASSERT_EQ(d.samples.size(), in.size());
+      for (std::size_t i = 0; i < in.size(); ++i) expect_same(d.samples[i], in[i]);
+    }
+    sample_batch2_t gb{};
+    ASSERT_EQ(gb.decode(many.data(), 0, static_cast<int>(many.size())), static_cast<int>(many.size()));
+    ASSERT_EQ(gb.count, 37);
+    ASSERT_EQ(gb.n_inputs, inputs);
+    EXPECT_EQ(gb.u[static_cast<std::size_t>(inputs - 1)][20], in[20].input(inputs - 1));
+    EXPECT_EQ(gb.r[36], in[36].r);
+    // A sample on the batch decoder and the other way round: wrong fingerprints.
+    EXPECT_EQ(decode(one, Kind::batch, 1, true, -1, inputs).result, DecodeResult::wrong_fingerprint);
+    EXPECT_EQ(decode(many, Kind::sample, 37, true, -1, inputs).result, DecodeResult::wrong_fingerprint);
+  }
+}
+
+// A model of one input takes either version; one of several takes only the new
+// types with its own number of inputs: a single-input packet or another count
+// cannot say what the other inputs were, and is a decode error (bad_inputs).
+TEST(Messages, AModelOfSeveralInputsTakesOnlyPacketsOfItsOwnInputCount) {
+  const auto one_input = make_samples(4, 1, 100, 1, 0.01);
+  const auto two_inputs = make_samples(4, 2, 100, 1, 0.01);
+  // encode_sample and encode_batch pick the version by the inputs.
+  EXPECT_EQ(static_cast<int>(encode_sample(one_input[0]).size()), kSampleWireSize);
+  EXPECT_EQ(encode_sample(two_inputs[0]), encode_sample2(two_inputs[0]));
+  EXPECT_EQ(static_cast<int>(encode_batch(one_input, 0.01).size()), batch_wire_size(4));
+  EXPECT_EQ(encode_batch(two_inputs, 0.01), encode_batch2(two_inputs, 0.01));
+  for (const Bytes& b : {encode_sample(one_input[0]), encode_sample2(one_input[0])})
+    EXPECT_EQ(decode(b, Kind::sample, 1, true, -1, 1).result, DecodeResult::ok);
+  for (const Bytes& b : {encode_batch(one_input, 0.01), encode_batch2(one_input, 0.01)})
+    EXPECT_EQ(decode(b, Kind::batch, 4, true, -1, 1).result, DecodeResult::ok);
+  for (const Bytes& b : {encode_sample(one_input[0]), encode_sample2(one_input[0])})
+    EXPECT_EQ(decode(b, Kind::any, 1, true, -1, 2).result, DecodeResult::bad_inputs);
+  for (const Bytes& b : {encode_batch(one_input, 0.01), encode_batch2(one_input, 0.01)})
+    EXPECT_EQ(decode(b, Kind::any, 4, true, -1, 2).result, DecodeResult::bad_inputs);
+  EXPECT_EQ(decode(encode_sample(two_inputs[0]), Kind::sample, 1, true, -1, 3).result, DecodeResult::bad_inputs);
+  EXPECT_EQ(decode(encode_batch(two_inputs, 0.01), Kind::batch, 4, true, -1, 1).result, DecodeResult::bad_inputs);
+  // The single-input decode leaves no further inputs behind in a reused record.
+  std::vector<StampedSample> out(4);
+  int n_out = 0;
+  const Bytes two = encode_batch(two_inputs, 0.01), single = encode_batch(one_input, 0.01);
+  ASSERT_EQ(decode_batch(two.data(), static_cast<int>(two.size()), true, out.data(), 4, n_out, 2), DecodeResult::ok);
+  EXPECT_EQ(out[2].further_inputs, 1);
+  ASSERT_EQ(decode_batch(single.data(), static_cast<int>(single.size()), true, out.data(), 4, n_out, 1),
+            DecodeResult::ok);
+  EXPECT_EQ(out[2].further_inputs, 0);
+}
+
+// Malformed new-type packets: every truncated prefix, a byte too many, an
+// input count outside 1 .. 8 or disagreeing with the arrays, a batch count
+// outside the capacity or disagreeing with the arrays, a bad period.
+TEST(Messages, MalformedSample2AndBatch2AreRejected) {
+  const auto in = make_samples(6, 3, 100, 1, 0.01);
+  const Bytes sample = encode_sample2(in[0]), batch = encode_batch2(in, 0.01);
+  for (std::size_t len = 0; len < sample.size(); ++len)
+    EXPECT_EQ(decode(sample, Kind::any, 8, true, static_cast<int>(len), 3).result, DecodeResult::truncated)
+        << "sample2 prefix " << len;
+  for (std::size_t len = 0; len < batch.size(); ++len) {
+    const DecodeResult r = decode(batch, Kind::any, 8, true, static_cast<int>(len), 3).result;
+    EXPECT_TRUE(r == DecodeResult::truncated) << "batch2 prefix " << len << ": " << to_string(r);
+  }
+  for (const Bytes& b : {sample, batch}) {
+    Bytes longer = b;
+    longer.push_back(0);
+    EXPECT_EQ(decode(longer, Kind::any, 8, true, -1, 3).result, DecodeResult::trailing_bytes);
+  }
+  for (int n : {0, -1, 9, 127, -128}) {
+    Bytes s = sample, b = batch;
+    s[kSample2Inputs] = static_cast<std::uint8_t>(n);
+    b[kBatch2Inputs] = static_cast<std::uint8_t>(n);
+    EXPECT_EQ(decode(s, Kind::sample, 8, true, -1, 3).result, DecodeResult::bad_inputs) << n;
+    EXPECT_EQ(decode(b, Kind::batch, 8, true, -1, 3).result, DecodeResult::bad_inputs) << n;
+  }
+  // n_inputs disagreeing with the arrays: the size says so first.
+  Bytes s2 = sample, b2 = batch;
+  s2[kSample2Inputs] = 2;
+  b2[kBatch2Inputs] = 4;
+  EXPECT_EQ(decode(s2, Kind::sample, 8, true, -1, 2).result, DecodeResult::trailing_bytes);
+  EXPECT_EQ(decode(b2, Kind::batch, 8, true, -1, 4).result, DecodeResult::truncated);
+  EXPECT_EQ(decode(batch, Kind::batch, 5, true, -1, 3).result, DecodeResult::bad_count);
+  for (std::int32_t c : {0, -1, std::numeric_limits<std::int32_t>::max()}) {
+    Bytes p = batch;
+    put_i32(p, kCount, c);
+    const DecodeResult r = decode(p, Kind::batch, 8, true, -1, 3).result;
+    EXPECT_TRUE(r == DecodeResult::bad_count || r == DecodeResult::truncated) << c << ": " << to_string(r);
+  }
+  Bytes fewer = batch;
+  put_i32(fewer, kCount, 5);
+  EXPECT_EQ(decode(fewer, Kind::batch, 8, true, -1, 3).result, DecodeResult::trailing_bytes);
+  Bytes period = batch;
+  put_f64(period, kPeriod, kNaN);
+  EXPECT_EQ(decode(period, Kind::batch, 8, true, -1, 3).result, DecodeResult::bad_period);
+  Bytes utime = sample;
+  put_i64(utime, 8, -1);
+  EXPECT_EQ(decode(utime, Kind::sample, 8, true, -1, 3).result, DecodeResult::bad_utime);
+}
+
+// A two-input record's slice encodes as a sample_batch2_t with each input.
+TEST(Messages, RecordOfTwoInputsEncodesAsBatch2) {
+  Record rec;
+  const int n = 30;
+  rec.t = Eigen::VectorXd::LinSpaced(n, 0.0, (n - 1) * 0.01);
+  rec.u = Eigen::VectorXd::LinSpaced(n, 1.0, 2.0);
+  rec.further_u = {Eigen::VectorXd::LinSpaced(n, -4.0, 4.0)};
+  rec.y = Eigen::VectorXd::LinSpaced(n, -1.0, 5.0);
+  const Bytes b = encode_batch(rec, 5, 20, 1'000'000, 0);
+  EXPECT_EQ(static_cast<std::int64_t>(b.size()), batch2_wire_size(20, 2));
+  const Decoded d = decode(b, Kind::batch, 20, false, -1, 2);
+  ASSERT_EQ(d.result, DecodeResult::ok);
+  for (int i = 0; i < 20; ++i) {
+    const auto& s = d.samples[static_cast<std::size_t>(i)];
+    EXPECT_EQ(s.seq, 5 + i);
+    EXPECT_EQ(s.u, rec.u(5 + i));
+    ASSERT_EQ(s.further_inputs, 1);
+    EXPECT_EQ(s.further_u[0], rec.further_u[0](5 + i));
+    EXPECT_EQ(s.y, rec.y(5 + i));
+  }
+}
+
+// Random bytes under the new types' fingerprints, decoded for every model
+// input count: no crash, and what is accepted agrees with lcm-gen's decoders.
+TEST(Messages, RandomBytesOfTheNewTypesNeverCrash) {
+  std::mt19937_64 rng(20261128);
+  const int capacity = 64;
+  std::vector<StampedSample> out(capacity);
+  int accepted = 0;
+  for (int iter = 0; iter < 10'000; ++iter) {
+    const bool batch = iter % 2 == 1;
+    std::size_t len = rng() % 700;
+    Bytes b(len);
+    for (auto& x : b) x = static_cast<std::uint8_t>(rng());
+    const int inputs = 1 + static_cast<int>(rng() % kMaxInputs);
+    if (len >= 8) put_i64(b, 0, batch ? batch2_fingerprint() : sample2_fingerprint());
+    if (!batch && len > kSample2Inputs) {
+      b[kSample2Inputs] = static_cast<std::uint8_t>(rng() % 3 == 0 ? rng() : static_cast<std::uint64_t>(inputs));
+      if (rng() % 2) b.resize(static_cast<std::size_t>(sample2_wire_size(inputs)));
+    }
+    if (batch && len > kBatch2Inputs) {
+      const std::int32_t c = static_cast<std::int32_t>(rng() % 20);
+      put_i32(b, kCount, c);
+      put_f64(b, kPeriod, 1e-3 * static_cast<double>(1 + rng() % 10));
+      put_i64(b, kUtime, static_cast<std::int64_t>(rng() >> 4));
+      put_i64(b, kFirstSeq, static_cast<std::int64_t>(rng() >> 4));
+      b[kBatch2Inputs] = static_cast<std::uint8_t>(rng() % 3 == 0 ? rng() : static_cast<std::uint64_t>(inputs));
+      if (rng() % 2) b.resize(static_cast<std::size_t>(batch2_wire_size(c, inputs)));
+    }
+    int n_out = -1;
+    const DecodeResult r =
+        decode_samples(b.data(), static_cast<int>(b.size()), true, out.data(), capacity, n_out, inputs);
+    if (r != DecodeResult::ok) {
+      ASSERT_EQ(n_out, 0);
+      continue;
+    }
+    ++accepted;
+    ASSERT_GE(n_out, 1);
+    if (!batch) {
+      sample2_t g{};
+      ASSERT_EQ(g.decode(b.data(), 0, static_cast<int>(b.size())), static_cast<int>(b.size()));
+      ASSERT_EQ(g.n_inputs, inputs);
+      ASSERT_EQ(g.seq, out[0].seq);
+      for (int j = 0; j < inputs; ++j) {
+        const double gu = g.u[static_cast<std::size_t>(j)], ou = out[0].input(j);
+        ASSERT_TRUE(gu == ou || (std::isnan(gu) && std::isnan(ou)));
+      }
+    } else {
+      sample_batch2_t g{};
+      ASSERT_EQ(g.decode(b.data(), 0, static_cast<int>(b.size())), static_cast<int>(b.size()));
+      ASSERT_EQ(g.count, n_out);
+      ASSERT_EQ(g.n_inputs, inputs);
+      for (int i = 0; i < n_out; ++i)
+        for (int j = 0; j < inputs; ++j) {
+          const double gu = g.u[static_cast<std::size_t>(j)][static_cast<std::size_t>(i)];
+          const double ou = out[static_cast<std::size_t>(i)].input(j);
+          ASSERT_TRUE(gu == ou || (std::isnan(gu) && std::isnan(ou)));
+        }
+    }
+  }
+  EXPECT_GT(accepted, 1000);
 }
 
 // 10 000 seeded random buffers: no crash, and each is either rejected (n_out 0)

@@ -48,12 +48,14 @@ build_args=(--target make_seeds)
 for t in "${targets[@]}"; do build_args+=(--target "$t"); done
 cmake --build "$DIR" -j"$JOBS" "${build_args[@]}" >"$DIR/build.log" 2>&1 || { tail -40 "$DIR/build.log"; exit 1; }
 
-# Seeds: a real checkpoint and an LCM log written by liblcm (make_seeds), the
-# shipped configs, a small CSV.
-mkdir -p "$DIR/corpus/fuzz_config" "$DIR/corpus/fuzz_csv" "$DIR/corpus/fuzz_checkpoint" "$DIR/corpus/fuzz_lcm_log"
+# Seeds: a real checkpoint, an LCM log written by liblcm and one packet of each
+# input type (make_seeds), the shipped configs, a small CSV.
+mkdir -p "$DIR/corpus/fuzz_config" "$DIR/corpus/fuzz_csv" "$DIR/corpus/fuzz_checkpoint" "$DIR/corpus/fuzz_lcm_log" \
+  "$DIR/corpus/fuzz_messages"
 "$DIR/tests/fuzz/make_seeds" "$DIR/seeds" >/dev/null || { echo "fuzz.sh: make_seeds failed"; exit 1; }
 cp "$DIR"/seeds/checkpoint/* "$DIR/corpus/fuzz_checkpoint/" 2>/dev/null
 cp "$DIR"/seeds/lcm_log/* "$DIR/corpus/fuzz_lcm_log/" 2>/dev/null
+cp "$DIR"/seeds/messages/* "$DIR/corpus/fuzz_messages/" 2>/dev/null
 cp config/*.yaml "$DIR/corpus/fuzz_config/" 2>/dev/null
 for f in config/*.yaml; do
   sed -e 's/[[:space:]]#.*$//' -e '/^[[:space:]]*#/d' -e '/^[[:space:]]*$/d' "$f" \

@@ -1,6 +1,7 @@
-// Writes seed inputs for the fuzz targets into <dir>/checkpoint and <dir>/lcm_log:
-// a checkpoint of a warmed-up estimator and a small LCM log with samples,
-// batches and other events (written by LCM's own file:// provider).
+// Writes seed inputs for the fuzz targets into <dir>/checkpoint, <dir>/lcm_log
+// and <dir>/messages: a checkpoint of a warmed-up estimator, a small LCM log
+// with samples and batches of one input and of two and other events (written
+// by LCM's own file:// provider), and one packet of each input type.
 #include <lcm/lcm.h>
 
 #include <cmath>
@@ -23,6 +24,11 @@ int main(int argc, char** argv) {
   const std::filesystem::path dir = std::filesystem::absolute(argv[1]);
   std::filesystem::create_directories(dir / "checkpoint");
   std::filesystem::create_directories(dir / "lcm_log");
+  std::filesystem::create_directories(dir / "messages");
+  const auto write = [](const std::filesystem::path& path, const std::vector<std::uint8_t>& bytes) {
+    std::ofstream(path, std::ios::binary)
+        .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  };
 
   AdditiveModel m;
   m.submodels = {make_mode("mode1", {2.0, 0.25, 3.0}), make_mode("mode2", {5.0, 0.025, 0.5}),
@@ -55,6 +61,22 @@ int main(int argc, char** argv) {
   }
   const auto b = encode_batch(batch, 0.05);
   lcm_publish(lcm, "MODALWATCH_BATCHES", b.data(), static_cast<unsigned>(b.size()));
+  // Two inputs: the same samples with a second input, as sample2_t and sample_batch2_t.
+  std::vector<StampedSample> two = batch;
+  for (std::size_t k = 0; k < two.size(); ++k) {
+    two[k].utime += 1000000;
+    two[k].seq += 100;
+    two[k].further_inputs = 1;
+    two[k].further_u[0] = 0.5 - 0.1 * static_cast<double>(k);
+  }
+  const auto s2 = encode_sample2(two[0]);
+  const auto b2 = encode_batch2(two, 0.05);
+  lcm_publish(lcm, "MODALWATCH_SAMPLES", s2.data(), static_cast<unsigned>(s2.size()));
+  lcm_publish(lcm, "MODALWATCH_BATCHES", b2.data(), static_cast<unsigned>(b2.size()));
+  write(dir / "messages" / "sample.bin", encode_sample(batch[0]));
+  write(dir / "messages" / "batch.bin", b);
+  write(dir / "messages" / "sample2.bin", s2);
+  write(dir / "messages" / "batch2.bin", b2);
   const std::string other = "heartbeat";
   lcm_publish(lcm, "OTHER", other.data(), static_cast<unsigned>(other.size()));
   lcm_destroy(lcm);
