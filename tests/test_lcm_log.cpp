@@ -20,6 +20,7 @@
 
 #include "support.hpp"
 
+#include "modalwatch/estimator.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/lcm_log.hpp"
@@ -326,13 +327,21 @@ TEST_F(LcmLog, SimulateReadsItsExcitationFromALogAsFromCsv) {
 struct Received {
   std::vector<StampedSample> samples;
   std::uint64_t packets = 0, bad = 0;
+  int inputs = 1;  // the model's, as the daemon decodes
+  std::int64_t fingerprint = 0;  // of the last packet
 };
 
 void on_message(const lcm_recv_buf_t* rbuf, const char*, void* user) {
   auto* r = static_cast<Received*>(user);
   StampedSample buf[256];
   int n = 0;
-  if (decode_samples(rbuf->data, static_cast<int>(rbuf->data_size), true, buf, 256, n) != DecodeResult::ok) {
+  if (rbuf->data_size >= 8) {
+    std::uint64_t f = 0;
+    for (int i = 0; i < 8; ++i) f = f << 8 | static_cast<const std::uint8_t*>(rbuf->data)[i];
+    r->fingerprint = static_cast<std::int64_t>(f);
+  }
+  if (decode_samples(rbuf->data, static_cast<int>(rbuf->data_size), true, buf, 256, n, r->inputs) !=
+      DecodeResult::ok) {
     ++r->bad;
     return;
   }
@@ -388,6 +397,130 @@ TEST_F(LcmLog, ReplayPublishesEverySampleExactlyOverUdpMulticast) {
       ASSERT_EQ(s.u, csv.u(static_cast<Eigen::Index>(k))) << k;
       ASSERT_EQ(s.y, csv.y(static_cast<Eigen::Index>(k))) << k;
       ASSERT_EQ(s.r, csv.r(static_cast<Eigen::Index>(k))) << k;
+    }
+  }
+}
+
+// ------------------------------------------------------------------ several inputs
+
+// A two-input record (the paper's open-loop plant with its mode2 on a second
+// input, white noise) and a config of that model naming the inputs u1, u2.
+class TwoInputLog : public LcmLog {
+ protected:
+  std::string two_input_config() {
+    return write("two.yaml",
+                 "sample_rate_hz: 20\n"
+                 "model:\n"
+                 "  inputs: [u1, u2]\n"
+                 "  submodels:\n"
+                 "    - {name: mode1, wn: 2.0, zeta: 0.25, gain: 3.0, forgetting: 0.999}\n"
+                 "    - {name: mode2, input: u2, wn: 5.0, zeta: 0.025, gain: 0.5, forgetting: 0.999}\n"
+                 "    - {name: mode3, wn: 20.0, zeta: 0.1, gain: 1.0, forgetting: 0.999}\n"
+                 "estimator:\n"
+                 "  warmup: 50\n");
+  }
+  Record two_input_record() {
+    const Config c = load_config(kConfig);
+    PlantSpec plant = *c.plant;
+    plant.modes[1].submodel.input = 1;
+    ExperimentSpec e = *c.experiment;
+    e.duration = 200.0;
+    e.closed_loop = false;
+    std::mt19937_64 rng(5);
+    std::normal_distribution<double> normal(0.0, 1.0);
+    Eigen::VectorXd u2(4000);
+    for (auto& v : u2) v = normal(rng);
+    e.further_input_samples = {u2};
+    return simulate(plant, e).record;
+  }
+  // The record as sample_batch2_t events on IN, 64 samples a batch.
+  void write_two_input_log(const std::string& path, const Record& rec) {
+    lcm_t* lcm = lcm_create(("file://" + path + "?mode=w").c_str());
+    ASSERT_NE(lcm, nullptr);
+    for (Eigen::Index k = 0; k < rec.size(); k += 64) {
+      const auto msg = encode_batch(rec, k, std::min<Eigen::Index>(64, rec.size() - k), kStart);
+      EXPECT_EQ(lcm_publish(lcm, "IN", msg.data(), static_cast<unsigned>(msg.size())), 0);
+    }
+    lcm_destroy(lcm);
+  }
+};
+
+// track reads a log's sample_batch2_t inputs in the model's order: its
+// estimates are the recursive estimator's on the record read back from the
+// log; a log of another number of inputs is named as such.
+TEST_F(TwoInputLog, TrackReadsTheInputsOfALogInTheModelsOrder) {
+  const Record rec = two_input_record();
+  write_two_input_log(path("two.lcm"), rec);
+  const std::string cfg = two_input_config();
+  const auto tr = run_cli("track --no-progress -c " + cfg + " -d " + path("two.lcm") + " -o " + path("est.csv"));
+  ASSERT_EQ(tr.code, 0) << tr.output;
+  EXPECT_NE(tr.output.find("4000 samples from LCM log"), std::string::npos) << tr.output;
+  const Config c = load_config(cfg);
+  RecordColumns columns;
+  columns.u = "u1";
+  columns.further_u = {"u2"};
+  RecordReadOptions options;
+  options.allow_gaps = true;
+  options.sample_time = c.sample_time;
+  const Record back = read_record(RecordSource(path("two.lcm"), columns), options);
+  ASSERT_EQ(back.inputs(), 2);
+  EXPECT_EQ(back.further_u[0], rec.further_u[0]);
+  RecursiveEstimator est(c.model, c.estimator);
+  Sample s;
+  s.further_inputs = 1;
+  for (Eigen::Index k = 0; k < back.size(); ++k) {
+    s.t = back.t(k);
+    s.u = back.u(k);
+    s.y = back.y(k);
+    s.further_u[0] = back.further_u[0](k);
+    est.step(s);
+  }
+  const Table t = read_table(path("est.csv"));
+  ASSERT_EQ(t.data.rows(), back.size());
+  for (int i = 0; i < 3; ++i) {
+    const std::string name = "mode" + std::to_string(i + 1);
+    EXPECT_EQ(t.data(back.size() - 1, t.column(name + "_wn")), est.mode(i).value.wn) << name;
+  }
+  // The paper's modes, mode2 followed on u2.
+  EXPECT_NEAR(est.mode(1).value.wn, 5.0, 0.05);
+  // A single-input config on the two-input log: no sample of one input in it.
+  const auto one = run_cli("track --no-progress -c " + kConfig + " -d " + path("two.lcm") + " -o " + path("one.csv"));
+  EXPECT_EQ(one.code, 2) << one.output;
+  EXPECT_NE(one.output.find("of another number of inputs"), std::string::npos) << one.output;
+}
+
+// replay sends a two-input record as sample2_t (one per packet) or
+// sample_batch2_t (batches), every input of every sample, over UDP multicast
+// (100 s of record at 50 x real time, as the single-input replay test).
+TEST_F(TwoInputLog, ReplaySendsEveryInputAsSample2AndBatch2) {
+  const Record rec = two_input_record().segment(0, 2000);  // 100 s
+  Eigen::MatrixXd table(rec.size(), 4);
+  table << rec.t, rec.u, rec.further_u[0], rec.y;
+  write_table(path("two.csv"), {"t", "u1", "u2", "y"}, table);
+  const std::string cfg = two_input_config();
+  for (int batch : {1, 50}) {
+    Received got;
+    got.inputs = 2;
+    bool lcm_ok = false;
+    const std::string channel = batch == 1 ? "MODALWATCH_SAMPLES" : "MODALWATCH_BATCHES";
+    const auto out = replay_into(test_url(), channel,
+                                 "-c " + cfg + " -d " + path("two.csv") + " --speed 50 --batch " +
+                                     std::to_string(batch) + " --start-utime " + std::to_string(kStart),
+                                 got, lcm_ok);
+    if (!lcm_ok) GTEST_SKIP() << "no multicast";
+    ASSERT_EQ(out.code, 0) << out.output;
+    EXPECT_NE(out.output.find(batch == 1 ? "sample2_t packets" : "sample_batch2_t packets"), std::string::npos)
+        << out.output;
+    EXPECT_EQ(got.fingerprint, batch == 1 ? sample2_fingerprint() : batch2_fingerprint());
+    EXPECT_EQ(got.bad, 0u);
+    ASSERT_EQ(got.samples.size(), 2000u) << "batch " << batch;
+    for (std::size_t k = 0; k < got.samples.size(); ++k) {
+      const auto i = static_cast<Eigen::Index>(k);
+      ASSERT_EQ(got.samples[k].seq, static_cast<std::int64_t>(k));
+      ASSERT_EQ(got.samples[k].u, rec.u(i)) << k;
+      ASSERT_EQ(got.samples[k].further_inputs, 1) << k;
+      ASSERT_EQ(got.samples[k].further_u[0], rec.further_u[0](i)) << k;
+      ASSERT_EQ(got.samples[k].y, rec.y(i)) << k;
     }
   }
 }

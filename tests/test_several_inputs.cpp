@@ -623,21 +623,91 @@ TEST_F(SeveralInputsCli, RepeatedUColumnNamesTheInputs) {
   EXPECT_TRUE(contains(refused.output, "a closed loop has one input")) << refused.output;
 }
 
-// The recursive estimator takes one input: track refuses a model fitted on
-// several, and says where they belong.
-TEST_F(SeveralInputsCli, TrackRefusesAModelWithSeveralInputs) {
+// track reads the inputs model.inputs names (f_a, f_b) from the CSV, streamed,
+// and its estimates are the recursive estimator's on the same samples; each
+// submodel follows its own input's mode. The 3 Hz mode starts at one
+// frequency on both inputs, and the warm-up fit puts its two submodels a hair
+// apart: not a mode moving past another (only those of one input have an order).
+TEST_F(SeveralInputsCli, TrackFollowsEachSubmodelFromItsOwnInputColumn) {
   const std::string data = record();
-  const std::string cfg = write("two.yaml", "sample_rate_hz: 100\nmodel:\n  inputs: [f_a, f_b]\n  modes: 3\n");
-  ASSERT_EQ(modalwatch::test_support::run_cli("fit --config " + cfg + " --data " + data + " --y-column acc --out " +
-                                              path("fitted.yaml"))
-                .code,
-            0);
-  const auto track = modalwatch::test_support::run_cli("track --config " + path("fitted.yaml") + " --data " + data +
-                                                       " --out " + path("est.csv"));
+  std::string yaml = recursive_config(kTruth, 0.1);
+  yaml.replace(yaml.find("inputs: [u1, u2]"), 16, "inputs: [f_a, f_b]");
+  for (const char* from : {"input: u1", "input: u2"})
+    for (std::size_t at = yaml.find(from); at != std::string::npos; at = yaml.find(from))
+      yaml.replace(at, 9, from[8] == '1' ? "input: f_a" : "input: f_b");
+  const std::string cfg = write("two.yaml", yaml);
+  const auto track = modalwatch::test_support::run_cli("track --no-progress --config " + cfg + " --data " + data +
+                                                       " --y-column acc --out " + path("est.csv"));
+  ASSERT_EQ(track.code, 0) << track.output;
+  EXPECT_TRUE(contains(track.output, "4 submodels, inputs f_a f_b")) << track.output;
+  EXPECT_TRUE(contains(track.output, "warm-up fit: used")) << track.output;
+  const modalwatch::Table est = modalwatch::read_table(path("est.csv"));
+  const Config c = modalwatch::load_config(cfg);
+  modalwatch::RecordColumns cols;
+  cols.u = "f_a";
+  cols.further_u = {"f_b"};
+  cols.y = "acc";
+  const Record r = modalwatch::read_record({data, cols});
+  modalwatch::RecursiveEstimator lib(c.model, c.estimator);
+  modalwatch::Sample s;
+  s.further_inputs = 1;
+  for (Eigen::Index k = 0; k < r.size(); ++k) {
+    s.t = r.t(k);
+    s.u = r.u(k);
+    s.y = r.y(k);
+    s.further_u[0] = r.input(1)(k);
+    lib.step(s);
+  }
+  ASSERT_EQ(est.data.rows(), r.size());
+  for (std::size_t i = 0; i < kTruth.size(); ++i) {
+    const double wn = est.data(r.size() - 1, est.column(kTruth[i].name + "_wn"));
+    EXPECT_EQ(wn, lib.mode(static_cast<int>(i)).value.wn) << kTruth[i].name;  // the same samples, the same estimate
+    EXPECT_NEAR(wn / kTruth[i].modal.wn, 1.0, 0.01) << kTruth[i].name;
+  }
+}
+
+// --u-column names the input columns when the record's are not the model's
+// names: as many as the model has inputs, each one the record has.
+TEST_F(SeveralInputsCli, TrackTakesRepeatedUColumnAndNamesWhatIsWrong) {
+  const std::string data = record();
+  const std::string cfg = write("two.yaml", recursive_config(kTruth, 0.1));
+  const std::string run =
+      "track --no-progress --config " + cfg + " --data " + data + " --y-column acc --out " + path("est.csv");
+  const auto ok = modalwatch::test_support::run_cli(run + " --u-column f_a --u-column f_b");
+  ASSERT_EQ(ok.code, 0) << ok.output;
+  const auto missing = modalwatch::test_support::run_cli(run + " --u-column f_a --u-column f_c");
+  EXPECT_EQ(missing.code, 2) << missing.output;
+  EXPECT_TRUE(contains(missing.output, "missing column 'f_c'")) << missing.output;
+  EXPECT_TRUE(contains(missing.output, "pick one with --u-column")) << missing.output;
+  const auto one = modalwatch::test_support::run_cli(run + " --u-column f_a");
+  EXPECT_EQ(one.code, 2) << one.output;
+  EXPECT_TRUE(contains(one.output, "--u-column: the model has 2 inputs (model.inputs); name as many input columns"))
+      << one.output;
+}
+
+// The controller gives one u: several inputs in closed loop are refused by the
+// config (naming the key and line) and by the estimator itself.
+TEST_F(SeveralInputsCli, TrackAndTheEstimatorRefuseSeveralInputsInClosedLoop) {
+  const std::string data = record();
+  std::string yaml = recursive_config(kTruth, 0.1);
+  yaml.replace(yaml.find("model:\n"), 7, "model:\n  loop: closed\n");
+  yaml += "controller:\n  numerator: [1]\n  denominator: [1]\n";
+  const std::string cfg = write("closed.yaml", yaml);
+  const auto track = modalwatch::test_support::run_cli("track --no-progress --config " + cfg + " --data " + data +
+                                                       " --y-column acc --out " + path("est.csv"));
   EXPECT_EQ(track.code, 2) << track.output;
-  EXPECT_TRUE(contains(track.output, "takes one input")) << track.output;
-  EXPECT_TRUE(contains(track.output, "several inputs are for fit and diagnose")) << track.output;
+  EXPECT_TRUE(contains(track.output, cfg + ":4: key 'model.inputs': a closed loop has one input")) << track.output;
   EXPECT_FALSE(std::filesystem::exists(path("est.csv")));
+  const Config open = parse_config(recursive_config(kTruth, 0.1), "open.yaml");
+  modalwatch::EstimatorSettings closed = open.estimator;
+  closed.closed_loop = true;
+  closed.controller = modalwatch::DiscreteTransferFunction({0.1}, {1.0});
+  try {
+    modalwatch::RecursiveEstimator est(open.model, closed);
+    FAIL() << "no error";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_CONTAINS(std::string(e.what()), "a closed loop has one input (the controller's u)");
+  }
 }
 
 // diagnose simulates each submodel from its input; its model tables and

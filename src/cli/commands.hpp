@@ -40,10 +40,12 @@ struct TrackArgs {
   std::string out;       // est.csv
   std::string faults;    // flags CSV (the daemon's fault detector over the record); empty: none
   bool progress = true;  // progress bar on stderr
+  ColumnArgs columns;    // the model's inputs (model.inputs) by default
 };
 
 // Publishes a record on LCM (config lcm:) as sample_t (batch 1) or
-// sample_batch_t (batch N), paced at speed x real time (0: as fast as possible).
+// sample_batch_t (batch N), or with several inputs (model.inputs) as sample2_t
+// or sample_batch2_t, paced at speed x real time (0: as fast as possible).
 struct ReplayArgs {
   std::string config;
   std::string data;                         // CSV or LCM log
@@ -52,6 +54,7 @@ struct ReplayArgs {
   int batch = 1;                            // samples per packet
   std::string url;                          // overrides lcm.url
   std::optional<std::int64_t> start_utime;  // utime of the first sample, us (default: now)
+  ColumnArgs columns;                       // the model's inputs (model.inputs) by default
 };
 
 struct DiagnoseArgs {

@@ -12,7 +12,7 @@
 
 namespace {
 
-// The record columns of the offline commands (CSV records; an LCM log has fixed fields).
+// The record columns (CSV records; an LCM log has fixed fields).
 void add_column_options(CLI::App* command, modalwatch::cli::ColumnArgs& columns) {
   command->add_option("--t-column", columns.t, "time column of the record (e.g. n: sample index)")
       ->capture_default_str();
@@ -89,6 +89,7 @@ int main(int argc, char** argv) {
                         "flags CSV to write: the daemon's fault detector (faults:) over the record, one row per flag "
                         "change (t,mode,quantity,event,value,baseline,relative,sigma)");
   track_cmd->add_flag("--no-progress", no_progress, "no progress bar on stderr");
+  add_column_options(track_cmd, track_args.columns);
 
   ReplayArgs replay_args;
   std::string speed = "1";
@@ -98,11 +99,15 @@ int main(int argc, char** argv) {
       ->required();
   replay_cmd->add_option("--channel", replay_args.channel, "LCM log input: channel with the samples");
   replay_cmd->add_option("--speed", speed, "times real time; 0 or 'max': as fast as possible")->capture_default_str();
-  replay_cmd->add_option("--batch", replay_args.batch, "samples per packet: 1 = sample_t, N > 1 = sample_batch_t")
+  replay_cmd
+      ->add_option("--batch", replay_args.batch,
+                   "samples per packet: 1 = sample_t, N > 1 = sample_batch_t (several inputs: sample2_t, "
+                   "sample_batch2_t)")
       ->check(CLI::Range(1, 100000))
       ->capture_default_str();
   replay_cmd->add_option("--url", replay_args.url, "LCM URL (overrides lcm.url)");
   replay_cmd->add_option("--start-utime", replay_args.start_utime, "utime of the first sample [us] (default: now)");
+  add_column_options(replay_cmd, replay_args.columns);
   DiagnoseArgs diag;
   auto* diagnose_cmd = app.add_subcommand("diagnose", "Residual analysis and model augmentation: writes a report");
   diagnose_cmd->add_option("--config,-c", diag.config, "YAML with the model: section")->required();

@@ -1,8 +1,8 @@
 #pragma once
-// The CSV columns the offline commands (fit, diagnose) read as t, u and y,
-// chosen with --t-column, --u-column and --y-column, and the reader that names
-// those options when a record lacks the column. --u-column may be repeated:
-// several measured inputs, in order.
+// The CSV columns the commands (fit, diagnose, track, replay) read as t, u and
+// y, chosen with --t-column, --u-column and --y-column, and the readers that
+// name those options when a record lacks the column. --u-column may be
+// repeated: several measured inputs, in order.
 #include <algorithm>
 #include <string>
 #include <vector>
@@ -42,6 +42,17 @@ inline RecordColumns record_columns(const ColumnArgs& args, const std::vector<st
   return columns;
 }
 
+// The columns for a command that runs the model as configured (track, and
+// replay for the daemon): exactly its inputs, no more.
+inline RecordColumns model_record_columns(const ColumnArgs& args, const AdditiveModel& model, bool closed_loop) {
+  const std::vector<std::string> inputs = input_columns(args, model, closed_loop);
+  if (static_cast<int>(inputs.size()) != model.n_inputs())
+    throw InputError("--u-column", "names " + std::to_string(inputs.size()) + " input columns, the model has " +
+                                       std::to_string(model.n_inputs()) + " input" +
+                                       (model.n_inputs() > 1 ? "s (model.inputs)" : ""));
+  return record_columns(args, inputs);
+}
+
 // A record without a sample rate: its time column, named otherwise than t, counts
 // samples (whole numbers one apart, as sample_rate_hz: 1 checks), and its
 // frequencies are in cycles/sample rather than Hz.
@@ -52,9 +63,12 @@ inline bool time_in_samples(const Record& r, const ColumnArgs& columns, double s
 
 inline const char* frequency_unit(bool in_samples) { return in_samples ? "cycles/sample" : "Hz"; }
 
-inline Record read_record_with_columns(const RecordSource& source) {
+// read(): reads from `source` (read_record, a RecordReader), with a missing
+// column named with the option that picks another.
+template <class Read>
+auto naming_column_options(const RecordSource& source, Read&& read) {
   try {
-    return read_record(source);
+    return read();
   } catch (const MissingColumnError& e) {
     const auto& further = source.columns.further_u;
     const bool input =
@@ -69,6 +83,10 @@ inline Record read_record_with_columns(const RecordSource& source) {
       message.erase(0, e.location().size() + 2);
     throw InputError(e.location(), message + "; pick one with " + option);
   }
+}
+
+inline Record read_record_with_columns(const RecordSource& source) {
+  return naming_column_options(source, [&] { return read_record(source); });
 }
 
 }  // namespace modalwatch::cli

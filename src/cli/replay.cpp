@@ -53,7 +53,9 @@ int replay(const ReplayArgs& args) {
     read_options.allow_nonfinite = true;
     read_options.allow_gaps = true;
     read_options.sample_time = config.sample_time;
-    const Record rec = read_record(RecordSource(args.data, {}, args.channel, config.closed_loop), read_options);
+    const RecordSource source(args.data, model_record_columns(args.columns, config.model, config.closed_loop),
+                              args.channel, config.closed_loop);
+    const Record rec = naming_column_options(source, [&] { return read_record(source, read_options); });
     if (config.closed_loop && !rec.has_reference())
       throw InputError(args.data, "closed loop (model.loop) needs a column 'r'");
     if (args.batch < 1) throw InputError("--batch", "must be >= 1");
@@ -90,6 +92,8 @@ int replay(const ReplayArgs& args) {
         s.u = rec.u(k + i);
         s.y = rec.y(k + i);
         s.r = rec.has_reference() ? rec.r(k + i) : 0.0;
+        s.further_inputs = rec.inputs() - 1;
+        for (int j = 1; j < rec.inputs(); ++j) s.further_u[static_cast<std::size_t>(j - 1)] = rec.input(j)(k + i);
       }
       // A batch carries the configured period; its samples' utimes follow from it.
       const std::vector<std::uint8_t> msg =
@@ -103,10 +107,11 @@ int replay(const ReplayArgs& args) {
     }
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
     const double span = rec.t(N - 1) - rec.t(0) + T;
-    std::printf("modalwatch replay: %lld samples in %llu %s packets (%llu bytes) on '%s' (%s)\n",
-                static_cast<long long>(N), static_cast<unsigned long long>(packets),
-                batched ? "sample_batch_t" : "sample_t", static_cast<unsigned long long>(bytes), channel.c_str(),
-                url.c_str());
+    std::printf(
+        "modalwatch replay: %lld samples in %llu %s packets (%llu bytes) on '%s' (%s)\n", static_cast<long long>(N),
+        static_cast<unsigned long long>(packets),
+        rec.inputs() > 1 ? (batched ? "sample_batch2_t" : "sample2_t") : (batched ? "sample_batch_t" : "sample_t"),
+        static_cast<unsigned long long>(bytes), channel.c_str(), url.c_str());
     std::printf("%.3f s of record in %.3f s: %.0f samples/s, %.0f packets/s (%.2f x real time)\n", span, wall,
                 static_cast<double>(N) / wall, static_cast<double>(packets) / wall, span / wall);
     return 0;

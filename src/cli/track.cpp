@@ -492,18 +492,16 @@ int track(const TrackArgs& args) {
     const Config config = load_config(args.config);
     if (config.model.submodels.empty())
       throw InputError(args.config, "model gives only modes: N; track needs the submodels (fit --out writes them)");
-    if (config.model.n_inputs() > 1)
-      throw InputError(args.config, "key 'model.inputs': the recursive estimator (track, the daemon) takes one input; " +
-                                        std::to_string(config.model.n_inputs()) +
-                                        " are named (several inputs are for fit and diagnose)");
     const EstimatorSettings& settings = config.estimator;  // completed by load_config
 
     RecordReadOptions read_options;
     read_options.allow_nonfinite = true;
     read_options.allow_gaps = true;
     read_options.sample_time = config.sample_time;
-    const RecordSource source(args.data, {}, args.channel, config.closed_loop);
-    RecordReader reader_source(source, read_options);  // a CSV's header and columns checked
+    const RecordSource source(args.data, model_record_columns(args.columns, config.model, config.closed_loop),
+                              args.channel, config.closed_loop);
+    // A CSV's header and columns checked here (an LCM log read whole).
+    RecordReader reader_source = naming_column_options(source, [&] { return RecordReader(source, read_options); });
     const bool with_r = reader_source.has_reference();
     if (config.closed_loop && !with_r) throw InputError(args.data, "closed loop (model.loop) needs a column 'r'");
     RecordCheck check(args.data, config.sample_time, config.closed_loop, config.source);
@@ -529,6 +527,9 @@ int track(const TrackArgs& args) {
 
     std::uint64_t n = 0;
     double last_t = 0.0;
+    // One sample, filled in place (its further inputs, with several, from the block's further_u).
+    Sample sample;
+    sample.further_inputs = config.model.n_inputs() - 1;
     ProgressBar progress(args.progress && reader_source.fraction_read().has_value(), 1.0);
     std::vector<ColumnFormat> formats;
     for (const auto& c : columns) formats.push_back(c.format);
@@ -542,7 +543,14 @@ int track(const TrackArgs& args) {
         const double* r = with_r ? block->r.data() : nullptr;
         // One row of estimates per sample.
         for (std::size_t k = 0; k < count; ++k) {
-          const unsigned flags = estimator.step(Sample{t[k], u[k], y[k], r != nullptr ? r[k] : 0.0});
+          sample.t = t[k];
+          sample.u = u[k];
+          sample.y = y[k];
+          sample.r = r != nullptr ? r[k] : 0.0;
+          for (int j = 0; j < sample.further_inputs; ++j)
+            sample.further_u[static_cast<std::size_t>(j)] =
+                block->further_u[static_cast<std::size_t>(j)](static_cast<Eigen::Index>(k));
+          const unsigned flags = estimator.step(sample);
           double* row = rows.next_row();
           *row++ = t[k];
           for (int m = 0; m < K; ++m) {
@@ -579,9 +587,15 @@ int track(const TrackArgs& args) {
     // Summary (stderr) and the final modal table (stdout).
     const EstimatorStatus& st = estimator.status();
     const double total = seconds_between(t_start, t_end), loop = seconds_between(t_read, t_end);
-    std::fprintf(stderr, "modalwatch track: %llu samples at %g Hz (%s loop, %d submodels, output hold %s%s) -> %s\n",
+    std::string inputs_text;
+    if (config.model.n_inputs() > 1) {
+      inputs_text = ", inputs";
+      for (const std::string& name : config.model.inputs) inputs_text += " " + name;
+    }
+    std::fprintf(stderr, "modalwatch track: %llu samples at %g Hz (%s loop, %d submodels%s, output hold %s%s) -> %s\n",
                  static_cast<unsigned long long>(n), 1.0 / config.sample_time, config.closed_loop ? "closed" : "open",
-                 K, hold_name(config.estimator.output_hold), config.output_hold ? "" : " by default", args.out.c_str());
+                 K, inputs_text.c_str(), hold_name(config.estimator.output_hold),
+                 config.output_hold ? "" : " by default", args.out.c_str());
     std::fprintf(stderr, "  time: %.3f s (start-up %.3f s, then read, estimate and write together %.3f s)\n", total,
                  seconds_between(t_start, t_read), loop);
     std::fprintf(stderr, "  samples/s: %.4g end to end, %.4g after start-up\n",

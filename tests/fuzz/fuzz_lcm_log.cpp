@@ -1,6 +1,7 @@
-// libFuzzer target: parse_lcm_log on any bytes (scripts/check/fuzz.sh). Properties:
-// only InputError escapes; a parsed record has one offset per sample, equal
-// column lengths, t from 0 and strictly increasing.
+// libFuzzer target: parse_lcm_log on any bytes (scripts/check/fuzz.sh), for a
+// model of one input or of two (by the input's size). Properties: only
+// InputError escapes; a parsed record has one offset per sample, equal column
+// lengths, the model's inputs, t from 0 and strictly increasing.
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>
@@ -15,6 +16,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   LcmLogOptions o;
   o.closed_loop = size % 2 == 1;
   o.channel = size % 3 == 0 ? "MODALWATCH_SAMPLES" : "";
+  o.inputs = size % 5 == 0 ? 2 : 1;
   try {
     const LcmLogRecord r = parse_lcm_log(std::span(data, size), "fuzz", o);
     const Record& rec = r.record;
@@ -22,6 +24,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (n < 1 || rec.u.size() != n || rec.y.size() != n || static_cast<Eigen::Index>(r.offsets.size()) != n)
       std::abort();
     if (o.closed_loop != rec.has_reference()) std::abort();
+    if (rec.inputs() != o.inputs) std::abort();
+    for (const auto& v : rec.further_u)
+      if (v.size() != n) std::abort();
     if (rec.t(0) != 0.0) std::abort();
     for (Eigen::Index k = 1; k < n; ++k)
       if (!(rec.t(k) > rec.t(k - 1))) std::abort();

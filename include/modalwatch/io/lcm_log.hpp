@@ -6,9 +6,12 @@
 // An event, all integers big-endian:
 //   u32 sync word 0xEDA1DA01, i64 event number, i64 timestamp (us, logger clock),
 //   i32 channel length, i32 data length, channel (no terminator), data.
-// sample_t and sample_batch_t events (chosen by fingerprint) become samples with
-// the allocation-free decoders of messages.hpp. The record's time is
-// t = (utime - utime of the first sample) / 1e6 s; r is filled in closed loop.
+// sample_t, sample_batch_t, sample2_t and sample_batch2_t events (chosen by
+// fingerprint) become samples with the allocation-free decoders of
+// messages.hpp, those of options.inputs inputs (Record::further_u after the
+// first); events of another number of inputs are skipped and counted. The
+// record's time is t = (utime - utime of the first sample) / 1e6 s; r is
+// filled in closed loop.
 #include <cstdint>
 #include <span>
 #include <string>
@@ -23,6 +26,7 @@ inline constexpr std::uint32_t kLcmSyncWord = 0xEDA1DA01u;
 struct LcmLogOptions {
   std::string channel;       // only events on this channel; empty: every channel
   bool closed_loop = false;  // keep r (else r is empty, as in an open-loop CSV)
+  int inputs = 1;            // measured inputs per sample (the model's)
 };
 
 struct LcmLogRecord {
@@ -33,6 +37,7 @@ struct LcmLogRecord {
   std::uint64_t skipped_channel = 0;   // on another channel than options.channel
   std::uint64_t skipped_type = 0;      // not a sample_t or sample_batch_t (fingerprint)
   std::uint64_t skipped_invalid = 0;   // a sample type that failed to decode (size, count, period, ...)
+  std::uint64_t skipped_inputs = 0;    // a sample type of another number of inputs than options.inputs
   std::uint64_t skipped_order = 0;     // samples whose utime or seq did not increase (duplicates, reordering)
   std::vector<std::string> channels;   // channels that carried samples
 };

@@ -19,9 +19,10 @@
 
 namespace modalwatch {
 
-// The CSV columns that hold t, u, y and r (an LCM log has fixed fields), and
-// with several measured inputs the columns of the inputs after u, in order
-// (Record::further_u; read by read_record and parse_record, not streamed).
+// The CSV columns that hold t, u, y and r, and with several measured inputs
+// the columns of the inputs after u, in order (Record::further_u). An LCM log
+// has fixed fields: its inputs are the messages' u in order, as many as the
+// columns name (the model's inputs; their names do not apply).
 struct RecordColumns {
   std::string t = "t", u = "u", y = "y", r = "r";
   std::vector<std::string> further_u;
@@ -61,7 +62,8 @@ Record read_record(const RecordSource& source, const RecordReadOptions& options 
 Record parse_record(std::string_view text, const std::string& name, const RecordColumns& columns = {},
                     const RecordReadOptions& options = {});
 
-// A record as a stream of blocks, so that a long CSV record is never held
+// A record as a stream of blocks (every input of the source's columns in each
+// block's further_u), so that a long CSV record is never held
 // whole: `modalwatch track` estimates while it reads. A CSV record is parsed a
 // chunk of the file at a time and checked as the rows arrive (the header and
 // columns when the reader is opened, a row's errors when read() reaches it);

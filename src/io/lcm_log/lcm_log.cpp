@@ -39,6 +39,7 @@ LcmLogRecord parse_lcm_log(std::span<const std::uint8_t> bytes, const std::strin
   LcmLogRecord out;
   std::vector<std::int64_t> utime, seq;
   std::vector<double> u, y, r;
+  std::vector<std::vector<double>> further(static_cast<std::size_t>(std::max(0, options.inputs - 1)));
   std::vector<StampedSample> buf;
   std::size_t pos = 0;
   while (pos < bytes.size()) {
@@ -79,7 +80,8 @@ LcmLogRecord parse_lcm_log(std::span<const std::uint8_t> bytes, const std::strin
       continue;
     }
     const auto fp = static_cast<std::int64_t>(be(data, 8));
-    if (fp != sample_fingerprint() && fp != batch_fingerprint()) {
+    if (fp != sample_fingerprint() && fp != batch_fingerprint() && fp != sample2_fingerprint() &&
+        fp != batch2_fingerprint()) {
       ++out.skipped_type;
       continue;
     }
@@ -87,8 +89,10 @@ LcmLogRecord parse_lcm_log(std::span<const std::uint8_t> bytes, const std::strin
     const int capacity = std::max(1, (data_len - batch_wire_size(0)) / 24);
     if (buf.size() < static_cast<std::size_t>(capacity)) buf.resize(static_cast<std::size_t>(capacity));
     int n = 0;
-    if (decode_samples(data, data_len, options.closed_loop, buf.data(), capacity, n) != DecodeResult::ok) {
-      ++out.skipped_invalid;
+    const DecodeResult decoded =
+        decode_samples(data, data_len, options.closed_loop, buf.data(), capacity, n, options.inputs);
+    if (decoded != DecodeResult::ok) {
+      ++(decoded == DecodeResult::bad_inputs ? out.skipped_inputs : out.skipped_invalid);
       continue;
     }
     ++out.sample_events;
@@ -105,21 +109,26 @@ LcmLogRecord parse_lcm_log(std::span<const std::uint8_t> bytes, const std::strin
       u.push_back(s.u);
       y.push_back(s.y);
       r.push_back(s.r);
+      for (std::size_t j = 0; j < further.size(); ++j) further[j].push_back(s.further_u[j]);
       out.offsets.push_back(at);
     }
   }
   if (utime.empty())
-    throw InputError(source, "LCM log: no sample_t or sample_batch_t events" +
-                                 (options.channel.empty() ? std::string() : " on channel '" + options.channel + "'") +
-                                 " (" + std::to_string(out.events) + " events, " + std::to_string(out.skipped_channel) +
-                                 " on other channels, " + std::to_string(out.skipped_type) + " of other types, " +
-                                 std::to_string(out.skipped_invalid) + " invalid)");
+    throw InputError(source,
+                     "LCM log: no sample_t, sample_batch_t, sample2_t or sample_batch2_t events" +
+                         (options.inputs > 1 ? " of " + std::to_string(options.inputs) + " inputs" : std::string()) +
+                         (options.channel.empty() ? std::string() : " on channel '" + options.channel + "'") + " (" +
+                         std::to_string(out.events) + " events, " + std::to_string(out.skipped_channel) +
+                         " on other channels, " + std::to_string(out.skipped_type) + " of other types, " +
+                         std::to_string(out.skipped_inputs) + " of another number of inputs, " +
+                         std::to_string(out.skipped_invalid) + " invalid)");
   const auto N = static_cast<Eigen::Index>(utime.size());
   Record& rec = out.record;
   rec.t.resize(N);
   rec.u = Eigen::Map<const Eigen::VectorXd>(u.data(), N);
   rec.y = Eigen::Map<const Eigen::VectorXd>(y.data(), N);
   if (options.closed_loop) rec.r = Eigen::Map<const Eigen::VectorXd>(r.data(), N);
+  for (const auto& v : further) rec.further_u.emplace_back(Eigen::Map<const Eigen::VectorXd>(v.data(), N));
   // Exact integer difference, one correctly rounded division: a CSV time of
   // k * 0.05 s printed as "0.05" reads back as the same double.
   for (Eigen::Index k = 0; k < N; ++k)

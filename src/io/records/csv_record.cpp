@@ -113,6 +113,7 @@ struct CsvRecordStream::Impl {
   std::vector<std::string> columns;
   std::unique_ptr<TableParser> parser;
   int ct = -1, cu = -1, cy = -1, cr = -1;
+  std::vector<int> cfu;  // the further inputs' columns
   std::vector<double> values;
   std::uint64_t rows = 0;
   double previous_t = 0.0;
@@ -193,6 +194,7 @@ struct CsvRecordStream::Impl {
     ct = require_column(path, columns, names.t);
     cu = require_column(path, columns, names.u);
     cy = require_column(path, columns, names.y);
+    for (const std::string& name : names.further_u) cfu.push_back(require_column(path, columns, name));
     if (const auto it = std::find(columns.begin(), columns.end(), names.r); it != columns.end())
       cr = static_cast<int>(it - columns.begin());
     std::vector<bool> nonfinite_ok(columns.size(), options.allow_nonfinite);
@@ -231,6 +233,8 @@ std::size_t CsvRecordStream::read(Record& block, std::size_t max_rows) {
   block.u.resize(capacity);
   block.y.resize(capacity);
   block.r.resize(s.cr >= 0 ? capacity : 0);
+  block.further_u.resize(s.cfu.size());
+  for (Eigen::VectorXd& v : block.further_u) v.resize(capacity);
   Eigen::Index n = 0;
   std::string_view line;
   while (n < capacity && !s.finished) {
@@ -255,6 +259,7 @@ std::size_t CsvRecordStream::read(Record& block, std::size_t max_rows) {
     block.u(n) = s.values[static_cast<std::size_t>(s.cu)];
     block.y(n) = s.values[static_cast<std::size_t>(s.cy)];
     if (s.cr >= 0) block.r(n) = s.values[static_cast<std::size_t>(s.cr)];
+    for (std::size_t j = 0; j < s.cfu.size(); ++j) block.further_u[j](n) = s.values[static_cast<std::size_t>(s.cfu[j])];
     ++n;
   }
   if (s.finished && s.rows == 0) throw InputError(s.path, "no data rows after the header");
@@ -263,6 +268,7 @@ std::size_t CsvRecordStream::read(Record& block, std::size_t max_rows) {
     block.u.conservativeResize(n);
     block.y.conservativeResize(n);
     if (s.cr >= 0) block.r.conservativeResize(n);
+    for (Eigen::VectorXd& v : block.further_u) v.conservativeResize(n);
   }
   return static_cast<std::size_t>(n);
 }

@@ -25,13 +25,19 @@ void check_csv_source(const RecordSource& source) {
 }
 
 // An LCM log's samples, checked as a CSV record is: one channel, finite values
-// (unless allowed), even time (unless gaps are allowed).
+// (unless allowed), even time (unless gaps are allowed). Its inputs are the
+// message's u, in order: the columns name as many inputs (the model's), whatever
+// their names; t, y and r cannot be renamed.
 Record read_lcm_record(const RecordSource& source, const RecordReadOptions& options) {
-  if (source.columns != RecordColumns{})
+  const RecordColumns& columns = source.columns;
+  const RecordColumns plain;
+  if (columns.t != plain.t || columns.y != plain.y || columns.r != plain.r ||
+      (columns.further_u.empty() && columns.u != plain.u))
     throw InputError(source.path, "LCM log: column options apply to CSV records only (an LCM log has u, y, r)");
   LcmLogOptions lo;
   lo.channel = source.channel;
   lo.closed_loop = source.closed_loop;
+  lo.inputs = 1 + static_cast<int>(columns.further_u.size());
   LcmLogRecord log = read_lcm_log(source.path, lo);
   const Record& rec = log.record;
   const auto where = [&](Eigen::Index k) {
@@ -44,9 +50,11 @@ Record read_lcm_record(const RecordSource& source, const RecordReadOptions& opti
     throw InputError(source.path, "LCM log: samples on several channels (" + list + "): choose one with --channel");
   }
   if (!options.allow_nonfinite) {
-    for (Eigen::Index k = 0; k < rec.size(); ++k)
-      if (!std::isfinite(rec.u(k)) || !std::isfinite(rec.y(k)) || (rec.has_reference() && !std::isfinite(rec.r(k))))
-        throw InputError(source.path, where(k) + ": NaN or Inf in u, y or r");
+    for (Eigen::Index k = 0; k < rec.size(); ++k) {
+      bool finite = std::isfinite(rec.y(k)) && (!rec.has_reference() || std::isfinite(rec.r(k)));
+      for (int j = 0; j < rec.inputs(); ++j) finite = finite && std::isfinite(rec.input(j)(k));
+      if (!finite) throw InputError(source.path, where(k) + ": NaN or Inf in u, y or r");
+    }
   }
   const Eigen::Index n = rec.size();
   if (!options.allow_gaps && n >= 3) {
@@ -61,10 +69,12 @@ Record read_lcm_record(const RecordSource& source, const RecordReadOptions& opti
   }
   std::fprintf(stderr,
                "modalwatch: %lld samples from LCM log %s (channel %s; %llu events, skipped: %llu other channel, "
-               "%llu other type, %llu invalid, %llu samples out of order or duplicate)\n",
+               "%llu other type, %llu of another number of inputs, %llu invalid, %llu samples out of order or "
+               "duplicate)\n",
                static_cast<long long>(n), source.path.c_str(), log.channels.front().c_str(),
                static_cast<unsigned long long>(log.events), static_cast<unsigned long long>(log.skipped_channel),
-               static_cast<unsigned long long>(log.skipped_type), static_cast<unsigned long long>(log.skipped_invalid),
+               static_cast<unsigned long long>(log.skipped_type), static_cast<unsigned long long>(log.skipped_inputs),
+               static_cast<unsigned long long>(log.skipped_invalid),
                static_cast<unsigned long long>(log.skipped_order));
   return std::move(log.record);
 }
@@ -98,8 +108,6 @@ RecordReader::RecordReader(const RecordSource& source, const RecordReadOptions& 
     impl_ = std::make_unique<Impl>(Impl{HeldRecord{read_lcm_record(source, options), 0}});
   } else {
     check_csv_source(source);
-    if (!source.columns.further_u.empty())
-      throw std::invalid_argument("RecordReader streams one input; several inputs are read whole (read_record)");
     impl_ = std::make_unique<Impl>(Impl{CsvRecordStream(source.path, source.columns, options)});
   }
 }
@@ -122,6 +130,9 @@ std::size_t RecordReader::read(Record& block, std::size_t max_samples) {
   block.t = rec.t.segment(held->next, count);
   block.u = rec.u.segment(held->next, count);
   block.y = rec.y.segment(held->next, count);
+  block.further_u.resize(rec.further_u.size());
+  for (std::size_t j = 0; j < rec.further_u.size(); ++j)
+    block.further_u[j] = rec.further_u[j].segment(held->next, count);
   if (rec.has_reference())
     block.r = rec.r.segment(held->next, count);
   else
