@@ -6,7 +6,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <type_traits>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -14,9 +13,11 @@
 #include <fstream>
 #include <functional>
 #include <mutex>
+#include <random>
 #include <sstream>
 #include <string>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -32,6 +33,7 @@
 #include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/messages.hpp"
 #include "modalwatch/io/records.hpp"
+#include "modalwatch/simulator.hpp"
 
 namespace modalwatch::test_support {
 
@@ -234,23 +236,96 @@ inline void dispatch_rest(lcm_t* lcm) {
 // utime has 1 us resolution and a batch of 64 carries its first sample's utime
 // with the period added per sample, so the daemon's t differs from the record's
 // by up to 0.5 us (and so would its estimates and flags, slightly). `track` on
-// this CSV sees exactly the daemon's times. t starts at 0.
-inline void write_wire_times_csv(const Record& rec, const std::string& path) {
+// this CSV sees exactly the daemon's times. t starts at 0. With several
+// inputs, `inputs` names their columns (the model's inputs).
+inline void write_wire_times_csv(const Record& rec, const std::string& path,
+                                 const std::vector<std::string>& inputs = {"u"}) {
   FILE* f = std::fopen(path.c_str(), "w");
   ASSERT_NE(f, nullptr) << path;
-  std::fprintf(f, rec.has_reference() ? "t,u,y,r\n" : "t,u,y\n");
+  ASSERT_EQ(static_cast<int>(inputs.size()), rec.inputs());
+  std::fprintf(f, "t");
+  for (const std::string& name : inputs) std::fprintf(f, ",%s", name.c_str());
+  std::fprintf(f, rec.has_reference() ? ",y,r\n" : ",y\n");
   const std::int64_t first = std::llround(rec.t(0) * 1e6);
   for (Eigen::Index k = 0; k < rec.size(); ++k) {
     const Eigen::Index b = k / 64 * 64;  // publish_paced's batches
     const std::int64_t utime =
         std::llround(rec.t(b) * 1e6) + std::llround(static_cast<double>(k - b) * rec.sample_time() * 1e6);
     const double t = static_cast<double>(utime - first) * 1e-6;
+    std::fprintf(f, "%.17g", t);
+    for (int j = 0; j < rec.inputs(); ++j) std::fprintf(f, ",%.17g", rec.input(j)(k));
     if (rec.has_reference())
-      std::fprintf(f, "%.17g,%.17g,%.17g,%.17g\n", t, rec.u(k), rec.y(k), rec.r(k));
+      std::fprintf(f, ",%.17g,%.17g\n", rec.y(k), rec.r(k));
     else
-      std::fprintf(f, "%.17g,%.17g,%.17g\n", t, rec.u(k), rec.y(k));
+      std::fprintf(f, ",%.17g\n", rec.y(k));
   }
   std::fclose(f);
+}
+
+// A two-input open-loop structure at 200 Hz: a 5 Hz mode both shakers drive
+// (residues of opposite sign) and a 12 Hz mode only the second does; u1 a
+// PRBS, u2 independent white noise, 30 dB output noise, 60 s. Its config
+// (written to `config_path`) starts every mode 5 % off, with a 5 s memory
+// (lambda 0.999), a 10 s warm-up fitted from both inputs and an estimate
+// every 0.1 s.
+struct TwoInputPlant {
+  struct Mode {
+    std::string name;
+    int input;
+    ModalParameters truth;
+  };
+  std::vector<Mode> modes;
+  std::string config_path;
+  Config config;
+  Record record;
+};
+
+inline TwoInputPlant two_input_plant(const std::string& config_path) {
+  TwoInputPlant out;
+  const double two_pi = 2.0 * 3.14159265358979323846;
+  out.modes = {{"pitch_u1", 0, {two_pi * 5.0, 0.04, 1.0}},
+               {"pitch_u2", 1, {two_pi * 5.0, 0.04, -0.4}},
+               {"roll_u2", 1, {two_pi * 12.0, 0.02, 0.5}}};
+  std::ostringstream yaml;
+  yaml.precision(17);
+  yaml << "sample_rate_hz: 200\nmodel:\n  inputs: [u1, u2]\n  submodels:\n";
+  for (const auto& m : out.modes)
+    yaml << "    - name: " << m.name << "\n      input: u" << m.input + 1 << "\n      wn: " << 1.05 * m.truth.wn
+         << "\n      zeta: " << 0.95 * m.truth.zeta << "\n      gain: " << 1.05 * m.truth.gain
+         << "\n      forgetting: 0.999\n";
+  yaml << "estimator:\n  warmup: 10\ndaemon:\n  publish_period: 0.1\n";
+  {
+    std::ofstream f(config_path);
+    f << yaml.str();
+  }
+  out.config_path = config_path;
+  out.config = load_config(config_path);
+
+  PlantSpec plant;
+  for (const auto& m : out.modes) {
+    PlantMode pm;
+    pm.modal = m.truth;
+    pm.submodel = make_mode(m.name, m.truth);
+    pm.submodel.input = m.input;
+    plant.modes.push_back(pm);
+  }
+  plant.snr_db = 30.0;
+  ExperimentSpec e;
+  e.sample_time = out.config.sample_time;
+  e.duration = 60.0;
+  e.seed = 4;
+  e.excitation.kind = SignalSpec::Kind::prbs;
+  e.excitation.register_bits = 12;
+  e.excitation.clock_period = 1;
+  e.excitation.amplitude = 1.0;
+  const auto n = static_cast<Eigen::Index>(std::llround(e.duration / e.sample_time));
+  std::mt19937_64 rng(44);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  Eigen::VectorXd u2(n);
+  for (Eigen::Index k = 0; k < n; ++k) u2(k) = normal(rng);
+  e.further_input_samples = {u2};
+  out.record = simulate(plant, e).record;
+  return out;
 }
 
 // The daemon's flag changes read off its fault status messages, as

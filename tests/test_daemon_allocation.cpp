@@ -104,3 +104,40 @@ TEST(DaemonAllocation, NoneOnTheEstimationThreadAfterStartUp) {
   EXPECT_EQ(probe.allocations.load(), 0u) << "heap allocations on the estimation thread after start-up\n"
                                           << probe.trace;
 }
+
+// The same with a model of two measured inputs (two_input_plant(): open loop,
+// sample_batch2_t packets, a NaN in the second input): the further inputs go
+// from the decoder through the ring and the backlog into the estimator's
+// Sample, all of fixed size.
+TEST(DaemonAllocation, NoneOnTheEstimationThreadWithTwoInputs) {
+  const std::string dir =
+      std::filesystem::temp_directory_path() / ("modalwatch_daemon_allocation_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const TwoInputPlant two = two_input_plant(dir + "/two_inputs.yaml");
+  Record rec = two.record;
+  const Eigen::Index bad = 30 * 200;  // after the warm-up
+  rec.further_u[0](bad) = std::nan("");
+  lcm_t* lcm = lcm_create("memq://");
+  ASSERT_NE(lcm, nullptr);
+  Received rx;
+  rx.subscribe(lcm, two.config.lcm);
+  CountingProbe probe;
+  {
+    Daemon d(two.config, lcm);
+    attach_loop_probe(d, probe);
+    d.start();
+    std::uint64_t published = 0;
+    publish_paced(lcm, two.config, d, rec, 0, rec.size(), published);
+    ASSERT_TRUE(wait_for([&] { return all_handled(d) && d.counters().samples_received == published; }, 30.0));
+    EXPECT_TRUE(probe.started.load()) << "the warm-up never ended";
+    d.stop();
+    const DaemonCounters k = d.counters();
+    EXPECT_EQ(k.samples_nonfinite, 1u);
+    EXPECT_EQ(k.samples_processed, static_cast<std::uint64_t>(rec.size()) - 1);
+    EXPECT_EQ(k.decode_errors, 0u);
+  }
+  lcm_destroy(lcm);
+  std::filesystem::remove_all(dir);
+  EXPECT_EQ(probe.allocations.load(), 0u) << "heap allocations on the estimation thread after start-up\n"
+                                          << probe.trace;
+}

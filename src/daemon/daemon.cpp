@@ -144,12 +144,18 @@ void Daemon::start() {
   if (sd_watchdog_enabled(0, &m.watchdog_usec) <= 0) m.watchdog_usec = 0;
   m.loop.set_watchdog_usec(m.watchdog_usec);
   const Config& c = m.config;
+  std::string inputs;  // with several: their names, and the messages that carry them
+  if (c.model.n_inputs() > 1) {
+    inputs = ", inputs";
+    for (const std::string& name : c.model.inputs) inputs += " " + name;
+    inputs += " (sample2_t / sample_batch2_t)";
+  }
   spdlog::info(
-      "modalwatchd: {} ({}), {} submodels at {} Hz, {} loop, output hold {}{}; LCM {} in: {} / {}, out: {} / {} / {}; "
-      "loop {} Hz, "
+      "modalwatchd: {} ({}), {} submodels at {} Hz, {} loop{}, output hold {}{}; LCM {} in: {} / {}, out: {} / {} / "
+      "{}; loop {} Hz, "
       "publish every {} s, heartbeat every {} s; rings {} samples / {} snapshots; checkpoint {}; {}{}",
       c.source, m.loop.restored() ? "resumed from checkpoint" : "fresh start", c.model.submodels.size(),
-      1.0 / c.sample_time, c.closed_loop ? "closed" : "open", hold_name(c.estimator.output_hold),
+      1.0 / c.sample_time, c.closed_loop ? "closed" : "open", inputs, hold_name(c.estimator.output_hold),
       c.output_hold ? "" : " by default", c.lcm.url, c.lcm.samples_channel, c.lcm.batches_channel,
       c.lcm.estimates_channel, c.lcm.fault_status_channel, c.lcm.heartbeat_channel, c.daemon.loop_rate_hz,
       c.daemon.publish_period, c.daemon.heartbeat_period, c.daemon.sample_ring, c.daemon.snapshot_ring,

@@ -20,7 +20,11 @@ namespace {
 constexpr double kRestartConfirm = 0.1;  // s of sample time
 constexpr int kRestartConfirmSamples = 8;
 
-bool finite(const StampedSample& s) { return std::isfinite(s.u) && std::isfinite(s.y) && std::isfinite(s.r); }
+bool finite(const StampedSample& s) {
+  bool ok = std::isfinite(s.u) && std::isfinite(s.y) && std::isfinite(s.r);
+  for (int j = 0; j < s.further_inputs; ++j) ok = ok && std::isfinite(s.further_u[static_cast<std::size_t>(j)]);
+  return ok;
+}
 
 // The fitter thread runs the warm-up fit (see warmup_fitter.hpp).
 EstimatorSettings with_deferred_fit(EstimatorSettings s) {
@@ -80,6 +84,7 @@ EstimationLoop::EstimationLoop(const Config& config, const std::optional<Checkpo
     backlog_.resize(static_cast<std::size_t>(std::max(1.0, held)));
   }
   set_detector(restored_baselines);
+  sample_.further_inputs = config.model.n_inputs() - 1;
   mode_values_.resize(K);
   mode_covariances_.assign(K, Eigen::Matrix3d::Zero());
   flag_changes_.reserve(kQuantities * K);
@@ -269,7 +274,13 @@ void EstimationLoop::process(const StampedSample& s) noexcept {
   // A non-finite sample goes to the estimator too, which keeps its time slot
   // (holds u and r, lets the model stand in for y, does not update): dropping it
   // here would leave a hole of 2 T that resets the prefilters as a gap.
-  const unsigned flags = estimator_.step(Sample{t, s.u, s.y, s.r});
+  sample_.t = t;
+  sample_.u = s.u;
+  sample_.y = s.y;
+  sample_.r = s.r;
+  // The subscriber passes only packets of the model's inputs (sample_.further_inputs).
+  if (sample_.further_inputs > 0) std::copy_n(s.further_u.begin(), sample_.further_inputs, sample_.further_u.begin());
+  const unsigned flags = estimator_.step(sample_);
   bump(finite(s) ? counters_.samples_processed : counters_.samples_nonfinite);
   if (flags & kWarmupFitPending) {
     // The window is complete: the fitter takes the job and, until it has applied

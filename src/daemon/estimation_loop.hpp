@@ -24,8 +24,8 @@
 //   (utime_offset_), so that sample time goes on past a gap: the prefilter
 //   states reset as after any gap, the parameters, baselines and a restored
 //   checkpoint stay.
-// - NaN/Inf in u, y or r: counted, and passed to the estimator, which keeps the
-//   sample's time slot without updating.
+// - NaN/Inf in u (any input), y or r: counted, and passed to the estimator,
+//   which keeps the sample's time slot without updating.
 // - Gaps. The estimator detects them itself (estimator.gap_factor, which
 //   daemon.gap_time sets), so track and the daemon apply one rule.
 // - The warm-up fit runs on the WarmupFitter. Meanwhile the loop keeps ticking
@@ -150,6 +150,7 @@ class EstimationLoop {
   bool have_ref_time_ = false;  // last_utime_ is meaningful (a sample, or a restored checkpoint)
   std::int64_t utime0_ = 0, last_utime_ = 0;
   std::int64_t next_publish_utime_ = 0;
+  Sample sample_;  // the estimator's input, filled in place (its further inputs: the model's)
   std::int64_t last_sample_ns_ = 0, last_snapshot_ns_ = 0, last_watchdog_ns_ = 0;
 
   // Events for the next snapshot.

@@ -12,7 +12,7 @@
 namespace modalwatch::daemon_detail {
 namespace {
 
-// Largest batch decoded (36 + 24 * 8192 bytes, about 200 kB).
+// Largest batch decoded (36 + 24 * 8192 bytes, about 200 kB, for one input).
 constexpr int kMaxBatch = 8192;
 
 }  // namespace
@@ -23,6 +23,7 @@ Subscriber::Subscriber(lcm_t* lcm, const Config& config, SpscRing<StampedSample>
       counters_(counters),
       channels_(config.lcm),
       closed_loop_(config.closed_loop),
+      inputs_(config.model.n_inputs()),
       realtime_priority_(config.daemon.realtime_priority),
       decoded_(kMaxBatch) {}
 
@@ -64,8 +65,8 @@ void Subscriber::on_packet(const lcm_recv_buf_t* rbuf, bool batch) noexcept {
   const int size = rbuf->data_size > static_cast<std::uint32_t>(std::numeric_limits<int>::max())
                        ? std::numeric_limits<int>::max()
                        : static_cast<int>(rbuf->data_size);
-  const DecodeResult r = batch ? decode_batch(rbuf->data, size, closed_loop_, decoded_.data(), kMaxBatch, n)
-                               : decode_sample(rbuf->data, size, closed_loop_, decoded_.data(), kMaxBatch, n);
+  const DecodeResult r = batch ? decode_batch(rbuf->data, size, closed_loop_, decoded_.data(), kMaxBatch, n, inputs_)
+                               : decode_sample(rbuf->data, size, closed_loop_, decoded_.data(), kMaxBatch, n, inputs_);
   if (r != DecodeResult::ok) {
     bump(counters_.decode_errors);
     return;

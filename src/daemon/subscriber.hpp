@@ -1,7 +1,9 @@
 #pragma once
 // The LCM side of the input: a thread that runs lcm_handle, decodes sample_t
-// and sample_batch_t packets and pushes the samples into the input ring. It
-// never blocks on the estimation loop: a full ring drops (and counts) samples.
+// and sample2_t packets (samples channel), sample_batch_t and sample_batch2_t
+// packets (batches channel), for the model's number of inputs, and pushes the
+// samples into the input ring. It never blocks on the estimation loop: a full
+// ring drops (and counts) samples.
 #include <lcm/lcm.h>
 
 #include <atomic>
@@ -39,6 +41,7 @@ class Subscriber {
   SubscriberCounters& counters_;
   const LcmSettings channels_;
   const bool closed_loop_;
+  const int inputs_;  // the model's (a packet of another count is a decode error)
   const int realtime_priority_;
   std::vector<StampedSample> decoded_;  // one packet's samples
   LossCounter loss_;                    // this thread's only
