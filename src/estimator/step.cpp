@@ -344,4 +344,12 @@ inline unsigned RecursiveEstimator::Impl::finish_update() {
   return kUpdated;
 }
 
+// Instantiated here for the other sources, which reach them through Impl::kernel.
+template unsigned RecursiveEstimator::Impl::advance_portable<false>(const Sample&, bool);
+template unsigned RecursiveEstimator::Impl::advance_portable<true>(const Sample&, bool);
+#if MODALWATCH_HAVE_AVX2_FMA
+template unsigned RecursiveEstimator::Impl::advance_avx2_fma<false>(const Sample&, bool);
+template unsigned RecursiveEstimator::Impl::advance_avx2_fma<true>(const Sample&, bool);
+#endif
+
 }  // namespace modalwatch
