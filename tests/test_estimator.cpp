@@ -831,12 +831,13 @@ struct ModeThreeStep {
   EstimatorStatus status;
 };
 
-ModeThreeStep follow_mode_three_step(double change_ratio) {
+ModeThreeStep follow_mode_three_step(double change_ratio, double covariance_bound = EstimatorSettings{}.covariance_bound) {
   constexpr double kStep = -0.03, kAt = 400.0;
   const test_support::PaperModeThreeStep loop = test_support::paper_mode_three_step(kStep, kAt);
   const Record& r = loop.record;
   EstimatorSettings s = loop.config.estimator;
   s.change_ratio = change_ratio;
+  s.covariance_bound = covariance_bound;
   RecursiveEstimator est(loop.config.model, s);
   ModeThreeStep out;
   for (Eigen::Index k = 0; k < r.size(); ++k) {
@@ -867,6 +868,16 @@ TEST(RecursiveEstimator, AChangeBelowTheDivergenceIsFollowedAfterABoostOfItsMode
   EXPECT_LT(boosted.others_worst, 1e-3);
   EXPECT_EQ(boosted.status.resets, 0u);
   EXPECT_EQ(boosted.boost_flags, boosted.status.boosts);  // step() says so on the sample it happens
+}
+
+// The boost multiplies the bound on P too, for a memory: under a bound as
+// tight as the steady state's P, the boost still gets mode 3 halfway within a
+// tenth of a memory.
+TEST(RecursiveEstimator, ABoostIsNotUndoneByTheCovarianceBound) {
+  const ModeThreeStep tight = follow_mode_three_step(4.0, 1.5);
+  ASSERT_FALSE(std::isnan(tight.first_boost)) << "no boost";
+  EXPECT_LT(tight.halfway, 5.0);
+  EXPECT_LT(std::abs(tight.end_error), 1e-3);
 }
 
 // The same record without the CUSUM (change_ratio 0): forgetting alone.

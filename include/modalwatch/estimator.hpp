@@ -79,7 +79,13 @@ struct EstimatorSettings {
   // Per submodel (empty: random_walk for every one): like the forgetting factor,
   // the drift a mode may follow is a property of that mode.
   std::vector<double> random_walks;
-  double covariance_bound = 100.0;  // diag(P_i) is held below this times diag(P_i(t0))
+  // diag(P_i) is held below this times its reference: what one memory of the
+  // warm-up window's data gives (the warm-up fit's covariance with the fit's
+  // information scaled to one memory, the configured model as its prior),
+  // else diag(P_i(t0)). Where the data leave a direction open, its std grows by
+  // sqrt(covariance_bound) at most. A change boost (change_ratio) lifts the
+  // bound by the boost for one memory of the submodel.
+  double covariance_bound = 10.0;
   // Stabilised forgetting (Kulhavy & Zarrop 1993). Where the data leave a
   // direction of theta_i open (a setpoint with few frequencies, a closed loop
   // that filters them), exponential forgetting winds P_i up there and theta_i
@@ -327,6 +333,7 @@ class WarmupFit {
   // the fit was used, the fit's noise variance, the window's output variance.
   AdditiveModel model_;
   std::vector<Eigen::MatrixXd> covariance_;
+  std::vector<Eigen::VectorXd> bound_variance_;  // diag of the same from one memory of the window
   double sigma2_ = 0.0, y_var_ = 0.0;
   bool fit_used_ = false;
   bool unsettled_ = false;  // a refit's: the change is real, but the window did not fit to the noise level

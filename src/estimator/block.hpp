@@ -129,6 +129,19 @@ struct Block {
   ThetaVec theta;            // theta-bar, normalised
   ThetaMat P;                // P-bar, normalised
   ThetaVec p_bound;          // per-direction bound on diag(P): covariance_bound x diag(P(t0))
+  // The bound that applies now: p_bound, lifted by a change boost's factor for
+  // one memory of the block after it (lift_bound()), while the boosted P
+  // re-converges; without the lift the bound would undo the boost.
+  ThetaVec p_limit;
+  std::uint64_t lifted = 0;  // updates left with the lifted bound
+  void lift_bound(double factor, std::uint64_t updates) {
+    p_limit = factor * p_bound;
+    lifted = updates;
+  }
+  void drop_lift() {
+    p_limit = p_bound;
+    lifted = 0;
+  }
   // Stabilised forgetting: off, waiting for sigma^2 (P_ref needs it), or on.
   enum class Stabilisation : unsigned char { off, pending, on };
   Stabilisation stabilisation = Stabilisation::off;

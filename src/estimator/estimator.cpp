@@ -52,7 +52,8 @@ bool EstimatorSettings::operator==(const EstimatorSettings& o) const {
 }
 
 void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>* fit_cov,
-                                     double fit_sigma2, double y_var) {
+                                     double fit_sigma2, double y_var,
+                                     const std::vector<Eigen::VectorXd>* fit_bound_variance) {
   blocks.clear();
   const double T = cfg.sample_time;
   for (std::size_t i = 0; i < model.submodels.size(); ++i) {
@@ -89,7 +90,16 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
         b.P(j, j) = v * v / std::max(y_var, 1e-300);
       }
     }
-    b.p_bound = cfg.covariance_bound * b.P.diagonal().cwiseMax(1e-300);
+    // The bound's reference: diag(P(t0)), or where P(t0) is the warm-up fit's,
+    // what one memory of its window gives (the recursion's steady state).
+    b.p_bound = b.P.diagonal();
+    const bool from_fit = i >= cfg.initial_covariance.size() || cfg.initial_covariance[i].size() != b.nt;
+    if (from_fit && fit_cov && fit_sigma2 > 0.0 && fit_bound_variance) {
+      const Eigen::VectorXd& v = (*fit_bound_variance)[i];
+      for (int j = 0; j < b.nt; ++j) b.p_bound(j) = std::max(b.p_bound(j), v(j) * b.scale(j) * b.scale(j) / fit_sigma2);
+    }
+    b.p_bound = cfg.covariance_bound * b.p_bound.cwiseMax(1e-300);
+    b.drop_lift();
     set_reference(b, cfg.stabilisations.empty() ? cfg.stabilisation : cfg.stabilisations[i]);
     b.filters.init(b.a_poly(), b.denominator(), b.ws * T, cfg.output_hold, b.biproper);
     b.phi.resize(b.nt);

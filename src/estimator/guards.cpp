@@ -161,7 +161,8 @@ void RecursiveEstimator::Impl::save_good() {
 // window, the score s = sum psi eps and its information F = sum psi psi^T give
 // the score test t = s^T F^-1 s / (sigma^2 n_theta): how much of the error
 // that block alone explains, per parameter. Blocks within half of the largest
-// t get P multiplied by kChangeBoost (within the P bound): their estimate then
+// t get P multiplied by kChangeBoost (and the P bound, for one memory of the
+// block: Block::lift_bound()): their estimate then
 // rests on a tenth of a memory and follows the change. The others keep theirs
 // for change_hold memories of the boosted blocks (no update at all): where two
 // modes' instruments are nearly collinear (a few sines, close modes), the
@@ -197,8 +198,11 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
     if (b.named) {
       boosted = true;
       b.P *= boost;
-      detail::bound_covariance<0>(b.P.data(), b.p_bound.data(), b.nt);
-      // Without forgetting there is no memory to hold the others for.
+      // Without forgetting there is no memory to hold the others for, nor
+      // one to lift the bound for (the boost is then bounded at once).
+      const auto memory = forget > 0.0 ? static_cast<std::uint64_t>(1.0 / forget) : 0;
+      b.lift_bound(boost, memory);
+      detail::bound_covariance<0>(b.P.data(), b.p_limit.data(), b.nt);
       const auto own = forget > 0.0 ? static_cast<std::uint64_t>(cfg.change_hold / forget) : 0;
       b.held = 0;
       b.adapting = own;
@@ -217,6 +221,7 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
 void RecursiveEstimator::Impl::restore_good(const char* reason) {
   for (auto& b : blocks) {
     b.held = b.adapting = 0;
+    b.drop_lift();
     b.theta = b.good_theta;
     b.P = b.good_P;
     rediscretise(b);

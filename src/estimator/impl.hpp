@@ -129,8 +129,11 @@ struct RecursiveEstimator::Impl {
   Kernel kernel = &Impl::advance_portable<false>;
   StepKernel kernel_id = StepKernel::portable;
 
+  // fit_bound_variance: per submodel, diag of the warm-up fit's covariance from
+  // one memory of its window (WarmupFit::bound_variance_), the covariance bound's
+  // reference; without it, diag(P(t0)).
   void build(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>* fit_covariance, double fit_sigma2,
-             double y_var);
+             double y_var, const std::vector<Eigen::VectorXd>* fit_bound_variance = nullptr);
   MODALWATCH_HOT void rediscretise(detail::Block& b);
   void rediscretise_prefilters(detail::Block& b, double Ts);
   void allocate_window() {

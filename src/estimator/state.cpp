@@ -283,6 +283,7 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
         fail("submodel " + std::to_string(i + 1) + ": time_scale out of range for its coefficients");
       b.P = st.P_[i];
       b.p_bound = st.P_bound_[i];
+      b.drop_lift();
       b.good_theta = st.good_theta_[i].cwiseProduct(Eigen::VectorXd(b.scale));
       b.good_P = st.good_P_[i];
       // Stabilised forgetting goes on toward the saved reference (theta(t0) of

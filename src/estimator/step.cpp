@@ -335,6 +335,7 @@ inline unsigned RecursiveEstimator::Impl::finish_update() {
   for (auto& b : blocks) {
     if (b.held > 0) --b.held;
     if (b.adapting > 0) --b.adapting;
+    if (b.lifted > 0 && --b.lifted == 0) b.drop_lift();
   }
   if (++stabilise_block == blocks.size()) {
     stabilise_block = 0;

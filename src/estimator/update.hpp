@@ -182,7 +182,7 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
     const double q2 = b.random_walk * b.random_walk / e_var;  // Q_jj = q2 theta_j^2
     for (int j = 0; j < nt; ++j) P[j + j * nt] += q2 * theta[j] * theta[j];
   }
-  if (detail::bound_covariance<N>(P, b.p_bound.data(), nt)) ++status.covariance_clamps;
+  if (detail::bound_covariance<N>(P, b.p_limit.data(), nt)) ++status.covariance_clamps;
   double trace = 0.0;
   for (int j = 0; j < nt; ++j) trace += P[j + j * nt] + theta[j];
   return std::isfinite(trace);

@@ -136,6 +136,7 @@ void WarmupFit::run() noexcept {
     const double y_var = (fitted.array() - fitted.mean()).square().mean();
     AdditiveModel model = initial;
     std::vector<Eigen::MatrixXd> cov;
+    std::vector<Eigen::VectorXd> bound;
     double sigma2 = 0.0;
     bool fit_used = false;
     if (cfg.fit_on_warmup) {
@@ -203,6 +204,15 @@ void WarmupFit::run() noexcept {
             const Eigen::VectorXd th0s =
                 C0s * (inv_std.cwiseProduct(th_cfg) + Cs_inv * inv_std.cwiseProduct(th_fit));
             const Eigen::MatrixXd C0 = prior_std.asDiagonal() * C0s * prior_std.asDiagonal();
+            // The same with one memory of the window's data (the recursion's
+            // steady state), the reference of the covariance bound: where the
+            // window is longer than the memory, its fit holds more
+            // information than the recursion will keep.
+            const double lambda = cfg.forgetting.empty() ? 1.0 : cfg.forgetting[i];
+            const double memories = std::max(1.0, static_cast<double>(N - settle_) * (1.0 - lambda));
+            Eigen::MatrixXd info_memory = Cs_inv / memories;
+            info_memory.diagonal().array() += 1.0;
+            bound.push_back(prior_std.cwiseAbs2().cwiseProduct(info_memory.inverse().diagonal()));
             Eigen::VectorXd th0 = prior_std.cwiseProduct(th0s);
             Submodel s = initial.submodels[i];
             s.set_theta(th0);
@@ -222,6 +232,7 @@ void WarmupFit::run() noexcept {
     }
     model_ = std::move(model);
     covariance_ = std::move(cov);
+    bound_variance_ = std::move(bound);
     sigma2_ = sigma2;
     y_var_ = y_var;
     fit_used_ = fit_used;
@@ -277,12 +288,14 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   // other's share, so that the two run apart along that direction.
   std::vector<detail::Block> restored;  // a refit's: the last good state, restored at the reset
   if (refitting) restored = std::exchange(blocks, {});
-  build(fit.model_, fit.covariance_.empty() ? nullptr : &fit.covariance_, sigma2, fit.y_var_);
+  build(fit.model_, fit.covariance_.empty() ? nullptr : &fit.covariance_, sigma2, fit.y_var_,
+        fit.bound_variance_.empty() ? nullptr : &fit.bound_variance_);
   for (std::size_t i = 0; i < restored.size(); ++i) {
     detail::Block& b = blocks[i];
     const detail::ThetaVec r = b.scale.cwiseQuotient(restored[i].scale);
     b.P = b.good_P = r.asDiagonal() * restored[i].good_P * r.asDiagonal();
     b.p_bound = restored[i].p_bound.cwiseProduct(r).cwiseProduct(r);
+    b.drop_lift();
   }
   if (sigma2 > 0.0) {
     e_var = e_short = e_var_good = sigma2;
