@@ -339,7 +339,7 @@ TEST(ConfigErrors, PlantNoise) {
             "test.yaml:18: key 'plant.modes[1].name': duplicate name (first used at line 12) (got m1)");
   EXPECT_EQ(parse_error(edit(kClosed, "      gain: 0.01", "      gain: 0.01\n      forgetting: 0.9")),
             "test.yaml:21: key 'plant.modes[1].forgetting': unknown key for kind rigid_body (allowed: name, "
-            "kind, gain, rigid_poles)");
+            "kind, gain, rigid_poles, input)");
 }
 
 TEST(ConfigErrors, Trajectories) {

@@ -87,6 +87,65 @@ TEST(SeveralInputsConfig, ErrorsNameTheKeyAndLine) {
             "several inputs need loop: open (got [u1, u2])");
 }
 
+// The same model, simulated: each plant mode on its input, one signal per input.
+const std::string kTwoInputSimulation = kTwoInputs +
+                                        "plant:\n"                     // 15
+                                        "  noise_variance: 0.0001\n"   // 16
+                                        "  modes:\n"                   // 17
+                                        "    - name: m1\n"             // 18
+                                        "      wn: 2.0\n"              // 19
+                                        "      zeta: 0.25\n"           // 20
+                                        "      gain: 3.0\n"            // 21
+                                        "    - name: m2\n"             // 22
+                                        "      input: u2\n"            // 23
+                                        "      frequency_hz: 1.0\n"    // 24
+                                        "      zeta: 0.1\n"            // 25
+                                        "      gain: 1.0\n"            // 26
+                                        "simulation:\n"                // 27
+                                        "  duration: 400\n"            // 28
+                                        "  seed: 3\n"                  // 29
+                                        "  input:\n"                   // 30
+                                        "    - type: prbs\n"           // 31
+                                        "      register_bits: 10\n"    // 32
+                                        "      clock_period: 1\n"      // 33
+                                        "      amplitude: 1\n"         // 34
+                                        "    - type: prbs\n"           // 35
+                                        "      register_bits: 10\n"    // 36
+                                        "      clock_period: 1\n"      // 37
+                                        "      amplitude: 1\n";        // 38
+
+TEST(SeveralInputsConfig, TheSimulationHasOneSignalPerInputAndEachPlantModeItsInput) {
+  const Config c = parse_config(kTwoInputSimulation, "test.yaml");
+  ASSERT_TRUE(c.plant && c.experiment);
+  EXPECT_EQ(c.plant->modes[0].submodel.input, 0);
+  EXPECT_EQ(c.plant->modes[1].submodel.input, 1);
+  ASSERT_EQ(c.experiment->further_excitations.size(), 1u);
+  // Two PRBS of one kind are two shifted copies (by half the 1023-step period
+  // here), and input j's random signals take the record's seed + j.
+  EXPECT_EQ(c.experiment->excitation.prbs_shift, 0);
+  EXPECT_EQ(c.experiment->further_excitations[0].prbs_shift, 511);
+  EXPECT_EQ(c.experiment->excitation.seed, 3u);
+  EXPECT_EQ(c.experiment->further_excitations[0].seed, 4u);
+  const std::string yaml = modalwatch::config_to_yaml(c, c.model);
+  Config back = parse_config(yaml, "test.yaml");
+  back.source = c.source;
+  EXPECT_TRUE(back == c) << yaml;
+}
+
+TEST(SeveralInputsConfig, ASimulationWithoutASignalPerInputIsNamed) {
+  const std::string head = kTwoInputSimulation.substr(0, kTwoInputSimulation.find("    - type: prbs"));
+  const std::string one_signal = head + "    type: prbs\n    register_bits: 10\n    clock_period: 1\n    amplitude: 1\n";
+  EXPECT_EQ(parse_error(one_signal),
+            "test.yaml:30: key 'simulation.input': model.inputs names 2 inputs: give a list of 2 signals, one per "
+            "input in that order");
+  const std::string three = kTwoInputSimulation + "    - type: square\n      frequency_hz: 0.5\n";
+  EXPECT_EQ(parse_error(three), "test.yaml:30: key 'simulation.input': lists 3 signals; model.inputs names 2 inputs");
+  EXPECT_EQ(parse_error(edit(kTwoInputSimulation, "      input: u2\n      frequency_hz: 1.0\n      zeta: 0.1\n"
+                                                  "      gain: 1.0\nsimulation",
+                             "      input: u3\n      frequency_hz: 1.0\n      zeta: 0.1\n      gain: 1.0\nsimulation")),
+            "test.yaml:23: key 'plant.modes[1].input': must be one of model.inputs (u1, u2) (got u3)");
+}
+
 // ---------------------------------------------------------------- record
 
 class SeveralInputsRecord : public modalwatch::test_support::ScratchDir {
@@ -664,6 +723,27 @@ TEST_F(SeveralInputsCli, TrackFollowsEachSubmodelFromItsOwnInputColumn) {
     EXPECT_EQ(wn, lib.mode(static_cast<int>(i)).value.wn) << kTruth[i].name;  // the same samples, the same estimate
     EXPECT_NEAR(wn / kTruth[i].modal.wn, 1.0, 0.01) << kTruth[i].name;
   }
+}
+
+// simulate writes one column per input under model.inputs' names, and track
+// follows each mode from its own input in what simulate wrote.
+TEST_F(SeveralInputsCli, SimulateWritesEachInputUnderItsNameAndTrackFollowsBoth) {
+  const std::string cfg = write("sim.yaml", kTwoInputSimulation);
+  const auto sim = modalwatch::test_support::run_cli("simulate --config " + cfg + " --out " + path("run.csv"));
+  ASSERT_EQ(sim.code, 0) << sim.output;
+  const modalwatch::Table run = modalwatch::read_table(path("run.csv"));
+  EXPECT_EQ(run.columns, (std::vector<std::string>{"t", "u1", "u2", "y"}));
+  const Eigen::VectorXd u1 = run.data.col(1), u2 = run.data.col(2);
+  // Two independent PRBS: correlation of a few 1/sqrt(N) at most.
+  EXPECT_LT(std::abs(u1.dot(u2)) / std::sqrt(u1.squaredNorm() * u2.squaredNorm()), 0.05);
+  const auto track = modalwatch::test_support::run_cli("track --no-progress --config " + cfg + " --data " +
+                                                       path("run.csv") + " --out " + path("est.csv"));
+  ASSERT_EQ(track.code, 0) << track.output;
+  const modalwatch::Table est = modalwatch::read_table(path("est.csv"));
+  const Eigen::Index last = est.data.rows() - 1;
+  EXPECT_NEAR(est.data(last, est.column("m1_wn")) / 2.0, 1.0, 0.01);
+  EXPECT_NEAR(est.data(last, est.column("m2_wn")) / (2.0 * M_PI), 1.0, 0.01);
+  EXPECT_NEAR(est.data(last, est.column("m2_zeta")) / 0.1, 1.0, 0.1);
 }
 
 // --u-column names the input columns when the record's are not the model's

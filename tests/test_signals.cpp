@@ -185,6 +185,22 @@ TEST(Signals, PrbsClockPeriodHoldsEachValue) {
   EXPECT_THROW(generate(prbs_spec(7, 0), time_grid(10, 1e-3)), std::invalid_argument);
 }
 
+// Input j of n starts j / n of a period in: the same sequence, shifted, and
+// over a whole period the two are uncorrelated (an m-sequence's circular
+// autocorrelation off zero lag is -1/N).
+TEST(Signals, PrbsShiftStartsTheSameSequenceLaterAndDecorrelatesAWholePeriod) {
+  const int N = 1023;
+  const Eigen::VectorXd y = generate(prbs_spec(10), time_grid(2 * N, 1e-3));
+  SignalSpec shifted = prbs_spec(10);
+  shifted.prbs_shift = 511;
+  const Eigen::VectorXd z = generate(shifted, time_grid(N, 1e-3));
+  EXPECT_EQ(z, y.segment(511, N));
+  const double a = shifted.amplitude;
+  EXPECT_DOUBLE_EQ(y.head(N).dot(z) / N, -a * a / N);
+  shifted.prbs_shift = -1;
+  EXPECT_THROW(generate(shifted, time_grid(10, 1e-3)), std::invalid_argument);
+}
+
 TEST(Signals, SquareWaveLevelsAndMean) {
   SignalSpec s;
   s.kind = SignalSpec::Kind::square;

@@ -29,6 +29,10 @@ struct SignalSpec {
   int register_bits = 10;
   int clock_period = 1;
   double amplitude = 1.0;
+  // The sequence starts this many register steps in: input j of n takes
+  // j (2^register_bits - 1) / n, so that shifted copies of one sequence drive
+  // several inputs uncorrelated over whole periods.
+  long long prbs_shift = 0;
 
   // square: amplitude * sign(sin(2 pi frequency_hz t)), plus offset.
   double frequency_hz = 1.0;

@@ -2,6 +2,7 @@
 // Data from a plant described as a sum of modes whose parameters follow
 // piecewise-linear trajectories in time, exactly discretised under ZOH, in open
 // loop or in closed loop with a discrete controller C_d(q).
+#include <algorithm>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -56,10 +57,16 @@ struct ExperimentSpec {
   // Samples of the excitation when it comes from a file (SignalSpec::Kind::csv),
   // already on the time grid.
   Eigen::VectorXd excitation_samples;
-  // Open loop with several actuators: the samples of inputs 2, 3, ... on the
-  // time grid, which drive the modes whose submodel.input is 1, 2, ... (the
-  // effects act on the first input only). Empty for one input.
+  // Open loop with several actuators: inputs 2, 3, ..., which drive the modes
+  // whose submodel.input is 1, 2, ... (the effects act on the first input
+  // only). Input j + 2 is further_input_samples[j] when that is given (a file,
+  // already on the time grid), else generated from further_excitations[j].
+  // Both empty for one input.
+  std::vector<SignalSpec> further_excitations;
   std::vector<Eigen::VectorXd> further_input_samples;
+  int further_inputs() const {
+    return static_cast<int>(std::max(further_excitations.size(), further_input_samples.size()));
+  }
 
   bool operator==(const ExperimentSpec& other) const;
 };

@@ -53,7 +53,7 @@ int simulate(const SimulateArgs& args) {
     }
     if (args.seed) experiment.seed = *args.seed;
     const SimulationResult sim = simulate(*config.plant, experiment);
-    write_record(args.out, sim.record);
+    write_record(args.out, sim.record, config.model.inputs);
     if (!args.truth.empty()) {
       std::vector<std::string> columns{"t"};
       columns.insert(columns.end(), sim.truth_columns.begin(), sim.truth_columns.end());

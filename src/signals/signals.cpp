@@ -82,7 +82,9 @@ class Lfsr {
 Eigen::VectorXd prbs(const SignalSpec& s, const Eigen::VectorXd& t) {
   if (s.register_bits < 2 || s.register_bits > 31) throw std::invalid_argument("prbs: register_bits must be in 2..31");
   if (s.clock_period < 1) throw std::invalid_argument("prbs: clock_period must be >= 1");
+  if (s.prbs_shift < 0) throw std::invalid_argument("prbs: prbs_shift must be >= 0");
   Lfsr lfsr(s.register_bits);
+  for (long long k = 0; k < s.prbs_shift; ++k) lfsr.next();
   Eigen::VectorXd y(t.size());
   double level = 0.0;
   for (Eigen::Index k = 0; k < t.size(); ++k) {

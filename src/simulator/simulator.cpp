@@ -209,6 +209,20 @@ Eigen::VectorXd excitation(const ExperimentSpec& ex, const Eigen::VectorXd& t) {
   return ex.excitation_samples;
 }
 
+// Inputs 2, 3, ...: the given samples, else generated from their signals.
+std::vector<Eigen::VectorXd> further_inputs(const ExperimentSpec& ex, const Eigen::VectorXd& t) {
+  std::vector<Eigen::VectorXd> inputs;
+  for (std::size_t j = 0; j < static_cast<std::size_t>(ex.further_inputs()); ++j) {
+    const bool given = j < ex.further_input_samples.size() && ex.further_input_samples[j].size() > 0;
+    if (!given && j >= ex.further_excitations.size())
+      throw std::invalid_argument("simulate: input " + std::to_string(j + 2) + " has neither samples nor a signal");
+    inputs.push_back(given ? ex.further_input_samples[j] : generate(ex.further_excitations[j], t));
+    if (inputs.back().size() != t.size())
+      throw std::invalid_argument("simulate: further_input_samples must have one value per sample");
+  }
+  return inputs;
+}
+
 // An unstable experiment (an unstable mode or loop, or a cubic stiffness whose
 // local stiffness 3 c x^2 outgrows what the explicit sampled loop can carry)
 // overflows; it is refused where it starts rather than written as NaN.
@@ -226,9 +240,9 @@ void check_bounded(const PlantSpec& plant, const ExperimentSpec& ex, const Eigen
 }
 
 Signals run(const PlantSpec& plant, const ExperimentSpec& ex, const Eigen::VectorXd& t, const Eigen::VectorXd& w,
-            const Eigen::VectorXd& noise) {
+            const std::vector<Eigen::VectorXd>& further_u, const Eigen::VectorXd& noise) {
   Signals s = ex.closed_loop ? run_closed_loop(plant, ex, t, w, noise)
-                             : run_open_loop(plant, t, ex.sample_time, w, ex.further_input_samples, noise);
+                             : run_open_loop(plant, t, ex.sample_time, w, further_u, noise);
   check_bounded(plant, ex, t, s);
   return s;
 }
@@ -259,12 +273,11 @@ void check_specs(const PlantSpec& plant, const ExperimentSpec& ex) {
   if (plant.snr_db && !std::isfinite(*plant.snr_db)) throw std::invalid_argument("simulate: snr_db must be finite");
   for (const PlantMode& m : plant.modes) {
     const int input = m.submodel.input;
-    if (input < 0 || input > static_cast<int>(ex.further_input_samples.size()))
+    if (input < 0 || input > ex.further_inputs())
       throw std::invalid_argument("simulate: mode " + m.submodel.name + " is driven by input " +
-                                  std::to_string(input + 1) + " of " +
-                                  std::to_string(1 + ex.further_input_samples.size()));
+                                  std::to_string(input + 1) + " of " + std::to_string(1 + ex.further_inputs()));
   }
-  if (!ex.further_input_samples.empty() && ex.closed_loop)
+  if (ex.further_inputs() > 0 && ex.closed_loop)
     throw std::invalid_argument("simulate: further inputs are for open loop only (the controller gives one u)");
   const PlantEffects& e = plant.effects;
   if (e.input_delay < 0) throw std::invalid_argument("simulate: input_delay must be >= 0");
@@ -309,26 +322,25 @@ SimulationResult simulate(const PlantSpec& plant, const ExperimentSpec& ex) {
   if (n < 1) throw std::invalid_argument("simulate: duration shorter than one sample");
   const Eigen::VectorXd t = Eigen::VectorXd::LinSpaced(n, 0.0, static_cast<double>(n - 1)) * ex.sample_time;
   const Eigen::VectorXd w = excitation(ex, t);
-  for (const auto& v : ex.further_input_samples)
-    if (v.size() != n) throw std::invalid_argument("simulate: further_input_samples must have one value per sample");
+  const std::vector<Eigen::VectorXd> further_u = further_inputs(ex, t);
 
   SimulationResult out;
   out.noise_variance = plant.noise_variance;
   if (plant.snr_db) {
     // The SNR refers to the noise-free experiment's output power.
-    const Signals clean = run(plant, ex, t, w, Eigen::VectorXd::Zero(n));
+    const Signals clean = run(plant, ex, t, w, further_u, Eigen::VectorXd::Zero(n));
     out.noise_variance = centred_power(clean.y_clean) / std::pow(10.0, *plant.snr_db / 10.0);
   }
   const Eigen::VectorXd noise = out.noise_variance > 0.0
                                     ? Eigen::VectorXd(std::sqrt(out.noise_variance) * standard_noise(ex.seed, n))
                                     : Eigen::VectorXd(Eigen::VectorXd::Zero(n));
-  Signals s = run(plant, ex, t, w, noise);
+  Signals s = run(plant, ex, t, w, further_u, noise);
 
   out.record.t = t;
   out.record.u = std::move(s.u);
   out.record.y = std::move(s.y);
   if (ex.closed_loop) out.record.r = w;
-  out.record.further_u = ex.further_input_samples;
+  out.record.further_u = further_u;
   out.y_clean = std::move(s.y_clean);
   fill_truth(plant, t, out);
   return out;
@@ -345,7 +357,7 @@ bool ExperimentSpec::operator==(const ExperimentSpec& other) const {
   return sample_time == other.sample_time && duration == other.duration && seed == other.seed &&
          closed_loop == other.closed_loop && controller == other.controller && excitation == other.excitation &&
          excitation_samples.size() == other.excitation_samples.size() &&
-         excitation_samples == other.excitation_samples &&
+         excitation_samples == other.excitation_samples && further_excitations == other.further_excitations &&
          further_input_samples.size() == other.further_input_samples.size() &&
          std::equal(further_input_samples.begin(), further_input_samples.end(), other.further_input_samples.begin(),
                     [](const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return a.size() == b.size() && a == b; });

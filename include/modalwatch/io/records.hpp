@@ -127,7 +127,8 @@ void check_record(const Record& record, const std::string& path, double sample_t
 // selects the log's channel and is refused for a CSV file.
 Table read_signal_file(const std::string& path, const std::string& channel);
 
-// Writes t, [r,] u, y as CSV, atomically (write_table).
-void write_record(const std::string& path, const Record& record);
+// Writes t, [r,] u, y as CSV, atomically (write_table). The input columns are
+// `input_names` (model.inputs) when given, else u (one input) or u1, u2, ...
+void write_record(const std::string& path, const Record& record, const std::vector<std::string>& input_names = {});
 
 }  // namespace modalwatch

@@ -31,7 +31,7 @@ void parse_document(const Map& top, Config& config, const std::filesystem::path&
   parse_model(Map(top.require("model")), config);
   if (const auto c = top.get("controller")) config.controller = parse_controller(Map(*c));
   if (config.closed_loop && !top.has("controller")) top.missing("controller", "model.loop is closed");
-  if (const auto p = top.get("plant")) config.plant = parse_plant(Map(*p), config.output_derivatives);
+  if (const auto p = top.get("plant")) config.plant = parse_plant(Map(*p), config.output_derivatives, config.model.inputs);
   if (const auto s = top.get("simulation")) config.experiment = parse_simulation(Map(*s), config, dir);
   if (const auto e = top.get("estimator")) parse_estimator(Map(*e), config.sample_time, config.estimator);
   if (const auto l = top.get("lcm")) parse_lcm(Map(*l), config.lcm);

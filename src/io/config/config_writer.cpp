@@ -186,7 +186,7 @@ void write_controller(YamlWriter& w, const DiscreteTransferFunction& c) {
   w.key(1, "denominator", flow_list(c.denominator()));
 }
 
-void write_plant(YamlWriter& w, const PlantSpec& plant) {
+void write_plant(YamlWriter& w, const PlantSpec& plant, const AdditiveModel& model) {
   w.line(0, "plant:");
   if (plant.snr_db)
     w.number(1, "snr_db", *plant.snr_db);
@@ -202,6 +202,7 @@ void write_plant(YamlWriter& w, const PlantSpec& plant) {
   for (const auto& mode : plant.modes) {
     if (!mode.resonant) {
       write_submodel(w, 2, mode.submodel);
+      if (!model.inputs.empty()) w.key(3, "input", quoted(model.input_name(mode.submodel.input)));
       continue;
     }
     w.key(2, "- name", quoted(mode.submodel.name));
@@ -209,6 +210,7 @@ void write_plant(YamlWriter& w, const PlantSpec& plant) {
     w.number(3, "wn", mode.modal.wn);
     w.number(3, "zeta", mode.modal.zeta);
     w.number(3, "gain", mode.modal.gain);
+    if (!model.inputs.empty()) w.key(3, "input", quoted(model.input_name(mode.submodel.input)));
     if (mode.wn.points.empty() && mode.zeta.points.empty() && mode.gain.points.empty()) continue;
     w.line(3, "trajectory:");
     if (!mode.wn.points.empty()) w.key(4, "wn", points(mode.wn));
@@ -217,35 +219,39 @@ void write_plant(YamlWriter& w, const PlantSpec& plant) {
   }
 }
 
-void write_signal(YamlWriter& w, int in, const SignalSpec& s) {
+// A signal's keys at `in`, or as a list item (`- type:` at `in`, the rest below it).
+void write_signal(YamlWriter& w, int in, const SignalSpec& s, bool list_item = false) {
+  const std::string type = list_item ? "- type" : "type";
+  const int at = in;
+  if (list_item) ++in;
   switch (s.kind) {
     case SignalSpec::Kind::sum_of_sines:
-      w.key(in, "type", "sum_of_sines");
+      w.key(at, type, "sum_of_sines");
       w.key(in, "amplitudes", flow_list(s.amplitudes));
       w.key(in, "frequencies_rad_s", flow_list(s.frequencies_rad_s));
       if (!s.phases.empty()) w.key(in, "phases", flow_list(s.phases));
       break;
     case SignalSpec::Kind::multisine:
-      w.key(in, "type", "multisine");
+      w.key(at, type, "multisine");
       w.number(in, "f_min_hz", s.f_min_hz);
       w.number(in, "f_max_hz", s.f_max_hz);
       w.number(in, "period_s", s.period_s);
       w.number(in, "rms", s.rms);
       break;
     case SignalSpec::Kind::prbs:
-      w.key(in, "type", "prbs");
+      w.key(at, type, "prbs");
       w.key(in, "register_bits", std::to_string(s.register_bits));
       w.key(in, "clock_period", std::to_string(s.clock_period));
       w.number(in, "amplitude", s.amplitude);
       break;
     case SignalSpec::Kind::square:
-      w.key(in, "type", "square");
+      w.key(at, type, "square");
       w.number(in, "frequency_hz", s.frequency_hz);
       w.number(in, "amplitude", s.amplitude);
       w.number(in, "offset", s.offset);
       break;
     case SignalSpec::Kind::csv:
-      w.key(in, "type", "csv");
+      w.key(at, type, "csv");
       w.key(in, "path", quoted(s.csv_path));  // absolute: valid wherever the YAML is written
       w.key(in, "column", quoted(s.csv_column));
       if (!s.csv_channel.empty()) w.key(in, "channel", quoted(s.csv_channel));
@@ -351,7 +357,14 @@ void write_simulation(YamlWriter& w, const ExperimentSpec& e) {
   w.number(1, "duration", e.duration);
   w.key(1, "seed", std::to_string(e.seed));
   w.line(1, e.closed_loop ? "reference:" : "input:");
-  write_signal(w, 2, e.excitation);
+  if (e.further_inputs() == 0) {
+    write_signal(w, 2, e.excitation);
+    return;
+  }
+  // One signal per input, in model.inputs' order. Samples given without a
+  // signal (a program's, not a file's) cannot be written.
+  write_signal(w, 2, e.excitation, true);
+  for (const SignalSpec& further : e.further_excitations) write_signal(w, 2, further, true);
 }
 
 }  // namespace
@@ -364,7 +377,7 @@ std::string config_to_yaml(const Config& config, const AdditiveModel& model) {
   w.number(0, "sample_rate_hz", 1.0 / config.sample_time);
   write_model(w, config, model);
   if (!config.controller.empty()) write_controller(w, config.controller);
-  if (config.plant) write_plant(w, *config.plant);
+  if (config.plant) write_plant(w, *config.plant, config.model);
   if (config.experiment) write_simulation(w, *config.experiment);
   write_estimator(w, config.estimator, config.sample_time);
   write_lcm(w, config.lcm);

@@ -170,7 +170,8 @@ std::vector<std::string> parse_inputs(const Value& v, bool closed_loop) {
   return names;
 }
 
-// A submodel's `input`: one of model.inputs by name, the first when absent.
+}  // namespace
+
 int parse_submodel_input(const Map& m, const std::vector<std::string>& inputs) {
   const auto v = m.get("input");
   if (!v) return 0;
@@ -184,8 +185,6 @@ int parse_submodel_input(const Map& m, const std::vector<std::string>& inputs) {
   }
   return static_cast<int>(it - inputs.begin());
 }
-
-}  // namespace
 
 void parse_model(const Map& model, Config& config) {
   model.allow({"loop", "output", "output_hold", "inputs", "submodels", "modes"}, "model");

@@ -18,6 +18,9 @@ struct SubmodelEntry {
 // A submodel entry; `extra` are the keys the caller reads itself (forgetting,
 // trajectory). The submodel measures the z-th derivative of its position (model.output).
 SubmodelEntry parse_submodel(const Map& m, const Keys& extra, int output_derivatives);
+// A submodel's `input`: the index of one of `inputs` (model.inputs) by name,
+// the first when the key is absent.
+int parse_submodel_input(const Map& m, const std::vector<std::string>& inputs);
 // Modal parameters (wn or frequency_hz, zeta, gain).
 ModalParameters parse_modal(const Map& m);
 // Names are unique within a list; `items` locate the entries in messages.
@@ -27,7 +30,7 @@ void check_unique_names(const std::vector<Value>& items, const std::vector<Submo
 void parse_model(const Map& model, Config& config);
 DiscreteTransferFunction parse_controller(const Map& c);
 // The plant is measured by the model's sensor: its modes take model.output's z.
-PlantSpec parse_plant(const Map& plant, int output_derivatives);
+PlantSpec parse_plant(const Map& plant, int output_derivatives, const std::vector<std::string>& inputs);
 // simulation: signal files are read relative to `dir` (CSV or LCM log, records.hpp).
 ExperimentSpec parse_simulation(const Map& sim, const Config& config, const std::filesystem::path& dir);
 void parse_estimator(const Map& est, double sample_time, EstimatorSettings& e);

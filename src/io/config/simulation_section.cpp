@@ -47,7 +47,7 @@ void parse_trajectory(const Map& m, PlantMode& mode) {
 
 }  // namespace
 
-PlantSpec parse_plant(const Map& plant, int output_derivatives) {
+PlantSpec parse_plant(const Map& plant, int output_derivatives, const std::vector<std::string>& inputs) {
   plant.allow({"modes", "noise_variance", "snr_db", "output_offset", "input_offset", "input_delay", "coulomb", "cubic"},
               "plant");
   PlantSpec spec;
@@ -57,7 +57,8 @@ PlantSpec parse_plant(const Map& plant, int output_derivatives) {
   std::vector<SubmodelEntry> entries;
   for (const auto& item : items) {
     const Map m(item);
-    entries.push_back(parse_submodel(m, {"trajectory"}, output_derivatives));
+    entries.push_back(parse_submodel(m, {"trajectory", "input"}, output_derivatives));
+    entries.back().submodel.input = parse_submodel_input(m, inputs);
     PlantMode mode;
     mode.submodel = entries.back().submodel;
     mode.resonant = entries.back().mode;
@@ -207,11 +208,17 @@ Eigen::VectorXd parse_csv_signal(const Map& m, SignalSpec& s, const SignalContex
   return interpolate(path, t, table.data.col(xc), ctx.sample_time, ctx.samples);
 }
 
-// Fills experiment.excitation (and excitation_samples for csv).
-void parse_signal(const Value& v, const SignalContext& ctx, ExperimentSpec& experiment) {
+// A signal, and its samples on the time grid for csv (else empty).
+struct ParsedSignal {
+  SignalSpec spec;
+  Eigen::VectorXd samples;
+};
+
+ParsedSignal parse_signal(const Value& v, const SignalContext& ctx) {
   const Map m(v);
   const std::string type = m.require("type").choice({"sum_of_sines", "multisine", "prbs", "square", "csv"});
-  SignalSpec& s = experiment.excitation;
+  ParsedSignal parsed;
+  SignalSpec& s = parsed.spec;
   s.seed = ctx.seed;
   if (type == "sum_of_sines") {
     s.kind = SignalSpec::Kind::sum_of_sines;
@@ -227,8 +234,9 @@ void parse_signal(const Value& v, const SignalContext& ctx, ExperimentSpec& expe
     parse_square(m, s);
   } else {
     s.kind = SignalSpec::Kind::csv;
-    experiment.excitation_samples = parse_csv_signal(m, s, ctx);
+    parsed.samples = parse_csv_signal(m, s, ctx);
   }
+  return parsed;
 }
 
 // ---------------------------------------------------------------- simulation
@@ -259,7 +267,39 @@ ExperimentSpec parse_simulation(const Map& sim, const Config& config, const std:
   if (const auto extra = sim.get(unused))
     extra->fail_plain("not used when model.loop is " + loop + " (the excitation is simulation." + used + ")");
   const SignalContext ctx{e.sample_time, static_cast<Eigen::Index>(samples), e.seed, dir};
-  parse_signal(sim.require(used, "model.loop is " + loop), ctx, e);
+  const Value signal = sim.require(used, "model.loop is " + loop);
+  const std::size_t inputs = config.model.inputs.size();
+  if (inputs < 2) {
+    ParsedSignal parsed = parse_signal(signal, ctx);
+    e.excitation = std::move(parsed.spec);
+    e.excitation_samples = std::move(parsed.samples);
+    return e;
+  }
+  // One signal per input in model.inputs' order. Two random signals of one
+  // kind differ: input j's seed is the record's seed + j, and its PRBS is the
+  // sequence shifted by j / inputs of its period.
+  const std::string count = std::to_string(inputs);
+  if (!signal.node().IsSequence())
+    signal.fail_plain("model.inputs names " + count + " inputs: give a list of " + count +
+                      " signals, one per input in that order");
+  const std::vector<Value> items = signal.items();
+  if (items.size() != inputs)
+    signal.fail_plain("lists " + std::to_string(items.size()) + " signals; model.inputs names " + count + " inputs");
+  for (std::size_t j = 0; j < inputs; ++j) {
+    SignalContext input_ctx = ctx;
+    input_ctx.seed = ctx.seed + j;
+    ParsedSignal parsed = parse_signal(items[j], input_ctx);
+    if (parsed.spec.kind == SignalSpec::Kind::prbs)
+      parsed.spec.prbs_shift = static_cast<long long>(j) * ((1LL << parsed.spec.register_bits) - 1) /
+                               static_cast<long long>(inputs);
+    if (j == 0) {
+      e.excitation = std::move(parsed.spec);
+      e.excitation_samples = std::move(parsed.samples);
+    } else {
+      e.further_excitations.push_back(std::move(parsed.spec));
+      e.further_input_samples.push_back(std::move(parsed.samples));
+    }
+  }
   return e;
 }
 

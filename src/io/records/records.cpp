@@ -221,20 +221,32 @@ Table read_signal_file(const std::string& path, const std::string& channel) {
   return table;
 }
 
-void write_record(const std::string& path, const Record& record) {
+void write_record(const std::string& path, const Record& record, const std::vector<std::string>& input_names) {
   const bool with_r = record.has_reference();
   const Eigen::Index n = record.size();
+  const int inputs = record.inputs();
   if (record.u.size() != n || record.y.size() != n) throw InputError(path, "cannot write: t, u and y differ in length");
+  for (const auto& v : record.further_u)
+    if (v.size() != n) throw InputError(path, "cannot write: the inputs differ in length from t");
+  if (!input_names.empty() && static_cast<int>(input_names.size()) != inputs)
+    throw InputError(path, "cannot write: " + std::to_string(inputs) + " inputs, " +
+                               std::to_string(input_names.size()) + " names");
   std::vector<std::string> columns{"t"};
-  Eigen::MatrixXd data(n, with_r ? 4 : 3);
-  data.col(0) = record.t;
+  Eigen::MatrixXd data(n, 2 + (with_r ? 1 : 0) + inputs);
+  Eigen::Index c = 0;
+  data.col(c++) = record.t;
   if (with_r) {
     columns.push_back("r");
-    data.col(1) = record.r;
+    data.col(c++) = record.r;
   }
-  columns.insert(columns.end(), {"u", "y"});
-  data.col(with_r ? 2 : 1) = record.u;
-  data.col(with_r ? 3 : 2) = record.y;
+  for (int j = 0; j < inputs; ++j) {
+    columns.push_back(!input_names.empty() ? input_names[static_cast<std::size_t>(j)]
+                      : inputs == 1        ? std::string("u")
+                                           : "u" + std::to_string(j + 1));
+    data.col(c++) = record.input(j);
+  }
+  columns.push_back("y");
+  data.col(c) = record.y;
   write_table(path, columns, data);
 }
 
