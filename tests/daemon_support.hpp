@@ -13,7 +13,6 @@
 #include <fstream>
 #include <functional>
 #include <mutex>
-#include <random>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -26,6 +25,7 @@
 #include <modalwatch/fault_status_t.hpp>
 #include <modalwatch/heartbeat_t.hpp>
 
+#include "simulation_support.hpp"
 #include "support.hpp"
 
 #include "modalwatch/daemon/daemon.hpp"
@@ -319,11 +319,7 @@ inline TwoInputPlant two_input_plant(const std::string& config_path) {
   e.excitation.clock_period = 1;
   e.excitation.amplitude = 1.0;
   const auto n = static_cast<Eigen::Index>(std::llround(e.duration / e.sample_time));
-  std::mt19937_64 rng(44);
-  std::normal_distribution<double> normal(0.0, 1.0);
-  Eigen::VectorXd u2(n);
-  for (Eigen::Index k = 0; k < n; ++k) u2(k) = normal(rng);
-  e.further_input_samples = {u2};
+  e.further_input_samples = {modalwatch::test_support::white_noise(n, 44)};
   out.record = simulate(plant, e).record;
   return out;
 }

@@ -1,6 +1,7 @@
 #pragma once
 // Experiments shared by the suites that fit simulated plants.
 #include <cstdint>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -37,6 +38,15 @@ inline ExperimentSpec open_loop_multisine(double T, double duration, std::uint64
   e.excitation.rms = rms;
   e.excitation.seed = seed;
   return e;
+}
+
+// n samples of unit white Gaussian noise from `seed`: a second shaker's input.
+inline Eigen::VectorXd white_noise(Eigen::Index n, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  Eigen::VectorXd v(n);
+  for (Eigen::Index k = 0; k < n; ++k) v(k) = normal(rng);
+  return v;
 }
 
 // A plant of plain modes named mode1, mode2, ..., with output noise at snr_db.

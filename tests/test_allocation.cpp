@@ -8,13 +8,13 @@
 #include <cmath>
 #include <cstdio>
 #include <optional>
-#include <random>
 #include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
 
 #include "allocation_counter.hpp"
+#include "simulation_support.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/fault_detector.hpp"
 #include "modalwatch/io/config.hpp"
@@ -155,11 +155,7 @@ const TwoInputs& two_inputs() {
     e.duration = 330.0;
     e.closed_loop = false;
     const auto n = static_cast<Eigen::Index>(std::llround(e.duration / e.sample_time));
-    std::mt19937_64 rng(11);
-    std::normal_distribution<double> normal(0.0, 1.0);
-    Eigen::VectorXd u2(n);
-    for (Eigen::Index k = 0; k < n; ++k) u2(k) = normal(rng);
-    e.further_input_samples = {u2};
+    e.further_input_samples = {modalwatch::test_support::white_noise(n, 11)};
     out.record = simulate(plant, e).record;
     return out;
   }();

@@ -18,6 +18,7 @@
 
 #include <gtest/gtest.h>
 
+#include "simulation_support.hpp"
 #include "support.hpp"
 
 #include "modalwatch/estimator.hpp"
@@ -426,11 +427,7 @@ class TwoInputLog : public LcmLog {
     ExperimentSpec e = *c.experiment;
     e.duration = 200.0;
     e.closed_loop = false;
-    std::mt19937_64 rng(5);
-    std::normal_distribution<double> normal(0.0, 1.0);
-    Eigen::VectorXd u2(4000);
-    for (auto& v : u2) v = normal(rng);
-    e.further_input_samples = {u2};
+    e.further_input_samples = {modalwatch::test_support::white_noise(4000, 5)};
     return simulate(plant, e).record;
   }
   // The record as sample_batch2_t events on IN, 64 samples a batch.

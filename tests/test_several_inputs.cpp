@@ -230,11 +230,7 @@ Record two_input_record(const std::vector<Truth>& truth, double coupling, std::u
   const Eigen::Index n = std::llround(e.duration / e.sample_time);
   const Eigen::VectorXd t = Eigen::VectorXd::LinSpaced(n, 0.0, static_cast<double>(n - 1)) * kT;
   const Eigen::VectorXd u1 = modalwatch::generate(e.excitation, t);
-  std::mt19937_64 rng(seed + 100);
-  std::normal_distribution<double> normal(0.0, 1.0);
-  Eigen::VectorXd u2(n);
-  for (Eigen::Index k = 0; k < n; ++k) u2(k) = normal(rng) + coupling * u1(k);
-  e.further_input_samples = {u2};
+  e.further_input_samples = {modalwatch::test_support::white_noise(n, seed + 100) + coupling * u1};
   return modalwatch::simulate(plant_of(truth), e).record;
 }
 Record two_input_record(double coupling, std::uint64_t seed = 3) { return two_input_record(kTruth, coupling, seed); }
