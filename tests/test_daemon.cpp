@@ -149,6 +149,34 @@ TEST_F(DaemonInProcess, FlagsTheDriftingModeOnlyAndMatchesTrack) {
   EXPECT_NEAR(fin.modes[kSuspension].hz, 6.0, 0.1);
 }
 
+// A checkpoint pauses the estimation loop wherever it has got to in the
+// record; the estimates and the fault detector's updates stay on the
+// sample-time grid, so the flags are still track's to the microsecond.
+TEST_F(DaemonInProcess, CheckpointPausesDoNotMoveTheFlags) {
+  const DriftData& data = drift_track();
+  Config c = load_config(kDriftConfig);
+  c.daemon.checkpoint_path = path("paused.ckpt");
+  c.daemon.checkpoint_period = 0.05;  // s of wall time: many pauses, at samples no one chose
+  Received rx;
+  const DaemonCounters counters = run_in_process(c, data.record, rx);
+  EXPECT_EQ(counters.samples_processed, 245760u);
+  EXPECT_GE(counters.checkpoints_written, 5u) << "too few pauses to test anything";
+  const std::string us_csv = path("record_us.csv"), us_flags = path("flags_us.csv");
+  write_wire_times_csv(data.record, us_csv);
+  const Outcome tr = run_cli("track --no-progress --config " + kDriftConfig + " --data " + us_csv + " --out " +
+                             path("est_us.csv") + " --faults " + us_flags);
+  ASSERT_EQ(tr.code, 0) << tr.output;
+  const std::vector<std::string> daemon_changes =
+      daemon_flag_changes(rx.status, std::llround(data.record.t(0) * 1e6));
+  EXPECT_FALSE(daemon_changes.empty());
+  EXPECT_EQ(track_flag_changes(us_flags), daemon_changes) << "a pause moved the daemon's flags";
+  // Every estimate on the grid of 0.1 s from the first sample.
+  for (const auto& m : rx.estimates) {
+    const std::int64_t since_first = m.utime - kUtime0 - std::llround(data.record.t(0) * 1e6);
+    ASSERT_LT(since_first % 100000, 245) << "an estimate off the publish grid at " << since_first << " us";
+  }
+}
+
 // The drift config's beam at 50 dB with one memory for both modes (0.49 s), a
 // 2 s warm-up and the flexible mode's wn stepping -8 % at t = 20 s: the step
 // trips the divergence reset, and the restored state does not settle, so the

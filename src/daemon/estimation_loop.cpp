@@ -109,9 +109,16 @@ void EstimationLoop::start_fitter() {
 void EstimationLoop::start() {
   if (thread_.joinable()) return;
   const DaemonSettings& d = config_.daemon;
-  publish_period_us_ = std::max<std::int64_t>(1, std::llround(d.publish_period * 1e6));
+  const std::int64_t period_us = std::max<std::int64_t>(1, std::llround(d.publish_period * 1e6));
+  // The estimates (and the fault detector's updates) fall on the sample-time
+  // grid utime0 + k period, as in `track --faults`. A pause (a checkpoint, a
+  // reload) keeps it: re-anchored on the last sample, it moved by however far
+  // the loop had got when paused, and so did the flags. A new period starts
+  // its grid from utime0 too.
+  if (have_time_ && period_us != publish_period_us_)
+    next_publish_utime_ = utime0_ + ((last_utime_ - utime0_) / period_us + 1) * period_us;
+  publish_period_us_ = period_us;
   gap_us_ = std::llround(config_.estimator.gap_factor * config_.sample_time * 1e6);
-  if (have_time_) next_publish_utime_ = last_utime_ + publish_period_us_;
   tick_period_ns_ = std::max<std::int64_t>(10'000, static_cast<std::int64_t>(std::llround(1e9 / d.loop_rate_hz)));
   tick_origin_ns_ = mono_ns();
   stop_.store(keep_running);
