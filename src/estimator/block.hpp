@@ -128,7 +128,9 @@ struct Block {
   ThetaVec scale;            // theta' = scale .* theta (physical)
   ThetaVec theta;            // theta-bar, normalised
   ThetaMat P;                // P-bar, normalised
-  ThetaVec p_bound;          // per-direction bound on diag(P): covariance_bound x diag(P(t0))
+  // Per-direction bound on diag(P): covariance_bound x its reference, diag(P(t0))
+  // or what one memory of the warm-up window gives (Impl::build).
+  ThetaVec p_bound;
   // The bound that applies now: p_bound, lifted by a change boost's factor for
   // one memory of the block after it (lift_bound()), while the boosted P
   // re-converges; without the lift the bound would undo the boost.

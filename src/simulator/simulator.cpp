@@ -202,23 +202,30 @@ Signals run_closed_loop(const PlantSpec& plant, const ExperimentSpec& ex, const 
   return s;
 }
 
-Eigen::VectorXd excitation(const ExperimentSpec& ex, const Eigen::VectorXd& t) {
-  if (ex.excitation_samples.size() == 0) return generate(ex.excitation, t);
-  if (ex.excitation_samples.size() != t.size())
-    throw std::invalid_argument("simulate: excitation_samples must have one value per sample");
-  return ex.excitation_samples;
+// A signal on the time grid: its samples when given (a file's), else generated.
+Eigen::VectorXd on_grid(const SignalSpec& spec, const Eigen::VectorXd& samples, const Eigen::VectorXd& t,
+                        const char* samples_name) {
+  if (samples.size() == 0) return generate(spec, t);
+  if (samples.size() != t.size())
+    throw std::invalid_argument(std::string("simulate: ") + samples_name + " must have one value per sample");
+  return samples;
 }
 
-// Inputs 2, 3, ...: the given samples, else generated from their signals.
+Eigen::VectorXd excitation(const ExperimentSpec& ex, const Eigen::VectorXd& t) {
+  return on_grid(ex.excitation, ex.excitation_samples, t, "excitation_samples");
+}
+
+// Inputs 2, 3, ...
 std::vector<Eigen::VectorXd> further_inputs(const ExperimentSpec& ex, const Eigen::VectorXd& t) {
+  static const Eigen::VectorXd none;
   std::vector<Eigen::VectorXd> inputs;
   for (std::size_t j = 0; j < static_cast<std::size_t>(ex.further_inputs()); ++j) {
-    const bool given = j < ex.further_input_samples.size() && ex.further_input_samples[j].size() > 0;
-    if (!given && j >= ex.further_excitations.size())
+    const Eigen::VectorXd& samples = j < ex.further_input_samples.size() ? ex.further_input_samples[j] : none;
+    const bool has_signal = j < ex.further_excitations.size();
+    if (samples.size() == 0 && !has_signal)
       throw std::invalid_argument("simulate: input " + std::to_string(j + 2) + " has neither samples nor a signal");
-    inputs.push_back(given ? ex.further_input_samples[j] : generate(ex.further_excitations[j], t));
-    if (inputs.back().size() != t.size())
-      throw std::invalid_argument("simulate: further_input_samples must have one value per sample");
+    inputs.push_back(on_grid(has_signal ? ex.further_excitations[j] : SignalSpec{}, samples, t,
+                             "further_input_samples"));
   }
   return inputs;
 }
