@@ -62,13 +62,19 @@ template <int N>
 MODALWATCH_HOT bool iv_update(int nt_runtime, double* P, double* theta, const double* phi, const double* psi,
                               double lambda, double y_f) {
   const int nt = N > 0 ? N : nt_runtime;
-  double Ppsi[kMaxTheta], w[kMaxTheta];
-  for (int i = 0; i < nt; ++i) Ppsi[i] = w[i] = 0.0;
+  // phi and psi in locals: they may point into the block, as theta and P do,
+  // and the compiler would reload them after every store.
+  double Ppsi[kMaxTheta], w[kMaxTheta], ps[kMaxTheta], ph[kMaxTheta];
+  for (int i = 0; i < nt; ++i) {
+    Ppsi[i] = w[i] = 0.0;
+    ps[i] = psi[i];
+    ph[i] = phi[i];
+  }
   for (int j = 0; j < nt; ++j) {  // by columns: P psi and P phi
     const double* column = P + j * nt;
     for (int i = 0; i < nt; ++i) {
-      Ppsi[i] += column[i] * psi[j];
-      w[i] += column[i] * phi[j];
+      Ppsi[i] += column[i] * ps[j];
+      w[i] += column[i] * ph[j];
     }
   }
   double denom = lambda, eps = y_f;
@@ -149,9 +155,13 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
     const double rho = e_short_alpha;
     double* score = b.score.data();
     double* info = b.score_info.data();
-    for (int i = 0; i < nt; ++i) score[i] = rho * score[i] + psi[i] * eps;
+    // psi copied first: the stores to score and info could otherwise alias it,
+    // and each element would be loaded again after every store.
+    double ps[kMaxTheta];
+    for (int i = 0; i < nt; ++i) ps[i] = psi[i];
+    for (int i = 0; i < nt; ++i) score[i] = rho * score[i] + ps[i] * eps;
     for (int j = 0; j < nt; ++j)  // the upper triangle: it is symmetric
-      for (int i = 0; i <= j; ++i) info[i + j * nt] = rho * info[i + j * nt] + psi[i] * psi[j];
+      for (int i = 0; i <= j; ++i) info[i + j * nt] = rho * info[i + j * nt] + ps[i] * ps[j];
   }
   if (b.held > 0) return true;  // another block re-converges after a change (boost_changed_blocks)
   if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), lambda, y_f)) return false;
