@@ -106,9 +106,13 @@ struct Received {
   std::vector<std::chrono::steady_clock::time_point> estimate_arrivals;
 
   void subscribe(lcm_t* lcm, const LcmSettings& s) {
-    lcm_subscribe(lcm, s.estimates_channel.c_str(), &on<modalwatch::estimates_t, &Received::estimates>, this);
-    lcm_subscribe(lcm, s.fault_status_channel.c_str(), &on<modalwatch::fault_status_t, &Received::status>, this);
-    lcm_subscribe(lcm, s.heartbeat_channel.c_str(), &on<modalwatch::heartbeat_t, &Received::heartbeats>, this);
+    // LCM keeps 30 messages per subscription by default and drops the rest
+    // silently: a test thread stalled by a loaded machine would lose some.
+    for (lcm_subscription_t* sub :
+         {lcm_subscribe(lcm, s.estimates_channel.c_str(), &on<modalwatch::estimates_t, &Received::estimates>, this),
+          lcm_subscribe(lcm, s.fault_status_channel.c_str(), &on<modalwatch::fault_status_t, &Received::status>, this),
+          lcm_subscribe(lcm, s.heartbeat_channel.c_str(), &on<modalwatch::heartbeat_t, &Received::heartbeats>, this)})
+      if (sub) lcm_subscription_set_queue_capacity(sub, 100000);
   }
   template <class T, std::vector<T> Received::*list>
   static void on(const lcm_recv_buf_t* rbuf, const char*, void* user) {
@@ -125,6 +129,10 @@ struct Received {
   std::size_t count_estimates() {
     std::lock_guard<std::mutex> lock(mutex);
     return estimates.size();
+  }
+  std::int64_t last_estimate_utime() {
+    std::lock_guard<std::mutex> lock(mutex);
+    return estimates.empty() ? 0 : estimates.back().utime;
   }
   std::size_t count_status() {
     std::lock_guard<std::mutex> lock(mutex);

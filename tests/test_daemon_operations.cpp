@@ -395,7 +395,11 @@ TEST_F(DaemonInProcessOperations, OneFaultStatusPerPublishPeriod) {
     (s.utime < last_utime ? with_input : without) += 1;
   }
   EXPECT_GE(rx.estimates.size(), 29u);
-  EXPECT_EQ(with_input, rx.estimates.size());  // flag changes would add theirs: none here
+  // Flag changes would add theirs: none here. A timer's status beside every
+  // estimate would double the count; a sender stalled for a publish period
+  // (a loaded machine) adds one, rightly, as for any silence.
+  EXPECT_GE(with_input, rx.estimates.size());
+  EXPECT_LE(with_input, rx.estimates.size() + 2);
   EXPECT_GE(without, 25u);                     // about 3 s / 0.1 s after the input stops
   EXPECT_LE(without, 35u);
 }
@@ -453,13 +457,13 @@ TEST_F(DaemonInProcessOperations, InputResumedIsLoggedOnlyWhenASampleArrives) {
   r.c.daemon.stale_time = 0.2;
   LogCapture log;
   Daemon& d = r.start();
-  ASSERT_TRUE(wait_for([&] { return log.count("no input yet") == 1; }, 5.0)) << log.text();
+  ASSERT_TRUE(wait_for([&] { return log.count("no input yet") == 1; }, 30.0)) << log.text();
   Config longer = r.c;
   longer.daemon.stale_time = 100.0;
   d.reload(longer);
   std::this_thread::sleep_for(std::chrono::milliseconds(400));
   EXPECT_EQ(log.count("input resumed"), 0) << log.text();
   ASSERT_TRUE(r.feed(17.0, 17.5));
-  ASSERT_TRUE(wait_for([&] { return log.count("input resumed") == 1; }, 5.0)) << log.text();
+  ASSERT_TRUE(wait_for([&] { return log.count("input resumed") == 1; }, 30.0)) << log.text();
   r.stop();
 }

@@ -357,6 +357,9 @@ test_support::Outcome replay_into(const std::string& url, const std::string& cha
   lcm_ok = lcm != nullptr;
   if (!lcm) return {-1, ""};
   lcm_subscription_t* sub = lcm_subscribe(lcm, channel.c_str(), on_message, &got);
+  // LCM keeps 30 messages per subscription by default and drops the rest
+  // silently: a handler thread stalled by a loaded machine would lose samples.
+  if (sub) lcm_subscription_set_queue_capacity(sub, 100000);
   std::atomic<bool> done{false};
   test_support::Outcome out;
   std::thread child([&] {
