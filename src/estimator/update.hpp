@@ -50,38 +50,30 @@ bool project(double* a_part, int n) {
 }
 
 // eqs. (23)-(25) on raw column-major storage (P is nt x nt, leading dimension nt):
-// K = P psi / (lambda + phi^T P psi), theta += K (y_f - phi^T theta),
+// K = P psi / (lambda + phi^T P psi), theta += K eps with eps = y_f - phi^T theta,
 // P = (P - K phi^T P) / lambda. The IV recursion (eq. 24) does not keep P
 // symmetric; its symmetric part is kept, against round-off that would
 // otherwise make P indefinite over millions of updates:
 // P = (P - (K w^T + w K^T)/2) / lambda with w = P^T phi = P phi (P symmetric on
 // entry), computed on the upper triangle and mirrored. N > 0 fixes the size at
 // compile time so that the loops unroll (N = 3: a mode, the common case); N = 0
-// takes nt at run time.
+// takes nt at run time. phi and psi are the caller's local copies: were they
+// the block's, every store to theta or P could alias them and force reloads.
 template <int N>
 MODALWATCH_HOT bool iv_update(int nt_runtime, double* P, double* theta, const double* phi, const double* psi,
-                              double lambda, double y_f) {
+                              double lambda, double eps) {
   const int nt = N > 0 ? N : nt_runtime;
-  // phi and psi in locals: they may point into the block, as theta and P do,
-  // and the compiler would reload them after every store.
-  double Ppsi[kMaxTheta], w[kMaxTheta], ps[kMaxTheta], ph[kMaxTheta];
-  for (int i = 0; i < nt; ++i) {
-    Ppsi[i] = w[i] = 0.0;
-    ps[i] = psi[i];
-    ph[i] = phi[i];
-  }
+  double Ppsi[kMaxTheta], w[kMaxTheta];
+  for (int i = 0; i < nt; ++i) Ppsi[i] = w[i] = 0.0;
   for (int j = 0; j < nt; ++j) {  // by columns: P psi and P phi
     const double* column = P + j * nt;
     for (int i = 0; i < nt; ++i) {
-      Ppsi[i] += column[i] * ps[j];
-      w[i] += column[i] * ph[j];
+      Ppsi[i] += column[i] * psi[j];
+      w[i] += column[i] * phi[j];
     }
   }
-  double denom = lambda, eps = y_f;
-  for (int i = 0; i < nt; ++i) {
-    denom += phi[i] * Ppsi[i];
-    eps -= phi[i] * theta[i];
-  }
+  double denom = lambda;
+  for (int i = 0; i < nt; ++i) denom += phi[i] * Ppsi[i];
   if (!std::isfinite(denom) || std::abs(denom) < 1e-300) return false;
   const double inv_lambda = 1.0 / lambda;
   double K_half[kMaxTheta];  // K / 2 (exact): the symmetric part's 1/2 taken once
@@ -146,25 +138,25 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
     const double rate = b.decay_rate();
     if (rate > 0.0) lambda = std::max(lambda, 1.0 - b.forget_per_decay * rate);
   }
-  // The score test's sums (boost_changed_blocks), with the error before this update.
-  {
-    const double* phi = b.phi.data();
-    const double* psi = b.psi.data();
-    double eps = y_f;
-    for (int i = 0; i < nt; ++i) eps -= phi[i] * theta[i];
+  // phi and psi copied once, for the score test's sums and iv_update: stores
+  // to score, info, theta and P could alias the block's own and force reloads.
+  double phi[detail::kMaxTheta], psi[detail::kMaxTheta];
+  for (int i = 0; i < nt; ++i) {
+    phi[i] = b.phi(i);
+    psi[i] = b.psi(i);
+  }
+  double eps = y_f;  // the error before this update
+  for (int i = 0; i < nt; ++i) eps -= phi[i] * theta[i];
+  {  // The score test's sums (boost_changed_blocks).
     const double rho = e_short_alpha;
     double* score = b.score.data();
     double* info = b.score_info.data();
-    // psi copied first: the stores to score and info could otherwise alias it,
-    // and each element would be loaded again after every store.
-    double ps[kMaxTheta];
-    for (int i = 0; i < nt; ++i) ps[i] = psi[i];
-    for (int i = 0; i < nt; ++i) score[i] = rho * score[i] + ps[i] * eps;
+    for (int i = 0; i < nt; ++i) score[i] = rho * score[i] + psi[i] * eps;
     for (int j = 0; j < nt; ++j)  // the upper triangle: it is symmetric
-      for (int i = 0; i <= j; ++i) info[i + j * nt] = rho * info[i + j * nt] + ps[i] * ps[j];
+      for (int i = 0; i <= j; ++i) info[i + j * nt] = rho * info[i + j * nt] + psi[i] * psi[j];
   }
   if (b.held > 0) return true;  // another block re-converges after a change (boost_changed_blocks)
-  if (!iv_update<N>(nt, P, theta, b.phi.data(), b.psi.data(), lambda, y_f)) return false;
+  if (!iv_update<N>(nt, P, theta, phi, psi, lambda, eps)) return false;
   // Stabilised forgetting on one block per update and one of its coordinates
   // per round, in turn (the same for every refinement of a sample), with K nt
   // times the information per update (set_reference_variance). P_ref needs

@@ -217,7 +217,7 @@ Eigen::VectorXd excitation(const ExperimentSpec& ex, const Eigen::VectorXd& t) {
 
 // Inputs 2, 3, ...
 std::vector<Eigen::VectorXd> further_inputs(const ExperimentSpec& ex, const Eigen::VectorXd& t) {
-  static const Eigen::VectorXd none;
+  const Eigen::VectorXd none;
   std::vector<Eigen::VectorXd> inputs;
   for (std::size_t j = 0; j < static_cast<std::size_t>(ex.further_inputs()); ++j) {
     const Eigen::VectorXd& samples = j < ex.further_input_samples.size() ? ex.further_input_samples[j] : none;

@@ -45,8 +45,9 @@ int main(int argc, char** argv) {
   for (long long k = 0; k < n; ++k) flags |= est.step(feed.next());
   const EstimatorStatus& st = est.status();
   const ModeEstimate m = est.mode(2);
-  std::printf("step_driver: %lld steps (%s kernel), updates %llu, resets %llu, covariance clamps %llu, flags %u, mode3 wn %.6g\n", n,
-              est.step_kernel() == StepKernel::portable ? "portable" : "avx2_fma",
+  std::printf("step_driver: %lld steps (%s kernel), updates %llu, resets %llu, covariance clamps %llu, flags %u, "
+              "mode3 wn %.6g\n",
+              n, est.step_kernel() == StepKernel::portable ? "portable" : "avx2_fma",
               static_cast<unsigned long long>(st.updates), static_cast<unsigned long long>(st.resets),
               static_cast<unsigned long long>(st.covariance_clamps), flags,
               m.value.wn);
