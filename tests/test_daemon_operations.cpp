@@ -395,11 +395,7 @@ TEST_F(DaemonInProcessOperations, OneFaultStatusPerPublishPeriod) {
     (s.utime < last_utime ? with_input : without) += 1;
   }
   EXPECT_GE(rx.estimates.size(), 29u);
-  // Flag changes would add theirs: none here. A timer's status beside every
-  // estimate would double the count; a sender stalled for a publish period
-  // (a loaded machine) adds one, rightly, as for any silence.
-  EXPECT_GE(with_input, rx.estimates.size());
-  EXPECT_LE(with_input, rx.estimates.size() + 2);
+  EXPECT_EQ(with_input, rx.estimates.size());  // flag changes would add theirs: none here
   EXPECT_GE(without, 25u);                     // about 3 s / 0.1 s after the input stops
   EXPECT_LE(without, 35u);
 }

@@ -196,7 +196,13 @@ TEST_F(DaemonProcess, SigtermCheckpointsAndRestartResumesWithoutWarmup) {
   EXPECT_NE(log2.find("resumed from checkpoint"), std::string::npos) << log2;
   {
     std::lock_guard<std::mutex> lock(rx_.mutex);
-    const auto& first = rx_.estimates[seen];
+    // The first run's last estimates may still have been on their way when
+    // `seen` was read: the restart's first is the first from 12 s of sample
+    // time on, where its input begins.
+    std::size_t restart = seen;
+    while (restart < rx_.estimates.size() && rx_.estimates[restart].utime < kUtime0 + 12'000'000) ++restart;
+    ASSERT_LT(restart, rx_.estimates.size()) << "no estimate after the restart";
+    const auto& first = rx_.estimates[restart];
     EXPECT_LT(static_cast<double>(first.utime - kUtime0) * 1e-6, 12.2);
     // A warm-up would publish the configured model with zero std for 5 s (20480 samples).
     EXPECT_LT(first.samples_processed, 1000);
