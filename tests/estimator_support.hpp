@@ -64,6 +64,63 @@ inline PaperModeThreeStep paper_mode_three_step(double step = -0.03, double at =
   return out;
 }
 
+// Four modes in closed loop under a multisine (a scenario-bank record, 700 s
+// of its 993): mode 3 is weak (gain 0.0044) and 50 rad/s below mode 4 (0.063),
+// whose gain steps by -20 % at 590.7 s. The change test names both. An
+// estimator that lets mode 3's gain change sign sees it move onto mode 4 (to
+// 160 rad/s, gain -0.002) to cancel part of that change, and stay there with
+// the residual 1.5x the noise, below the divergence ratio (measured; over the
+// whole record mode 2 then drifted too, and both got false flags).
+struct WeakModeBesideAGainStep {
+  Config config;
+  Record record;
+};
+
+inline WeakModeBesideAGainStep weak_mode_beside_a_gain_step() {
+  WeakModeBesideAGainStep out;
+  out.config = parse_config(R"(
+sample_rate_hz: 706.0302900810594
+model:
+  loop: closed
+  submodels:
+    - {name: mode1, kind: mode, wn: 7.08516, zeta: 0.0205105, gain: 0.0151547, forgetting: 0.9999677}
+    - {name: mode2, kind: mode, wn: 30.1029, zeta: 0.202816, gain: 0.00656049, forgetting: 0.9999677}
+    - {name: mode3, kind: mode, wn: 96.4924, zeta: 0.248370, gain: 0.00398663, forgetting: 0.9999677}
+    - {name: mode4, kind: mode, wn: 143.732, zeta: 0.0948344, gain: 0.0570198, forgetting: 0.9999677}
+controller:
+  numerator: [11.157019439463667, -11.152359550168866]
+  denominator: [1.0, -1.0]
+plant:
+  noise_variance: 0.0005545879427030076
+  modes:
+    - {name: mode1, kind: mode, wn: 7.16434, zeta: 0.0203090, gain: 0.0164034}
+    - {name: mode2, kind: mode, wn: 29.4840, zeta: 0.246875, gain: 0.00605512}
+    - {name: mode3, kind: mode, wn: 97.5172, zeta: 0.211331, gain: 0.00440936}
+    - name: mode4
+      kind: mode
+      wn: 147.305
+      zeta: 0.0825969
+      gain: 0.0627992
+      trajectory:
+        gain: [[590.7246278744783, 0.06279920374855019], [590.7260442443055, 0.05023936299884016]]
+simulation:
+  duration: 700
+  seed: 1560692665
+  reference:
+    type: multisine
+    f_min_hz: 0.5701196656550697
+    f_max_hz: 35.16651710312351
+    period_s: 3.5080354537533665
+    rms: 1.0
+estimator:
+  warmup: 43.8508
+  fit_on_warmup: true
+)",
+                            "weak-mode-beside-a-gain-step.yaml");
+  out.record = simulate(*out.config.plant, *out.config.experiment).record;
+  return out;
+}
+
 inline SignalSpec prbs(double amplitude, int bits = 12, int clock = 2) {
   SignalSpec s;
   s.kind = SignalSpec::Kind::prbs;

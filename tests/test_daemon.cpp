@@ -337,6 +337,23 @@ TEST_F(DaemonInProcess, CountsTheChangeTestsCovarianceBoostsAsTheEstimatorMakesT
   EXPECT_EQ(counters.resets, 0u);
 }
 
+// The weak mode beside a gain step: the daemon counts the modes returned to
+// their estimate after a sign change of their gain
+// (modalwatch_mode_restores_total), as many as step() reports.
+TEST_F(DaemonInProcess, CountsTheModesReturnedAfterASignChangeAsTheEstimatorReturnsThem) {
+  const test_support::WeakModeBesideAGainStep loop = test_support::weak_mode_beside_a_gain_step();
+  const Record& r = loop.record;
+  RecursiveEstimator est(loop.config.model, loop.config.estimator);
+  std::uint64_t restores = 0;
+  for (Eigen::Index k = 0; k < r.size(); ++k)
+    if (est.step(Sample{r.t(k), r.u(k), r.y(k), r.r(k)}) & kModeRestored) ++restores;
+  ASSERT_GT(restores, 0u);
+  Received rx;
+  const DaemonCounters counters = run_in_process(loop.config, r, rx);
+  EXPECT_EQ(counters.samples_processed, static_cast<std::uint64_t>(r.size()));
+  EXPECT_EQ(counters.mode_restores, restores);
+}
+
 // The warm-up fit runs on the fitter thread, not the estimation loop: a fit
 // longer than WatchdogSec (here 1 s; the probe's hook holds the fitter for 3 s
 // before the real fit) keeps the WATCHDOG=1 pings coming, and the input that

@@ -972,6 +972,38 @@ TEST(RecursiveEstimator, WithoutTheHoldAHealthyNeighbourAbsorbsPartOfTheChange) 
 
 // ------------------------------------------------------------------ step kernels
 
+// A mode's gain does not change sign in a fault of its own: the weak mode 3
+// goes back to its last good estimate and keeps it while mode 4 re-converges
+// after its gain step (estimator_support.hpp says what happens otherwise).
+TEST(RecursiveEstimator, AWeakModeWhoseGainChangesSignGoesBackToItsEstimateAndTheChangeToItsNeighbour) {
+  const WeakModeBesideAGainStep loop = weak_mode_beside_a_gain_step();
+  const Config& c = loop.config;
+  const Record& r = loop.record;
+  RecursiveEstimator est(c.model, c.estimator);
+  double worst_wn3 = 0.0, worst_gain3 = 0.0;
+  std::uint64_t restore_flags = 0;
+  for (Eigen::Index k = 0; k < r.size(); ++k) {
+    if (est.step(Sample{r.t(k), r.u(k), r.y(k), r.r(k)}) & kModeRestored) ++restore_flags;
+    if (r.t(k) < 590.72 + 43.85) continue;  // one memory after the step
+    worst_wn3 = std::max(worst_wn3, std::abs(est.mode(2).value.wn / 97.5172 - 1.0));
+    worst_gain3 = std::max(worst_gain3, std::abs(est.mode(2).value.gain / 0.00440936 - 1.0));
+  }
+  const double gain4 = est.mode(3).value.gain / 0.0502394 - 1.0;
+  const double wn2 = est.mode(1).value.wn / 29.4840 - 1.0;
+  std::printf("from one memory after the step: mode 3's wn within %.2f %%, its gain within %.1f %%; at the end mode "
+              "4's gain %+.2f %%, mode 2's wn %+.2f %%; sign restores %llu, boosts %llu, resets %llu\n",
+              100.0 * worst_wn3, 100.0 * worst_gain3, 100.0 * gain4, 100.0 * wn2,
+              static_cast<unsigned long long>(est.status().sign_restores),
+              static_cast<unsigned long long>(est.status().boosts), static_cast<unsigned long long>(est.status().resets));
+  EXPECT_GE(est.status().sign_restores, 1u);
+  EXPECT_EQ(restore_flags, est.status().sign_restores);  // one mode at a time here
+  EXPECT_EQ(est.status().resets, 0u);
+  EXPECT_LT(worst_wn3, 0.03);    // the flag's relative threshold
+  EXPECT_LT(worst_gain3, 0.10);  // likewise
+  EXPECT_LT(std::abs(gain4), 0.02);
+  EXPECT_LT(std::abs(wn2), 0.03);
+}
+
 // step() runs one of two compilations of the same source (portable x86-64, and
 // AVX2 with fused multiply-add where the CPU has it). FMA rounds a b + c once
 // instead of twice, so the two may differ by round-off only: 2^-53 ~ 1.1e-16

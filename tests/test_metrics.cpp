@@ -172,6 +172,7 @@ MetricsSnapshot example_snapshot() {
   s.counters.flag_changes = 1;
   s.counters.samples_lost = 7;
   s.counters.change_boosts = 4;
+  s.counters.mode_restores = 5;
   s.tick.record(3'000);          // le 5 us
   s.tick.record(5'000);          // le 5 us (the bound is inclusive)
   s.tick.record(700'000);        // le 1 ms
@@ -245,6 +246,7 @@ TEST(Metrics, ExposesGaugesCountersAndHistogramWithTheirLabels) {
   EXPECT_TRUE(has_value(s, "modalwatch_decode_errors_total", axis, 2.0));
   EXPECT_TRUE(has_value(s, "modalwatch_estimator_resets_total", axis, 0.0));
   EXPECT_TRUE(has_value(s, "modalwatch_change_boosts_total", axis, 4.0));
+  EXPECT_TRUE(has_value(s, "modalwatch_mode_restores_total", axis, 5.0));
   EXPECT_TRUE(has_value(s, "modalwatch_flag_changes_total", axis, 1.0));
   EXPECT_EQ(s.type.at("modalwatch_samples_received_total"), "counter");
   EXPECT_EQ(s.type.at("modalwatch_mode_flag"), "gauge");

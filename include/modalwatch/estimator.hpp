@@ -159,6 +159,10 @@ struct EstimatorStatus {
   std::uint64_t covariance_clamps = 0;
   std::uint64_t resets = 0;  // returns to the last good state
   std::uint64_t boosts = 0;  // covariance boosts after a change of the output error (change_ratio)
+  // Modes returned to their last good estimate because their gain had changed
+  // sign (a well-determined one): a mode that did so no longer describes its
+  // physical mode but cancels a neighbour's change.
+  std::uint64_t sign_restores = 0;
   const char* last_reset_reason = "";
   bool warming_up = true;
   bool low_excitation = false;
@@ -191,6 +195,9 @@ enum StepFlags : unsigned {
   // The change test (change_ratio) alarmed and boosted the covariance of at
   // least one submodel (EstimatorStatus::boosts).
   kChangeBoost = 1u << 9,
+  // A mode went back to its last good estimate because its gain had changed
+  // sign (EstimatorStatus::sign_restores).
+  kModeRestored = 1u << 10,
 };
 
 // The instruction set of step()'s arithmetic (RecursiveEstimator::set_step_kernel).

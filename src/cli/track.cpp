@@ -626,6 +626,8 @@ int track(const TrackArgs& args) {
     else
       std::fprintf(stderr, "  resets: 0\n");
     std::fprintf(stderr, "  covariance boosts on a change: %llu\n", static_cast<unsigned long long>(st.boosts));
+    std::fprintf(stderr, "  modes restored after a sign change of their gain: %llu\n",
+                 static_cast<unsigned long long>(st.sign_restores));
     std::fprintf(stderr, "  rejected non-finite: %llu\n", static_cast<unsigned long long>(st.rejected_nonfinite));
     std::fprintf(stderr, "  rejected out-of-order: %llu\n", static_cast<unsigned long long>(st.rejected_out_of_order));
     std::fprintf(stderr, "  gaps: %llu\n", static_cast<unsigned long long>(st.gaps));

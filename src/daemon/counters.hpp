@@ -24,7 +24,7 @@ struct SubscriberCounters {
 
 struct LoopCounters {
   Counter samples_nonfinite{0}, samples_duplicate{0}, samples_out_of_order{0}, samples_processed{0}, gaps{0}, resets{0},
-      change_boosts{0}, overruns{0}, sender_restarts{0}, samples_held{0}, held_dropped{0}, snapshots{0},
+      change_boosts{0}, mode_restores{0}, overruns{0}, sender_restarts{0}, samples_held{0}, held_dropped{0}, snapshots{0},
       snapshots_dropped{0}, flag_changes{0};
 };
 
@@ -57,6 +57,7 @@ struct Counters {
     c.gaps = read(loop.gaps);
     c.resets = read(loop.resets);
     c.change_boosts = read(loop.change_boosts);
+    c.mode_restores = read(loop.mode_restores);
     c.overruns = read(loop.overruns);
     c.samples_held = read(loop.samples_held);
     c.held_dropped = read(loop.held_dropped);

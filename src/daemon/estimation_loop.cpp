@@ -305,6 +305,7 @@ void EstimationLoop::process(const StampedSample& s) noexcept {
     reset_since_snapshot_ = true;
   }
   if (flags & kChangeBoost) bump(counters_.change_boosts);
+  if (flags & kModeRestored) bump(counters_.mode_restores);
   if (utime >= next_publish_utime_) {
     push_snapshot(Snapshot::estimate, mono_ns(), true);
     next_publish_utime_ += publish_period_us_;

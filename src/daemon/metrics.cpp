@@ -112,6 +112,8 @@ constexpr CounterSeries kCounterSeries[] = {
      [](const MetricsSnapshot& s) { return s.counters.resets; }},
     {"modalwatch_change_boosts_total", "Covariance boosts after the change test found a change of the output error.",
      [](const MetricsSnapshot& s) { return s.counters.change_boosts; }},
+    {"modalwatch_mode_restores_total", "Estimator updates that returned a mode (or several) to its last good estimate after its gain changed sign.",
+     [](const MetricsSnapshot& s) { return s.counters.mode_restores; }},
     {"modalwatch_loop_overruns_total", "Estimation loop ticks that ended after the next one was due.",
      [](const MetricsSnapshot& s) { return s.counters.overruns; }},
     {"modalwatch_flag_changes_total", "Fault flags raised or cleared.",

@@ -179,6 +179,10 @@ void Publisher::log_repeated(const DaemonCounters& c, std::int64_t now) {
         "{} so far",
         n, in(over), total);
   });
+  warn_repeated(restores_, c.mode_restores, now, [&](std::uint64_t n, double over, std::uint64_t total) {
+    spdlog::warn("estimator: a mode whose gain changed sign went back to its last good estimate: {}{}, {} so far", n,
+                 in(over), total);
+  });
   warn_repeated(lost_, c.samples_lost, now, [&](std::uint64_t n, double over, std::uint64_t total) {
     spdlog::warn("samples lost in transport (sequence numbers that never arrived): {}{}, {} so far", n, in(over),
                  total);

@@ -83,7 +83,7 @@ class Publisher {
   std::int64_t rate_base_ns_ = 0;
   bool logged_warmup_over_ = false, logged_stale_ = false;
   std::uint64_t received_when_stale_ = 0;
-  RepeatedWarning gaps_, resets_, boosts_, lost_, dropped_;
+  RepeatedWarning gaps_, resets_, boosts_, restores_, lost_, dropped_;
   const char* last_reset_reason_ = "";
   std::uint64_t logged_held_dropped_ = 0;
   std::array<bool, kMaxModes> logged_baseline_{};

@@ -218,6 +218,37 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
   return boosted;
 }
 
+// A mode's gain does not change sign in a drift or a fault of that mode (a
+// stiffness, damping or gain change moves it by tens of %). When one has, from
+// a sign its last good estimate had to within kSignSigmas std, the mode no
+// longer describes its physical mode: it has moved onto a neighbour and
+// cancels part of that one's change (a weak mode beside a strong one whose
+// gain stepped, both named by the change test). Only that block goes back to
+// its last good estimate; it keeps it while the blocks that re-converge after
+// the change still do, so that the change goes to them alone. Checked as
+// often as the good state is saved, and before it is.
+bool RecursiveEstimator::Impl::restore_sign_flipped_modes() {
+  constexpr double kSignSigmas = 3.0;
+  std::uint64_t adapting = 0;
+  for (const auto& b : blocks) adapting = std::max(adapting, b.adapting);
+  bool restored = false;
+  for (auto& b : blocks) {
+    if (b.n != 2 || b.m != 0 || b.l != 0) continue;  // modes only: b0 is the gain's sign
+    const double gain = b.theta(b.n), good = b.good_theta(b.n);
+    const double good_std = std::sqrt(std::max(0.0, e_var_good * b.good_P(b.n, b.n)));
+    if (!(gain * good < 0.0 && std::abs(good) > kSignSigmas * good_std)) continue;
+    b.theta = b.good_theta;
+    b.P = b.good_P;
+    b.adapting = 0;
+    b.drop_lift();
+    b.held = std::max(b.held, adapting);
+    rediscretise(b);
+    ++status.sign_restores;
+    restored = true;
+  }
+  return restored;
+}
+
 void RecursiveEstimator::Impl::restore_good(const char* reason) {
   for (auto& b : blocks) {
     b.held = b.adapting = 0;

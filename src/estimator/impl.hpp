@@ -159,6 +159,7 @@ struct RecursiveEstimator::Impl {
   void save_good();
   void restore_good(const char* reason);
   bool boost_changed_blocks();  // true when a block was boosted
+  bool restore_sign_flipped_modes();  // true when a mode went back
   int refit_samples() const;
   bool may_refit() const;
   void buffer_window_sample(const Sample& s) {

@@ -341,8 +341,12 @@ inline unsigned RecursiveEstimator::Impl::finish_update() {
     stabilise_block = 0;
     ++stabilise_round;
   }
-  if (++updates_since_good >= 256 && e_short < 4.0 * e_var) save_good();
-  return kUpdated;
+  unsigned flags = kUpdated;
+  if (++updates_since_good >= 256) {
+    if (restore_sign_flipped_modes()) flags |= kModeRestored;  // before a save could keep a flipped mode as good
+    if (e_short < 4.0 * e_var) save_good();
+  }
+  return flags;
 }
 
 // Instantiated here for the other sources, which reach them through Impl::kernel.

@@ -59,6 +59,7 @@ struct DaemonCounters {
   std::uint64_t gaps = 0;                  // utime gaps that reset the prefilter states
   std::uint64_t resets = 0;                // estimator returns to its last good state
   std::uint64_t change_boosts = 0;         // covariance boosts after a change of the output error
+  std::uint64_t mode_restores = 0;         // updates that returned a mode to its last good estimate (its gain changed sign)
   std::uint64_t overruns = 0;              // loop ticks that ended after the next was due
   std::uint64_t samples_held = 0;          // held in the backlog while the warm-up fit ran
   std::uint64_t held_dropped = 0;          // backlog full (daemon.warmup_backlog), also in samples_dropped
