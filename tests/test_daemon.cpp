@@ -318,6 +318,18 @@ TEST_F(DaemonInProcess, ATwoInputModelMatchesTrackAndFollowsEachModeOnItsOwnInpu
   }
 }
 
+// The samples of r whose step() says `flag`, for a RecursiveEstimator run as
+// the daemon runs it.
+namespace {
+std::uint64_t steps_flagged(const Config& c, const Record& r, StepFlags flag) {
+  RecursiveEstimator est(c.model, c.estimator);
+  std::uint64_t n = 0;
+  for (Eigen::Index k = 0; k < r.size(); ++k)
+    if (est.step(Sample{r.t(k), r.u(k), r.y(k), r.r(k)}) & flag) ++n;
+  return n;
+}
+}  // namespace
+
 // The paper's loop with mode 3's wn stepping -3 % at 400 s, below the
 // divergence reset: the daemon counts the change test's covariance boosts
 // (modalwatch_change_boosts_total), as many as the estimator's step() reports
@@ -325,10 +337,7 @@ TEST_F(DaemonInProcess, ATwoInputModelMatchesTrackAndFollowsEachModeOnItsOwnInpu
 TEST_F(DaemonInProcess, CountsTheChangeTestsCovarianceBoostsAsTheEstimatorMakesThem) {
   const test_support::PaperModeThreeStep loop = test_support::paper_mode_three_step();
   const Record& r = loop.record;
-  RecursiveEstimator est(loop.config.model, loop.config.estimator);
-  std::uint64_t boosts = 0;
-  for (Eigen::Index k = 0; k < r.size(); ++k)
-    if (est.step(Sample{r.t(k), r.u(k), r.y(k), r.r(k)}) & kChangeBoost) ++boosts;
+  const std::uint64_t boosts = steps_flagged(loop.config, r, kChangeBoost);
   ASSERT_GT(boosts, 0u);
   Received rx;
   const DaemonCounters counters = run_in_process(loop.config, r, rx);
@@ -343,10 +352,7 @@ TEST_F(DaemonInProcess, CountsTheChangeTestsCovarianceBoostsAsTheEstimatorMakesT
 TEST_F(DaemonInProcess, CountsTheModesReturnedAfterASignChangeAsTheEstimatorReturnsThem) {
   const test_support::WeakModeBesideAGainStep loop = test_support::weak_mode_beside_a_gain_step();
   const Record& r = loop.record;
-  RecursiveEstimator est(loop.config.model, loop.config.estimator);
-  std::uint64_t restores = 0;
-  for (Eigen::Index k = 0; k < r.size(); ++k)
-    if (est.step(Sample{r.t(k), r.u(k), r.y(k), r.r(k)}) & kModeRestored) ++restores;
+  const std::uint64_t restores = steps_flagged(loop.config, r, kModeRestored);
   ASSERT_GT(restores, 0u);
   Received rx;
   const DaemonCounters counters = run_in_process(loop.config, r, rx);
