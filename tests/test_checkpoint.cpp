@@ -147,6 +147,10 @@ TEST(Checkpoint, WrongMagicVersionAndAbsurdLengthsAreNamed) {
   EXPECT_NE(error_of([&] { decode_checkpoint(b, "v1"); }).find("format version 1 carries no stabilised-forgetting"),
             std::string::npos);
   b = good;
+  put_le(b, 8, 2, 4);  // before it carried the instruments' joint information
+  EXPECT_NE(error_of([&] { decode_checkpoint(b, "v2"); }).find("format version 2 carries no joint information"),
+            std::string::npos);
+  b = good;
   put_le(b, 8, 0, 4);
   EXPECT_NE(error_of([&] { decode_checkpoint(b, "v"); }).find("format version 0"), std::string::npos);
   b = good;

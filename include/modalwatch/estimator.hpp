@@ -288,6 +288,15 @@ class EstimatorState {
   std::vector<Eigen::MatrixXd> good_P_;
   std::vector<Eigen::VectorXd> reference_theta_;
   std::vector<Eigen::VectorXd> reference_variance_;
+  // The instruments' joint information across submodels, when warmed up: per
+  // submodel the term it adds to P-bar in the covariance reported
+  // (RecursiveEstimator::mode_covariance), the information now and at the last
+  // good state (normalised, over all submodels' theta), and where its sampling
+  // stands.
+  std::vector<Eigen::MatrixXd> cross_;
+  Eigen::MatrixXd joint_, joint_good_;
+  std::uint64_t joint_updates_ = 0, joint_good_updates_ = 0, joint_solved_at_ = 0, joint_rng_ = 0;
+  std::int32_t joint_countdown_ = 1, joint_gap_ = 1;
   // Output-error statistics (variance over the residual window, short window
   // for divergence, its value at the last good state) and excitation power.
   double noise_variance_ = 0.0, residual_short_ = 0.0, noise_variance_good_ = 0.0;
@@ -383,11 +392,18 @@ class RecursiveEstimator {
   // or use mode()).
   Submodel submodel(int i) const;
   AdditiveModel model() const;
-  // Modal view of submodel i and its standard deviations (sigma^2 P_i). No allocation.
+  // Modal view of submodel i and its standard deviations (sigma^2 (P_i + C_i), as
+  // mode_covariance()). No allocation.
   ModeEstimate mode(int i) const noexcept;
-  // Covariance of submodel i's (wn, zeta, gain): modal_covariance() of sigma^2 P_i. No allocation.
+  // Covariance of submodel i's (wn, zeta, gain): modal_covariance() of
+  // sigma^2 (P_i + C_i), C_i what not knowing the other submodels adds to
+  // P_i (the instruments' joint information; at first, and for one memory
+  // after a change boost or restore(), the last C_i or zero). No allocation.
   Eigen::Matrix3d mode_covariance(int i) const noexcept;
-  // Covariance of theta_i (physical units), sigma^2 P_i.
+  // The same from sigma^2 P_i alone: the other submodels taken as known, as
+  // the block-coordinate recursion takes them.
+  Eigen::Matrix3d mode_covariance_given_others(int i) const noexcept;
+  // Covariance of theta_i (physical units), sigma^2 (P_i + C_i).
   Eigen::MatrixXd covariance(int i) const;
   double residual_rms() const noexcept;  // output error over the residual window
   double noise_variance() const noexcept;

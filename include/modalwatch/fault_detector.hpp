@@ -158,9 +158,15 @@ class FaultDetector {
   // estimates stand for that much data before t that all say the same, as the
   // fit of a window does (EstimatorStatus::fitted_window, on the first valid
   // update after the fit): a condition they show began that long ago, and its
-  // hold counts from there (on the mode clock).
+  // hold counts from there (on the mode clock). `settle_covariance`, when
+  // given, is what the learning's settle test takes instead of `covariance`:
+  // the estimate's covariance with the other modes known
+  // (RecursiveEstimator::mode_covariance_given_others), which says whether the
+  // estimate has settled where the data leave a trade between modes open and
+  // `covariance` (the joint one) stays wide.
   void update(double t, const std::vector<ModalParameters>& value, const std::vector<Eigen::Matrix3d>& covariance,
-              bool valid, std::vector<FlagChange>& changes, double evidence_span = 0.0);
+              bool valid, std::vector<FlagChange>& changes, double evidence_span = 0.0,
+              const std::vector<Eigen::Matrix3d>* settle_covariance = nullptr);
   // The same with standard deviations only (a diagonal covariance).
   void update(double t, const std::vector<ModalParameters>& value, const std::vector<ModalParameters>& std_dev,
               bool valid, std::vector<FlagChange>& changes, double evidence_span = 0.0);
@@ -184,7 +190,8 @@ class FaultDetector {
     Eigen::Vector3d sum = Eigen::Vector3d::Zero(), sum_first = Eigen::Vector3d::Zero();
     Eigen::Matrix3d sum_covariance = Eigen::Matrix3d::Zero();
   };
-  void learn(std::size_t i, double now, const Eigen::Vector3d& x, const Eigen::Matrix3d& c);
+  void learn(std::size_t i, double now, const Eigen::Vector3d& x, const Eigen::Matrix3d& c,
+             const Eigen::Matrix3d& settle_c);
   void restart_learning(std::size_t i, LearnHold why);
 
   FaultDetectorSettings settings_;

@@ -416,6 +416,7 @@ class FlagRecorder {
     for (std::size_t i = 0; i < names_.size(); ++i) names_[i] = config.model.submodels[i].name;
     values_.resize(names_.size());
     covariances_.assign(names_.size(), Eigen::Matrix3d::Zero());
+    settle_covariances_.assign(names_.size(), Eigen::Matrix3d::Zero());
     changes_.reserve(kQuantities * names_.size());
   }
 
@@ -443,11 +444,12 @@ class FlagRecorder {
     for (std::size_t i = 0; i < values_.size(); ++i) {
       values_[i] = estimator.mode(static_cast<int>(i)).value;
       covariances_[i] = estimator.mode_covariance(static_cast<int>(i));
+      settle_covariances_[i] = estimator.mode_covariance_given_others(static_cast<int>(i));
     }
     changes_.clear();
     const bool valid = !fit_sample && !st.warming_up && !st.low_excitation;
     detector_.update(static_cast<double>(utime - utime0_) * 1e-6, values_, covariances_, valid, changes_,
-                     evidence_span_);
+                     evidence_span_, &settle_covariances_);
     if (valid) evidence_span_ = 0.0;
     for (const FlagChange& c : changes_) {
       static constexpr const char* kQuantityNames[kQuantities] = {"wn", "zeta", "gain"};
@@ -472,7 +474,7 @@ class FlagRecorder {
   double evidence_span_ = 0.0;  // a (re)fit's window, until the detector's next valid update
   std::vector<std::string> names_;
   std::vector<ModalParameters> values_;
-  std::vector<Eigen::Matrix3d> covariances_;
+  std::vector<Eigen::Matrix3d> covariances_, settle_covariances_;
   std::vector<FlagChange> changes_;
   std::int64_t period_us_, utime0_ = 0, last_utime_ = 0, next_publish_ = 0;
   bool have_time_ = false;

@@ -87,6 +87,7 @@ EstimationLoop::EstimationLoop(const Config& config, const std::optional<Checkpo
   sample_.further_inputs = config.model.n_inputs() - 1;
   mode_values_.resize(K);
   mode_covariances_.assign(K, Eigen::Matrix3d::Zero());
+  settle_covariances_.assign(K, Eigen::Matrix3d::Zero());
   flag_changes_.reserve(kQuantities * K);
 }
 
@@ -339,6 +340,7 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
     mode_values_[k] = snap.value[k] = m.value;
     snap.std_dev[k] = m.std;
     mode_covariances_[k] = estimator_.mode_covariance(i);
+    settle_covariances_[k] = estimator_.mode_covariance_given_others(i);
   }
   if (!fit_in_flight_) snap.residual_rms = estimator_.residual_rms();
   snap.n_changes = 0;
@@ -347,7 +349,7 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
     const double t = static_cast<double>(last_utime_ - utime0_) * 1e-6;
     const bool valid = !st.warming_up && !st.low_excitation;
     // capacity reserved: no allocation
-    detector_->update(t, mode_values_, mode_covariances_, valid, flag_changes_, evidence_span_);
+    detector_->update(t, mode_values_, mode_covariances_, valid, flag_changes_, evidence_span_, &settle_covariances_);
     if (valid) evidence_span_ = 0.0;
     for (const FlagChange& c : flag_changes_) {
       if (snap.n_changes == kMaxEntries) break;

@@ -134,6 +134,7 @@ class EstimationLoop {
   FaultSettings detector_faults_;          // the config's faults: section the detector was made for
   std::vector<ModalParameters> mode_values_;
   std::vector<Eigen::Matrix3d> mode_covariances_;  // the detector's input, sized at construction
+  std::vector<Eigen::Matrix3d> settle_covariances_;  // ... for its learning's settle test
   std::vector<FlagChange> flag_changes_;
   TickHistogram tick_histogram_;  // durations of the loop's ticks, for the metrics endpoint
 

@@ -121,6 +121,7 @@ struct Block {
   bool b0_position = true;    // m = 0, z = 0
   bool position_mode = true;  // n = 2, m = 0, z = 0
   double ws = 1.0, lambda = 1.0;
+  double lambda_now = 1.0;  // the forgetting of the last update (lambda held by min_memory)
   double random_walk = 0.0;  // relative std of theta's drift per update (Q, CONTSID's Kalman-filter adaptation)
   // update_divisor T / min_memory (s): 1 - lambda may not exceed this times
   // decay_rate() (EstimatorSettings::min_memory); 0: lambda as configured.
@@ -158,6 +159,8 @@ struct Block {
   ThetaVec good_theta;
   ThetaMat good_P;
   ThetaVec phi, psi;
+  // What not knowing the other blocks adds to P (normalised): JointInformation's C_i.
+  ThetaMat cross;
   // The output error's correlation with this block's instrument over e_short's
   // window, and the instrument's own (upper triangle): the score test's sums,
   // which blocks a change of the output error belongs to (boost_changed_blocks).

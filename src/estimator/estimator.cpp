@@ -106,6 +106,7 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.psi.resize(b.nt);
     b.score = ThetaVec::Zero(b.nt);
     b.score_info = ThetaMat::Zero(b.nt, b.nt);
+    b.cross = ThetaMat::Zero(b.nt, b.nt);
     blocks.push_back(std::move(b));
   }
   snapshot.resize(blocks.size());
@@ -117,6 +118,7 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
   loop_u.assign(order, 0.0);
   loop_e.assign(order, 0.0);
   loop_state.assign(order, 0.0);
+  joint.resize(blocks);
   save_good();
 }
 
@@ -366,18 +368,19 @@ ModeEstimate RecursiveEstimator::mode(int i) const noexcept {
     return est;
   }
   const Block& b = m.blocks[i];
+  const ThetaMat P = m.reported_P(b);
   est.value.gain = b.theta(b.n) / b.scale(b.n);
   const double s2 = m.e_var;
-  est.std.gain = std::sqrt(std::max(0.0, s2 * b.P(b.n, b.n))) / b.scale(b.n);
+  est.std.gain = std::sqrt(std::max(0.0, s2 * P(b.n, b.n))) / b.scale(b.n);
   if (b.n == 2) {
     const double a1 = b.theta(0) / b.scale(0), a2 = b.theta(1) / b.scale(1);
     if (a2 > 0.0) {
       est.value.wn = 1.0 / std::sqrt(a2);
       est.value.zeta = 0.5 * a1 * est.value.wn;
       // First-order propagation of sigma^2 P through wn = a2^-1/2, zeta = a1/(2 sqrt a2).
-      const double c11 = s2 * b.P(0, 0) / (b.scale(0) * b.scale(0));
-      const double c22 = s2 * b.P(1, 1) / (b.scale(1) * b.scale(1));
-      const double c12 = s2 * b.P(0, 1) / (b.scale(0) * b.scale(1));
+      const double c11 = s2 * P(0, 0) / (b.scale(0) * b.scale(0));
+      const double c22 = s2 * P(1, 1) / (b.scale(1) * b.scale(1));
+      const double c12 = s2 * P(0, 1) / (b.scale(0) * b.scale(1));
       const double a2_32 = a2 * std::sqrt(a2);  // a2^1.5 (no pow: mode() runs per sample in `track`)
       const double dw2 = -0.5 / a2_32;
       const double dz1 = 0.5 / std::sqrt(a2), dz2 = -0.25 * a1 / a2_32;
@@ -388,25 +391,41 @@ ModeEstimate RecursiveEstimator::mode(int i) const noexcept {
   return est;
 }
 
-Eigen::Matrix3d RecursiveEstimator::mode_covariance(int i) const noexcept {
-  const Impl& m = *impl_;
+namespace {
+
+// modal_covariance() of e_var P (normalised) for block b.
+Eigen::Matrix3d modal_covariance_of(const Block& b, const ThetaMat& P, double e_var) {
   Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
-  if (m.blocks.empty()) return c;
-  const Block& b = m.blocks[i];
   if (b.n != 2) {
-    c(2, 2) = m.e_var * b.P(b.n, b.n) / (b.scale(b.n) * b.scale(b.n));
+    c(2, 2) = e_var * P(b.n, b.n) / (b.scale(b.n) * b.scale(b.n));
     return c;
   }
   const std::array<int, 3> at = {0, 1, b.n};  // a1, a2, b0 inside theta
   for (int r = 0; r < 3; ++r)
-    for (int k = 0; k < 3; ++k) c(r, k) = m.e_var * b.P(at[r], at[k]) / (b.scale(at[r]) * b.scale(at[k]));
+    for (int k = 0; k < 3; ++k) c(r, k) = e_var * P(at[r], at[k]) / (b.scale(at[r]) * b.scale(at[k]));
   return modal_covariance(b.theta(0) / b.scale(0), b.theta(1) / b.scale(1), c);
+}
+
+}  // namespace
+
+Eigen::Matrix3d RecursiveEstimator::mode_covariance(int i) const noexcept {
+  const Impl& m = *impl_;
+  if (m.blocks.empty()) return Eigen::Matrix3d::Zero();
+  const Block& b = m.blocks[static_cast<std::size_t>(i)];
+  return modal_covariance_of(b, m.reported_P(b), m.e_var);
+}
+
+Eigen::Matrix3d RecursiveEstimator::mode_covariance_given_others(int i) const noexcept {
+  const Impl& m = *impl_;
+  if (m.blocks.empty()) return Eigen::Matrix3d::Zero();
+  const Block& b = m.blocks[static_cast<std::size_t>(i)];
+  return modal_covariance_of(b, b.P, m.e_var);
 }
 
 Eigen::MatrixXd RecursiveEstimator::covariance(int i) const {
   const Impl& m = *impl_;
   const Block& b = m.blocks.at(i);
-  Eigen::MatrixXd c = m.e_var * Eigen::MatrixXd(b.P);
+  Eigen::MatrixXd c = m.e_var * Eigen::MatrixXd(m.reported_P(b));
   for (int j = 0; j < b.nt; ++j)
     for (int k = 0; k < b.nt; ++k) c(j, k) /= b.scale(j) * b.scale(k);
   return c;

@@ -152,6 +152,7 @@ void RecursiveEstimator::Impl::save_good() {
     b.good_theta = b.theta;
     b.good_P = b.P;
   }
+  joint.save_good();
   e_var_good = e_var;
   updates_since_good = 0;
 }
@@ -213,6 +214,7 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
   }
   for (auto& b : blocks)
     if (!b.named && b.adapting == 0) b.held = std::max(b.held, hold);
+  if (boosted) joint.clear();
   rearm = static_cast<std::uint64_t>(kWait / (1.0 - e_alpha));
   if (boosted) ++status.boosts;
   return boosted;
@@ -257,6 +259,7 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
     b.P = b.good_P;
     rediscretise(b);
   }
+  joint.restore_good();
   // The noise level goes back with the state. The first residuals on the
   // restarted filters are their transient, not noise: they must not set e_var
   // again (as the very first residual does), only the outlier test restarts

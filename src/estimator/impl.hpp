@@ -12,6 +12,7 @@
 
 #include "block.hpp"
 #include "hot_path.hpp"
+#include "joint_information.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/model.hpp"
 #include "modalwatch/record.hpp"
@@ -58,6 +59,10 @@ struct RecursiveEstimator::Impl {
   int refit_retries = 0;               // windows tried again since the divergence
   std::uint64_t warm_since_sample = 0;  // status.samples when the last (re)fit was applied
   std::vector<detail::Block> blocks;
+  detail::JointInformation joint;  // the blocks' instruments together: the covariance reported
+  // P_i + C_i (joint_information.hpp), bounded as P_i is: what mode() and the
+  // covariances report.
+  detail::ThetaMat reported_P(const detail::Block& b) const { return b.P + b.cross; }
   std::vector<detail::BlockFilters> snapshot;  // filters at t_{k-1}, for refinements
   DiscreteTransferFunction controller;         // C_d(q) of the instrument's loop (eqs. 9, 29)
   // The plant's own loop u = C_d(q)(r - y), on the measured samples: the last

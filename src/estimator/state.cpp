@@ -46,6 +46,11 @@ bool EstimatorState::operator==(const EstimatorState& o) const {
   return warmed_up_ == o.warmed_up_ && model_ == o.model_ && time_scale_ == o.time_scale_ && same(P_, o.P_) &&
          same(P_bound_, o.P_bound_) && same(good_theta_, o.good_theta_) && same(good_P_, o.good_P_) &&
          same(reference_theta_, o.reference_theta_) && same(reference_variance_, o.reference_variance_) &&
+         same(cross_, o.cross_) && joint_.rows() == o.joint_.rows() && joint_ == o.joint_ &&
+         joint_good_.rows() == o.joint_good_.rows() && joint_good_ == o.joint_good_ &&
+         joint_updates_ == o.joint_updates_ && joint_good_updates_ == o.joint_good_updates_ &&
+         joint_solved_at_ == o.joint_solved_at_ && joint_rng_ == o.joint_rng_ &&
+         joint_countdown_ == o.joint_countdown_ && joint_gap_ == o.joint_gap_ &&
          noise_variance_ == o.noise_variance_ && residual_short_ == o.residual_short_ &&
          noise_variance_good_ == o.noise_variance_good_ && residual_count_ == o.residual_count_ && rearm_ == o.rearm_ &&
          input_power_ == o.input_power_ && input_power_reference_ == o.input_power_reference_ &&
@@ -74,7 +79,14 @@ void EstimatorState::write(StateWriter& out) const {
       out.matrix(good_P_.at(i), "last good P");
       out.reals(reference_theta_.at(i), "reference theta");
       out.reals(reference_variance_.at(i), "reference variance");
+      out.matrix(cross_.at(i), "joint covariance term");
     }
+    out.matrix(joint_, "joint information");
+    out.matrix(joint_good_, "last good joint information");
+    for (std::uint64_t v : {joint_updates_, joint_good_updates_, joint_solved_at_, joint_rng_})
+      out.counter(v, "joint information counter");
+    out.integer(joint_countdown_, "joint information countdown");
+    out.integer(joint_gap_, "joint information gap");
   }
   out.real(noise_variance_, "noise variance");
   out.real(residual_short_, "short residual variance");
@@ -133,7 +145,16 @@ EstimatorState EstimatorState::read(StateReader& in) {
       e.good_P_.push_back(in.matrix(nt, "last good P"));
       e.reference_theta_.push_back(in.reals(nt, "reference theta"));
       e.reference_variance_.push_back(in.reals(nt, "reference variance"));
+      e.cross_.push_back(in.matrix(nt, "joint covariance term"));
     }
+    Eigen::Index n = 0;
+    for (const Submodel& s : e.model_.submodels) n += s.n_theta();
+    e.joint_ = in.matrix(n, "joint information");
+    e.joint_good_ = in.matrix(n, "last good joint information");
+    for (std::uint64_t* v : {&e.joint_updates_, &e.joint_good_updates_, &e.joint_solved_at_, &e.joint_rng_})
+      *v = in.counter("joint information counter");
+    e.joint_countdown_ = in.integer("joint information countdown", 1, std::numeric_limits<std::int32_t>::max());
+    e.joint_gap_ = in.integer("joint information gap", 1, std::numeric_limits<std::int32_t>::max());
   }
   e.noise_variance_ = in.real("noise variance");
   e.residual_short_ = in.real("short residual variance");
@@ -184,7 +205,17 @@ EstimatorState RecursiveEstimator::state() const {
       st.good_P_.emplace_back(b.good_P);
       st.reference_theta_.emplace_back(b.theta_ref.cwiseQuotient(b.scale));
       st.reference_variance_.emplace_back(b.ref_var);
+      st.cross_.emplace_back(b.cross);
     }
+    const detail::JointInformation::Saved j = m.joint.saved();
+    st.joint_ = j.information;
+    st.joint_good_ = j.good_information;
+    st.joint_updates_ = j.updates;
+    st.joint_good_updates_ = j.good_updates;
+    st.joint_solved_at_ = j.solved_at;
+    st.joint_rng_ = j.rng;
+    st.joint_countdown_ = j.countdown;
+    st.joint_gap_ = j.gap;
   }
   st.noise_variance_ = m.e_var;
   st.residual_short_ = m.e_short;
@@ -223,10 +254,11 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
   }
   if (st.warmed_up_) {
     if (st.P_.size() != K || st.time_scale_.size() != K || st.P_bound_.size() != K || st.good_theta_.size() != K ||
-        st.good_P_.size() != K || st.reference_theta_.size() != K || st.reference_variance_.size() != K)
+        st.good_P_.size() != K || st.reference_theta_.size() != K || st.reference_variance_.size() != K ||
+        st.cross_.size() != K)
       fail(
-          "per-submodel arrays (P, time_scale, P_bound, good_theta, good_P, reference theta and variance) do not "
-          "have one entry per submodel");
+          "per-submodel arrays (P, time_scale, P_bound, good_theta, good_P, reference theta and variance, joint "
+          "covariance term) do not have one entry per submodel");
     for (std::size_t i = 0; i < K; ++i) {
       const Eigen::Index nt = m.initial.submodels[i].n_theta();
       const std::string where = "submodel " + std::to_string(i + 1) + ": ";
@@ -294,7 +326,21 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
         b.stabilisation = Block::Stabilisation::on;
       }
       b.filters.init(b.a_poly(), b.denominator(), b.ws * next.cfg.sample_time, next.cfg.output_hold, b.biproper);
+      if (st.cross_[i].rows() != b.nt || st.cross_[i].cols() != b.nt || !st.cross_[i].allFinite())
+        fail("submodel " + std::to_string(i + 1) + ": joint covariance term does not match n_theta or is not finite");
+      b.cross = st.cross_[i];
     }
+    detail::JointInformation::Saved joint;
+    joint.information = st.joint_;
+    joint.good_information = st.joint_good_;
+    joint.updates = st.joint_updates_;
+    joint.good_updates = st.joint_good_updates_;
+    joint.solved_at = st.joint_solved_at_;
+    joint.rng = st.joint_rng_;
+    joint.countdown = st.joint_countdown_;
+    joint.gap = st.joint_gap_;
+    if (!next.joint.load(joint))
+      fail("joint information: not of the submodels' size, not finite, or its counters out of range");
     next.buffered = 0;
   } else {
     next.blocks.clear();

@@ -341,6 +341,7 @@ inline unsigned RecursiveEstimator::Impl::finish_update() {
     stabilise_block = 0;
     ++stabilise_round;
   }
+  if (joint.update(blocks)) joint.solve(blocks, e_var);
   unsigned flags = kUpdated;
   if (++updates_since_good >= 256) {
     if (restore_sign_flipped_modes()) flags |= kModeRestored;  // before a save could keep a flipped mode as good

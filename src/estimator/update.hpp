@@ -138,6 +138,7 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
     const double rate = b.decay_rate();
     if (rate > 0.0) lambda = std::max(lambda, 1.0 - b.forget_per_decay * rate);
   }
+  b.lambda_now = lambda;
   // phi and psi copied once, for the score test's sums and iv_update: stores
   // to score, info, theta and P could alias the block's own and force reloads.
   double phi[detail::kMaxTheta], psi[detail::kMaxTheta];

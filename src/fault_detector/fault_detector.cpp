@@ -250,12 +250,13 @@ void FaultDetector::restart_learning(std::size_t i, LearnHold why) {
   m.learn_progress = 0.0;
 }
 
-void FaultDetector::learn(std::size_t i, double now, const Eigen::Vector3d& x, const Eigen::Matrix3d& c) {
+void FaultDetector::learn(std::size_t i, double now, const Eigen::Vector3d& x, const Eigen::Matrix3d& c,
+                          const Eigen::Matrix3d& settle_c) {
   ModeStatus& m = modes_[i];
   Learning& l = learning_[i];
   for (int q = 0; q < kQuantities; ++q) {
     const double limit = settings_.settle_std_fraction * settings_.thresholds[q].relative_threshold;
-    if (!(c(q, q) >= 0.0 && std::sqrt(c(q, q)) < limit * std::abs(x(q)))) {
+    if (!(settle_c(q, q) >= 0.0 && std::sqrt(settle_c(q, q)) < limit * std::abs(x(q)))) {
       restart_learning(i, LearnHold::uncertain);
       return;
     }
@@ -315,9 +316,10 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
 
 void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
                            const std::vector<Eigen::Matrix3d>& covariance, bool valid,
-                           std::vector<FlagChange>& changes, double evidence_span) {
+                           std::vector<FlagChange>& changes, double evidence_span,
+                           const std::vector<Eigen::Matrix3d>* settle_covariance) {
   const std::size_t n = modes_.size();
-  if (value.size() != n || covariance.size() != n)
+  if (value.size() != n || covariance.size() != n || (settle_covariance && settle_covariance->size() != n))
     throw std::invalid_argument("FaultDetector::update: estimates for a different number of modes");
   const bool t_ok = std::isfinite(t);
   const double span = std::isfinite(evidence_span) && evidence_span > 0.0 ? evidence_span : 0.0;
@@ -338,7 +340,7 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
     const Eigen::Matrix3d& c = covariance[i];
 
     if (m.state == BaselineState::learning) {
-      learn(i, now, x, c);
+      learn(i, now, x, c, settle_covariance ? (*settle_covariance)[i] : c);
       continue;
     }
 

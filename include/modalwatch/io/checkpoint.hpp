@@ -29,7 +29,7 @@
 
 namespace modalwatch {
 
-inline constexpr std::uint32_t kCheckpointVersion = 2;
+inline constexpr std::uint32_t kCheckpointVersion = 3;
 inline constexpr std::uint64_t kMaxCheckpointPayload = 16u << 20;  // 16 MiB: far above any real model
 
 struct Checkpoint {

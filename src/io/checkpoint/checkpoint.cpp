@@ -304,12 +304,14 @@ Checkpoint decode_checkpoint(std::span<const std::uint8_t> bytes, const std::str
   const std::uint32_t version = h.u32("version");
   // Version 1 lacks stabilised forgetting's reference (theta_ref, P_ref): a
   // run resumed from it would stabilise toward another point than the run that
-  // wrote it. Refused, like any other version.
-  if (version == 1)
-    throw InputError(source,
-                     "checkpoint: byte offset 8: format version 1 carries no stabilised-forgetting "
-                     "reference; this build reads version " +
-                         std::to_string(kCheckpointVersion) + " only (the estimator starts afresh)");
+  // wrote it. Version 2 lacks the instruments' joint information, without which
+  // the covariance the detector tests against is the submodels' own for a
+  // memory. Refused, like any other version.
+  if (version == 1 || version == 2)
+    throw InputError(source, "checkpoint: byte offset 8: format version " + std::to_string(version) + " carries no " +
+                                 (version == 1 ? "stabilised-forgetting reference" : "joint information") +
+                                 "; this build reads version " + std::to_string(kCheckpointVersion) +
+                                 " only (the estimator starts afresh)");
   if (version != kCheckpointVersion)
     throw InputError(source, "checkpoint: byte offset 8: format version " + std::to_string(version) +
                                  ", this build reads version " + std::to_string(kCheckpointVersion));
