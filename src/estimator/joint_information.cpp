@@ -20,7 +20,6 @@ void JointInformation::resize(const std::vector<Block>& blocks) {
   S_good_.resize(n_, n_);
   inv_w_good_.resize(n_);
   A_.resize(n_, n_);
-  x_.resize(n_);
   own_.resize(n_, n_);
   clear();
   save_good();

@@ -99,7 +99,6 @@ class JointInformation {
   std::uint64_t updates_good_ = 0;
   // The solve's workspace (no allocation once sized).
   Eigen::MatrixXd A_, own_;
-  Eigen::VectorXd x_;
 };
 
 MODALWATCH_HOT void JointInformation::accumulate(const std::vector<Block>& blocks) {
