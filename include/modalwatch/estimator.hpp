@@ -397,8 +397,9 @@ class RecursiveEstimator {
   ModeEstimate mode(int i) const noexcept;
   // Covariance of submodel i's (wn, zeta, gain): modal_covariance() of
   // sigma^2 (P_i + C_i), C_i what not knowing the other submodels adds to
-  // P_i (the instruments' joint information; at first, and for one memory
-  // after a change boost or restore(), the last C_i or zero). No allocation.
+  // P_i (the instruments' joint information; for one memory after the
+  // warm-up C_i is zero, and from a change boost until one memory after it
+  // C_i keeps its value from before). No allocation.
   Eigen::Matrix3d mode_covariance(int i) const noexcept;
   // The same from sigma^2 P_i alone: the other submodels taken as known, as
   // the block-coordinate recursion takes them.
