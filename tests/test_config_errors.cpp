@@ -220,7 +220,7 @@ TEST(ConfigErrors, TransferFunctionOrders) {
             "test.yaml:4: key 'model.submodels[0].a': missing required key (kind transfer_function)");
   EXPECT_EQ(parse_error(edit(kTf, "a: [0.1, 0.01]", "wn: 3")),
             "test.yaml:6: key 'model.submodels[0].wn': unknown key for kind transfer_function (allowed: name, "
-            "kind, a, b, rigid_poles, input, forgetting, random_walk, stabilisation, min_memory, initial_covariance)");
+            "kind, a, b, rigid_poles, input, poles_of, forgetting, random_walk, stabilisation, min_memory, initial_covariance)");
 }
 
 TEST(ConfigErrors, UnstableTransferFunction) {
@@ -263,7 +263,7 @@ TEST(ConfigErrors, Feedthrough) {
   EXPECT_EQ(parse_error(edit(kTf, "      kind: transfer_function\n      a: [0.1, 0.01]\n      b: [1, 0.5]\n",
                              "      kind: feedthrough\n      gain: 0.25\n      rigid_poles: 1\n")),
             "test.yaml:7: key 'model.submodels[0].rigid_poles': unknown key for kind feedthrough (allowed: name, "
-            "kind, gain, input, forgetting, random_walk, stabilisation, min_memory, initial_covariance)");
+            "kind, gain, input, poles_of, forgetting, random_walk, stabilisation, min_memory, initial_covariance)");
 }
 
 TEST(ConfigErrors, InitialCovariance) {

@@ -147,6 +147,33 @@ TEST(CheckPhysical, CloseModesWithOppositeGainsAreMerged) {
   EXPECT_FALSE(check_physical(m, sharp, 0.05).changed());
 }
 
+// Two resonances seen from two inputs, each submodel on u2 sharing its u1
+// view's A: when the u1 views merge, b's u2 view goes with them into a's.
+TEST(CheckPhysical, AMergedResonanceTakesItsOtherInputsViewsAlong) {
+  AdditiveModel m;
+  m.inputs = {"u1", "u2"};
+  m.submodels = {make_mode("a_u1", {10.0, 0.02, 1.0}), make_mode("a_u2", {10.0, 0.02, 0.3}),
+                 make_mode("b_u1", {10.05, 0.03, -0.4}), make_mode("b_u2", {10.05, 0.03, 0.2})};
+  m.submodels[1].input = m.submodels[3].input = 1;
+  m.submodels[1].poles_of = "a_u1";
+  m.submodels[3].poles_of = "b_u1";
+  Eigen::MatrixXd cov = Eigen::MatrixXd::Zero(12, 12);
+  const double sa = 0.05 * 2.0 / std::pow(10.0, 3), sb = 0.05 * 2.0 / std::pow(10.05, 3);
+  for (const int o : {0, 3}) cov(o + 1, o + 1) = sa * sa;
+  for (const int o : {6, 9}) cov(o + 1, o + 1) = sb * sb;
+  const PhysicalCheck c = check_physical(m, cov, 0.05);
+  EXPECT_TRUE(c.refit);
+  EXPECT_EQ(c.findings[2].verdict, ModeVerdict::merged);
+  EXPECT_EQ(c.findings[2].into, "a_u1");
+  EXPECT_EQ(c.findings[3].verdict, ModeVerdict::merged);  // same-sign gains on u2: merged with its resonance
+  EXPECT_EQ(c.findings[3].into, "a_u2");
+  ASSERT_EQ(c.model.submodels.size(), 2u);
+  EXPECT_EQ(c.model.submodels[1].name, "a_u2");
+  EXPECT_EQ(c.model.submodels[1].poles_of, "a_u1");
+  EXPECT_NEAR(modal_parameters(c.model.submodels[1]).gain, 0.5, 1e-12);
+  EXPECT_NO_THROW(pole_groups(c.model));
+}
+
 // End to end: a plant with a feedthrough (a sensor's direct path) fitted with a
 // mode far above Nyquist in its place: the fit comes out with the feedthrough.
 TEST(FitPhysical, ModeAboveNyquistIsRefittedAsFeedthrough) {

@@ -53,6 +53,12 @@ struct Submodel {
   // The measured input that drives this submodel: an index into the model's
   // inputs (AdditiveModel::inputs). 0, the first input, for a single-input model.
   int input = 0;
+  // One resonance seen through several inputs: the name of the submodel whose
+  // A(p) this one shares, empty when it has its own. A structure's mode has
+  // one pole pair and a residue per actuator, so the batch fits (fit_srivc)
+  // estimate a shared A from every member's input at once; the recursive
+  // estimator follows each submodel's poles on their own.
+  std::string poles_of;
 
   int n_theta() const { return n + m + 1; }
   // eq. (7): theta_i = [a_1 .. a_n, b_0 .. b_m]
@@ -85,7 +91,7 @@ struct Submodel {
   // Throws std::invalid_argument when the sizes do not match n, m, or the
   // measured response p^z B / (p^l A) is improper.
   void check() const;
-  // Same name, orders, output kind, coefficients and input.
+  // Same name, orders, output kind, coefficients, input and shared poles.
   bool operator==(const Submodel& other) const;
 };
 
@@ -142,5 +148,22 @@ struct AdditiveModel {
   std::complex<double> response(double w, int input) const;
   bool operator==(const AdditiveModel&) const = default;
 };
+
+// The submodels that share one A(p): per submodel that has its own poles, its
+// index followed by those of the submodels whose poles_of names it, in model
+// order. Throws std::invalid_argument naming the submodel when poles_of names
+// no submodel, one that shares another's poles itself, one of other orders or
+// output kind, or one on the same input.
+std::vector<std::vector<int>> pole_groups(const AdditiveModel& model);
+
+// The parameters of a model whose submodels may share poles: beta without the
+// a of each submodel that shares another's (its leader's a stands for it).
+// Equal to beta when no submodel shares poles.
+Eigen::VectorXd free_beta(const AdditiveModel& model);
+// Sets beta from them: each sharing submodel takes its leader's a.
+void set_free_beta(AdditiveModel& model, const Eigen::VectorXd& p);
+// E with beta = E * free_beta(model) (0/1 entries): a covariance of the free
+// parameters C maps to E C E^T over beta.
+Eigen::MatrixXd free_beta_map(const AdditiveModel& model);
 
 }  // namespace modalwatch

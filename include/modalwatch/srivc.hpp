@@ -43,6 +43,12 @@ struct SrivcOptions {
   int srivc_per_block = 1;       // SRIVC refinements of one submodel per cycle
   double tolerance = 1e-10;      // on the relative change of beta per cycle
   Hold output_hold = Hold::zoh;  // intersample behaviour assumed for y in the prefilters
+  // ... and for the input, open loop only: zoh for an input the plant receives
+  // held (a DAC), foh for a measured band-limited one (a shaker's force). Near
+  // Nyquist the two differ by up to half a sample of delay, which a zoh fit of a
+  // band-limited record puts on its fastest modes (the flexible structure of
+  // the README: with zoh no block stays on its 397, 417 or 467 Hz peak).
+  Hold input_hold = Hold::zoh;
   bool stability_projection = true;
   // Trust region: a block's natural frequency moves by at most this factor per
   // iteration (1 or less: no limit). Keeps blocks on their own modes from a rough start.
@@ -91,17 +97,21 @@ struct FitResult {
 // Several measured inputs: each block's prefiltered regressors and
 // instruments come from its submodel's input (Submodel::input indexes
 // Record::input), the other blocks' simulated outputs are subtracted as for one
-// input (eq. 15). Throws std::invalid_argument on a record too short for the
-// number of parameters, a closed-loop fit without a reference or controller, a
-// submodel on an input the record lacks, or a closed loop with submodels on
-// several inputs (the controller gives one u).
+// input (eq. 15). Submodels that share poles (Submodel::poles_of) are one block:
+// its regression has A's coefficients once and each member's B on its own
+// input, and the covariance counts the shared A once (FitResult::covariance
+// over beta repeats it per member, fully correlated). Throws
+// std::invalid_argument on a record too short for the number of parameters, a
+// closed-loop fit without a reference or controller or with input_hold foh, a
+// submodel on an input the record lacks, a closed loop with submodels on
+// several inputs (the controller gives one u), or a poles_of that pole_groups refuses.
 FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const SrivcOptions& options);
 
 // Output of the model on the record: open loop, the simulated sum of submodels
 // driven by u (ZOH); closed loop with simulate_loop, the noise-free loop driven by r.
 Eigen::VectorXd simulate_model(const AdditiveModel& model, const Eigen::VectorXd& u, double T);
 // The same with every submodel driven by its own input of the record (open loop).
-Eigen::VectorXd simulate_model(const AdditiveModel& model, const Record& data);
+Eigen::VectorXd simulate_model(const AdditiveModel& model, const Record& data, Hold input_hold = Hold::zoh);
 // Noise-free closed loop with the known controller: returns z = S_uo(q) r (the
 // instrument input, eq. 29) and the loop output.
 void simulate_loop(const AdditiveModel& model, const DiscreteTransferFunction& controller, const Eigen::VectorXd& r,

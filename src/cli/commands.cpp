@@ -131,6 +131,11 @@ int fit(const FitArgs& args) {
     const double T = data.sample_time();
     SrivcOptions options;
     options.closed_loop = config.closed_loop;
+    if (args.input_hold == "foh") {
+      if (config.closed_loop)
+        throw InputError("--input-hold", "foh is for open-loop records (u is the controller's held output in closed loop)");
+      options.input_hold = Hold::foh;
+    }
     options.controller = config.controller;
     options.max_iterations = args.max_iterations;
     options.settle_samples = settle;

@@ -30,6 +30,7 @@ struct FitArgs {
   std::optional<std::string> output;  // what the sensor measures, for modes from the data (else model.output)
   std::string stabilisation;       // with max_modes: the stabilisation diagram's tables here
   std::string plot_script;         // scripts/plot/plot_stabilisation.py, run on them when given
+  std::string input_hold = "zoh";  // zoh (held input) or foh (band-limited input, open loop)
   ColumnArgs columns;
 };
 

@@ -76,6 +76,11 @@ int main(int argc, char** argv) {
                    "with --stabilisation: run this scripts/plot/plot_stabilisation.py on it")
       ->needs("--stabilisation");
   add_column_options(fit_cmd, fit_args.columns);
+  fit_cmd
+      ->add_option("--input-hold", fit_args.input_hold,
+                   "zoh (input held between samples, as from a DAC) or foh (a measured band-limited input, "
+                   "open loop)")
+      ->check(CLI::IsMember({"zoh", "foh"}));
 
   TrackArgs track_args;
   bool no_progress = false;

@@ -86,9 +86,12 @@ Refined fit_structure(const AugmentedModel& start, const Problem& pb, const Diag
 
 // Covariance of the linear part's beta at the model (empty when unknown).
 Eigen::MatrixXd beta_covariance(const AugmentedModel& m, const Problem& pb) {
-  const int nb = m.linear.n_beta();
+  const Eigen::MatrixXd E = free_beta_map(m.linear);  // beta = E * free parameters
+  const Eigen::Index nf = E.cols();
   const Eigen::MatrixXd all = refine(m, pb, 0, true).covariance;
-  return all.rows() >= nb ? Eigen::MatrixXd(all.topLeftCorner(nb, nb)) : Eigen::MatrixXd();
+  if (all.rows() < nf) return Eigen::MatrixXd();
+  if (nf == m.linear.n_beta()) return all.topLeftCorner(nf, nf);  // no shared poles: E = I
+  return E * all.topLeftCorner(nf, nf) * E.transpose();
 }
 
 // The physical check (physical.hpp) on a fitted structure: its verdicts

@@ -20,16 +20,17 @@ Eigen::VectorXd pack(const AugmentedModel& m) {
   if (e.drift_on) extra.push_back(e.drift);
   if (e.coulomb_on) extra.push_back(e.coulomb);
   if (e.cubic_on) extra.push_back(e.cubic);
-  const int nb = m.linear.n_beta();
+  const Eigen::VectorXd beta = free_beta(m.linear);
+  const int nb = static_cast<int>(beta.size());
   Eigen::VectorXd p(nb + static_cast<int>(extra.size()));
-  p.head(nb) = m.linear.beta();
+  p.head(nb) = beta;
   for (std::size_t i = 0; i < extra.size(); ++i) p(nb + static_cast<int>(i)) = extra[i];
   return p;
 }
 
 void unpack(const Eigen::VectorXd& p, AugmentedModel& m) {
-  const int nb = m.linear.n_beta();
-  m.linear.set_beta(p.head(nb));
+  const int nb = static_cast<int>(free_beta(m.linear).size());
+  set_free_beta(m.linear, p.head(nb));
   int i = nb;
   ModelEffects& e = m.effects;
   if (e.output_offset_on) e.output_offset = p(i++);

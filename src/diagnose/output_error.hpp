@@ -20,7 +20,8 @@ struct Problem {
   long* simulations = nullptr;  // when set, counts the model's simulations (its benchmark)
 };
 
-// p = [beta; effect parameters that are on], in physical units.
+// p = [free_beta; effect parameters that are on], in physical units (a
+// shared A counts once: free_beta in model.hpp).
 Eigen::VectorXd pack(const AugmentedModel& m);
 void unpack(const Eigen::VectorXd& p, AugmentedModel& m);
 

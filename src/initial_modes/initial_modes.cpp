@@ -256,6 +256,8 @@ AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOpt
       model.submodels.push_back(
           make_mode("mode" + std::to_string(i + 1) + "_" + model.input_name(j), p, output_derivatives));
       model.submodels.back().input = j;
+      // One resonance, one pole pair: every input's submodel shares the first's A.
+      if (j > 0) model.submodels.back().poles_of = model.submodels[model.submodels.size() - 1 - j].name;
     }
   return model;
 }

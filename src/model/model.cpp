@@ -226,7 +226,104 @@ bool Submodel::operator==(const Submodel& other) const {
   return name == other.name && n == other.n && m == other.m && rigid_poles == other.rigid_poles &&
          output_derivatives == other.output_derivatives &&
          a.size() == other.a.size() && b.size() == other.b.size() && a == other.a && b == other.b &&
-         input == other.input;
+         input == other.input && poles_of == other.poles_of;
+}
+
+std::vector<std::vector<int>> pole_groups(const AdditiveModel& model) {
+  const auto& subs = model.submodels;
+  const int K = static_cast<int>(subs.size());
+  std::vector<std::vector<int>> groups;
+  std::vector<int> group_of(static_cast<std::size_t>(K), -1);
+  for (int i = 0; i < K; ++i)
+    if (subs[i].poles_of.empty()) {
+      group_of[i] = static_cast<int>(groups.size());
+      groups.push_back({i});
+    }
+  for (int i = 0; i < K; ++i) {
+    const Submodel& s = subs[i];
+    if (s.poles_of.empty()) continue;
+    const auto it = std::find_if(subs.begin(), subs.end(), [&](const Submodel& o) { return o.name == s.poles_of; });
+    if (it == subs.end())
+      throw std::invalid_argument(s.name + ": poles_of names " + s.poles_of + ", which is no submodel of the model");
+    const Submodel& leader = *it;
+    if (!leader.poles_of.empty())
+      throw std::invalid_argument(s.name + ": poles_of names " + leader.name + ", which shares the poles of " +
+                                  leader.poles_of + " itself; name " + leader.poles_of);
+    if (leader.n != s.n || leader.m != s.m || leader.rigid_poles != s.rigid_poles ||
+        leader.output_derivatives != s.output_derivatives)
+      throw std::invalid_argument(s.name + ": shares the poles of " + leader.name +
+                                  ", so it needs the same orders n, m, rigid poles and output kind");
+    std::vector<int>& group = groups[static_cast<std::size_t>(group_of[static_cast<std::size_t>(it - subs.begin())])];
+    for (int j : group)
+      if (subs[j].input == s.input)
+        throw std::invalid_argument(s.name + ": shares the poles of " + leader.name + " on the same input as " +
+                                    subs[j].name + "; one resonance has one submodel per input");
+    group.push_back(i);
+  }
+  return groups;
+}
+
+namespace {
+
+// Per submodel: the index of the submodel whose a it takes, or -1 for its own.
+std::vector<int> leaders(const AdditiveModel& model) {
+  std::vector<int> out(model.submodels.size(), -1);
+  for (const auto& g : pole_groups(model))
+    for (std::size_t q = 1; q < g.size(); ++q) out[static_cast<std::size_t>(g[q])] = g.front();
+  return out;
+}
+
+}  // namespace
+
+Eigen::MatrixXd free_beta_map(const AdditiveModel& model) {
+  const std::vector<int> lead = leaders(model);
+  const int K = static_cast<int>(model.submodels.size());
+  std::vector<int> free_offset(static_cast<std::size_t>(K));  // where theta_i's first free entry sits
+  int free = 0;
+  for (int i = 0; i < K; ++i) {
+    free_offset[i] = free;
+    free += model.submodels[i].n_theta() - (lead[i] >= 0 ? model.submodels[i].n : 0);
+  }
+  Eigen::MatrixXd E = Eigen::MatrixXd::Zero(model.n_beta(), free);
+  for (int i = 0, o = 0; i < K; o += model.submodels[i].n_theta(), ++i) {
+    const Submodel& s = model.submodels[i];
+    const int own = lead[i] >= 0 ? 0 : s.n;  // a's own entries in the free vector
+    for (int j = 0; j < s.n; ++j) E(o + j, lead[i] >= 0 ? free_offset[lead[i]] + j : free_offset[i] + j) = 1.0;
+    for (int j = 0; j <= s.m; ++j) E(o + s.n + j, free_offset[i] + own + j) = 1.0;
+  }
+  return E;
+}
+
+Eigen::VectorXd free_beta(const AdditiveModel& model) {
+  const std::vector<int> lead = leaders(model);
+  Eigen::VectorXd p(model.n_beta());
+  int k = 0;
+  for (std::size_t i = 0; i < model.submodels.size(); ++i) {
+    const Submodel& s = model.submodels[i];
+    if (lead[i] < 0) {
+      p.segment(k, s.n) = s.a;
+      k += s.n;
+    }
+    p.segment(k, s.m + 1) = s.b;
+    k += s.m + 1;
+  }
+  return p.head(k);
+}
+
+void set_free_beta(AdditiveModel& model, const Eigen::VectorXd& p) {
+  const std::vector<int> lead = leaders(model);
+  int k = 0;
+  for (std::size_t i = 0; i < model.submodels.size(); ++i) {
+    Submodel& s = model.submodels[i];
+    if (lead[i] < 0) {
+      s.a = p.segment(k, s.n);
+      k += s.n;
+    }
+    s.b = p.segment(k, s.m + 1);
+    k += s.m + 1;
+  }
+  for (std::size_t i = 0; i < model.submodels.size(); ++i)
+    if (lead[i] >= 0) model.submodels[i].a = model.submodels[static_cast<std::size_t>(lead[i])].a;
 }
 
 }  // namespace modalwatch

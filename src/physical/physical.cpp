@@ -65,6 +65,50 @@ bool PhysicalCheck::changed() const {
                      [](const ModeFinding& f) { return f.verdict != ModeVerdict::physical; });
 }
 
+namespace {
+
+int index_of(const std::vector<Submodel>& subs, const std::string& name) {
+  for (std::size_t i = 0; i < subs.size(); ++i)
+    if (subs[i].name == name) return static_cast<int>(i);
+  return -1;
+}
+
+// The submodel whose poles submodel i shares (i itself when it has its own).
+int leader_of(const std::vector<Submodel>& subs, int i) {
+  const int lead = subs[i].poles_of.empty() ? i : index_of(subs, subs[i].poles_of);
+  return lead < 0 ? i : lead;
+}
+
+// Submodel j was merged into i: the other inputs' views of j's resonance go
+// with it, each into i's view on its input (their gains add) or, where i's
+// resonance has none there, into i's group.
+void absorb_views(int j, int i, std::vector<Submodel>& subs, std::vector<bool>& removed,
+                  std::vector<ModeFinding>& findings) {
+  const int K = static_cast<int>(subs.size());
+  const int lead_j = leader_of(subs, j), lead_i = leader_of(subs, i);
+  if (lead_j == lead_i) return;
+  const std::string from = subs[lead_j].name, into = subs[lead_i].name;
+  for (int k = 0; k < K; ++k) {
+    if (removed[k] || !(k == lead_j || subs[k].poles_of == from)) continue;
+    int view = -1;
+    for (int w = 0; w < K; ++w)
+      if (!removed[w] && (w == lead_i || subs[w].poles_of == into) && subs[w].input == subs[k].input) view = w;
+    if (view < 0) {
+      subs[k].poles_of = into;
+      continue;
+    }
+    const ModalParameters p = modal_parameters(subs[k]);
+    subs[view].b(0) += subs[k].b(0);
+    removed[k] = true;
+    findings[k].verdict = ModeVerdict::merged;
+    findings[k].into = subs[view].name;
+    findings[k].reason = format("%.5g Hz (gain %.4g): another input's view of ", p.hz(), p.gain) + subs[j].name +
+                         ", merged with it into " + subs[view].name;
+  }
+}
+
+}  // namespace
+
 PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd& beta_covariance, double sample_time,
                              const PhysicalOptions& options) {
   const int K = static_cast<int>(fitted.submodels.size());
@@ -160,9 +204,12 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
     const double larger = std::abs(pi.gain) > std::abs(pj.gain) ? pi.gain : pj.gain;
     if (std::abs(merged.gain) < 1e-3 * std::abs(larger)) merged.gain = larger;
     const int input = subs[best_i].input;
+    const std::string poles_of = subs[best_i].poles_of;
     subs[best_i] = make_mode(subs[best_i].name, merged, subs[best_i].output_derivatives);
     subs[best_i].input = input;
+    subs[best_i].poles_of = poles_of;
     removed[best_j] = true;
+    absorb_views(best_j, best_i, subs, removed, out.findings);
     ModeFinding& f = out.findings[best_j];
     f.verdict = ModeVerdict::merged;
     f.into = subs[best_i].name;
@@ -172,6 +219,9 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
     out.refit = true;
   }
 
+  // A feedthrough has no poles to share: a view of one keeps its own.
+  for (int i = 0; i < K; ++i)
+    if (!removed[i] && !subs[i].poles_of.empty() && !subs[leader_of(subs, i)].is_mode()) subs[i].poles_of.clear();
   for (int i = 0; i < K; ++i)
     if (!removed[i]) out.model.submodels.push_back(subs[i]);
   return out;

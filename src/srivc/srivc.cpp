@@ -61,9 +61,9 @@ struct ScaledSubmodel {
   }
 };
 
-// B/(p^l A) w under ZOH at the samples.
-Eigen::VectorXd simulate_scaled(const ScaledSubmodel& s, const Eigen::VectorXd& w, double T) {
-  Prefilter f(s.denominator(), s.ws * T, Hold::zoh);
+// B/(p^l A) w at the samples, w held (zoh) or interpolated (foh) between them.
+Eigen::VectorXd simulate_scaled(const ScaledSubmodel& s, const Eigen::VectorXd& w, double T, Hold hold = Hold::zoh) {
+  Prefilter f(s.denominator(), s.ws * T, hold);
   const Eigen::VectorXd b = s.b();
   Eigen::VectorXd x(w.size());
   for (Eigen::Index k = 0; k < w.size(); ++k) {
@@ -126,24 +126,32 @@ void simulate_loop_scaled(const std::vector<ScaledSubmodel>& model, DiscreteTran
   }
 }
 
-// Filtered signals of one submodel for one SRIVC iteration (eqs. 18-20, 33):
-// regressor phi, instrument psi (both n_theta wide) and filtered output y_f.
-// With a derivative output p^z the regressor of b_k is the prefiltered input's
+// Filtered signals of one block for one SRIVC iteration (eqs. 18-20, 33):
+// regressor phi, instrument psi and filtered output y_f. A block is one
+// submodel, or the submodels that share its A(p) (pole_groups), each on its own
+// input: the columns are a_1..a_n, then b_0..b_m of each member in turn. With a
+// derivative output p^z the regressor of b_k is the prefiltered input's
 // (k+z)-th derivative, p^(k+z) u / (p^l A), the top one algebraic when m + z = n + l.
 struct Filtered {
   Eigen::MatrixXd phi, psi;
   Eigen::VectorXd y_f;
 };
 
-Filtered filter_block(const ScaledSubmodel& s, const Eigen::VectorXd& y_tilde, const Eigen::VectorXd& u,
-                      const Eigen::VectorXd& x_hat, const Eigen::VectorXd& z, double T, Hold output_hold) {
-  const int n = s.shape->n, m = s.shape->m, nt = s.shape->n_theta();
+using Signals = std::vector<const Eigen::VectorXd*>;
+
+Filtered filter_block(const ScaledSubmodel& s, const Eigen::VectorXd& y_tilde, const Signals& u,
+                      const Eigen::VectorXd& x_hat, const Signals& z, double T, Hold output_hold, Hold input_hold) {
+  const int n = s.shape->n, m = s.shape->m, members = static_cast<int>(u.size());
+  const int nt = n + members * (m + 1);
   const int derivatives = s.shape->output_derivatives;  // z of p^z
   const double Ts = s.ws * T;
   const Eigen::VectorXd a = s.a_poly(), den = s.denominator();
   Prefilter fy(a, Ts, output_hold), fx(a, Ts, output_hold);
-  Prefilter fu(den, Ts, Hold::zoh), fz(den, Ts, Hold::zoh);
-  const bool same_input = &u == &z;
+  std::vector<Prefilter> fu, fz;
+  for (int q = 0; q < members; ++q) {
+    fu.emplace_back(den, Ts, input_hold);
+    fz.emplace_back(den, Ts, input_hold);
+  }
   const Eigen::Index N = y_tilde.size();
   Filtered out;
   out.phi.resize(N, nt);
@@ -152,16 +160,19 @@ Filtered filter_block(const ScaledSubmodel& s, const Eigen::VectorXd& y_tilde, c
   for (Eigen::Index k = 0; k < N; ++k) {
     const auto& dy = fy.step(y_tilde(k));
     const auto& dx = fx.step(x_hat(k));
-    const auto& du = fu.step(u(k));
-    const auto& dz = same_input ? du : fz.step(z(k));
     out.y_f(k) = dy(0);
     for (int j = 1; j <= n; ++j) {
       out.phi(k, j - 1) = -dy(j);
       out.psi(k, j - 1) = -dx(j);
     }
-    for (int j = 0; j <= m; ++j) {
-      out.phi(k, n + j) = du(j + derivatives);
-      out.psi(k, n + j) = dz(j + derivatives);
+    for (int q = 0; q < members; ++q) {
+      const auto& du = fu[q].step((*u[q])(k));
+      const auto& dz = u[q] == z[q] ? du : fz[q].step((*z[q])(k));
+      const int c = n + q * (m + 1);
+      for (int j = 0; j <= m; ++j) {
+        out.phi(k, c + j) = du(j + derivatives);
+        out.psi(k, c + j) = dz(j + derivatives);
+      }
     }
   }
   return out;
@@ -185,15 +196,14 @@ Eigen::VectorXd iv_solve(const Filtered& f, Eigen::Index first) {
 // blocks on one mode: a local minimum of the block-coordinate descent). Moving
 // sqrt(a_n) by at most a factor `max_step` per iteration lets each block walk to
 // its own mode. Returns true when the step was shortened.
-bool damp_step(const ScaledSubmodel& s, Eigen::VectorXd& theta, double max_step) {
-  const int n = s.shape->n;
+bool damp_step(int n, const Eigen::VectorXd& previous, Eigen::VectorXd& theta, double max_step) {
   if (n == 0 || !(max_step > 1.0)) return false;
-  const double before = s.theta(n - 1), after = theta(n - 1);
+  const double before = previous(n - 1), after = theta(n - 1);
   if (!(before > 0.0) || !(after > 0.0)) return false;
   const double ratio = std::abs(std::log(after / before)) / n;  // log of the frequency ratio
   const double limit = std::log(max_step);
   if (ratio <= limit) return false;
-  theta = s.theta + (limit / ratio) * (theta - s.theta);
+  theta = previous + (limit / ratio) * (theta - previous);
   return true;
 }
 
@@ -219,10 +229,10 @@ Eigen::VectorXd simulate_model(const AdditiveModel& model, const Eigen::VectorXd
   return y;
 }
 
-Eigen::VectorXd simulate_model(const AdditiveModel& model, const Record& data) {
+Eigen::VectorXd simulate_model(const AdditiveModel& model, const Record& data, Hold input_hold) {
   const double T = data.sample_time();
   Eigen::VectorXd y = Eigen::VectorXd::Zero(data.size());
-  for (const auto& s : scale_model(model)) y += simulate_scaled(s, data.input(s.shape->input), T);
+  for (const auto& s : scale_model(model)) y += simulate_scaled(s, data.input(s.shape->input), T, input_hold);
   return y;
 }
 
@@ -326,6 +336,8 @@ FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const Sriv
       throw std::invalid_argument("fit: input " + std::to_string(s.input + 1) + " is not as long as the record");
     one_input = one_input && s.input == initial.submodels[0].input;
   }
+  if (options.closed_loop && options.input_hold != Hold::zoh)
+    throw std::invalid_argument("fit: a closed loop's input is the controller's held output; input_hold foh is for open loop");
   if (options.closed_loop && !one_input)
     throw std::invalid_argument(
         "fit: a closed loop has the controller's one input; submodels on several inputs "
@@ -351,17 +363,53 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   const Eigen::Index N = data.size();
   const double T = data.sample_time();
   const Eigen::VectorXd& y = data.y;
-  // Each block's regressors come from its own input (several actuators).
-  const auto input_of = [&](std::size_t i) -> const Eigen::VectorXd& { return data.input(initial.submodels[i].input); };
   const Eigen::Index first = options.settle_samples, used = N - first;  // the samples in eq. (8)
 
   FitResult result;
   result.model = initial;
+  // Blocks: each submodel, or the submodels that share one A (one resonance on
+  // several inputs), whose members start from their leader's A.
+  const std::vector<std::vector<int>> groups = pole_groups(result.model);
+  for (const auto& g : groups)
+    for (int i : g) result.model.submodels[i].a = result.model.submodels[g.front()].a;
   std::vector<ScaledSubmodel> model = scale_model(result.model);
   const std::size_t K = model.size();
+  // Each block's regressors come from its members' own inputs (several actuators).
+  const auto input_of = [&](int i) -> const Eigen::VectorXd& { return data.input(result.model.submodels[i].input); };
+  const auto inputs_of = [&](const std::vector<int>& g) {
+    Signals u;
+    for (int i : g) u.push_back(&input_of(i));
+    return u;
+  };
 
   std::vector<Eigen::VectorXd> x_hat(K);  // G_i u_i: the submodel outputs on the record
-  for (std::size_t i = 0; i < K; ++i) x_hat[i] = simulate_scaled(model[i], input_of(i), T);
+  const Hold in_hold = options.input_hold;  // open loop only (checked in fit_srivc)
+  for (std::size_t i = 0; i < K; ++i)
+    x_hat[i] = simulate_scaled(model[i], input_of(static_cast<int>(i)), T, in_hold);
+  const auto block_output = [&](const std::vector<int>& g) {
+    Eigen::VectorXd x = x_hat[static_cast<std::size_t>(g.front())];
+    for (std::size_t q = 1; q < g.size(); ++q) x += x_hat[static_cast<std::size_t>(g[q])];
+    return x;
+  };
+  // A block's parameters, [a; b of each member], and back.
+  const auto block_theta = [&](const std::vector<int>& g) {
+    const ScaledSubmodel& lead = model[static_cast<std::size_t>(g.front())];
+    const int n = lead.shape->n, nb = lead.shape->m + 1;
+    Eigen::VectorXd theta(n + static_cast<int>(g.size()) * nb);
+    theta.head(n) = lead.theta.head(n);
+    for (std::size_t q = 0; q < g.size(); ++q)
+      theta.segment(n + static_cast<int>(q) * nb, nb) = model[static_cast<std::size_t>(g[q])].theta.tail(nb);
+    return theta;
+  };
+  const auto set_block_theta = [&](const std::vector<int>& g, const Eigen::VectorXd& theta) {
+    const int n = model[static_cast<std::size_t>(g.front())].shape->n;
+    for (std::size_t q = 0; q < g.size(); ++q) {
+      ScaledSubmodel& s = model[static_cast<std::size_t>(g[q])];
+      const int nb = s.shape->m + 1;
+      s.theta.head(n) = theta.head(n);
+      s.theta.tail(nb) = theta.segment(n + static_cast<int>(q) * nb, nb);
+    }
+  };
 
   auto beta_scaled = [&] {
     Eigen::VectorXd b(result.model.n_beta());
@@ -370,36 +418,42 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
     return b;
   };
 
-  // Instrument input in closed loop: S_uo r (one input); open loop: each block's own input.
+  // Instrument input in closed loop: S_uo r (one input, so every block is one
+  // submodel); open loop: each member's own input.
   Eigen::VectorXd z, y_loop;
   for (int it = 1; it <= options.max_iterations; ++it) {
     const Eigen::VectorXd before = beta_scaled();
-    for (std::size_t i = 0; i < K; ++i) {
+    for (const auto& g : groups) {
+      const ScaledSubmodel& lead = model[static_cast<std::size_t>(g.front())];
+      const int n = lead.shape->n;
       for (int s = 0; s < options.srivc_per_block; ++s) {
         // Residual output of this block (eq. 15): the data less the other submodels.
         Eigen::VectorXd y_tilde = y;
         for (std::size_t j = 0; j < K; ++j)
-          if (j != i) y_tilde -= x_hat[j];
+          if (std::find(g.begin(), g.end(), static_cast<int>(j)) == g.end()) y_tilde -= x_hat[j];
         if (options.closed_loop) simulate_loop_scaled(model, options.controller, data.r, T, z, y_loop);
-        const Eigen::VectorXd x_hat_z = options.closed_loop ? simulate_scaled(model[i], z, T) : x_hat[i];
-        const Eigen::VectorXd& u = input_of(i);
+        const Eigen::VectorXd x_hat_z = options.closed_loop ? simulate_scaled(lead, z, T) : block_output(g);
+        const Signals u = inputs_of(g);
         const Filtered f =
-            filter_block(model[i], y_tilde, u, x_hat_z, options.closed_loop ? z : u, T, options.output_hold);
+            filter_block(lead, y_tilde, u, x_hat_z, options.closed_loop ? Signals{&z} : u, T, options.output_hold, in_hold);
         Eigen::VectorXd theta = iv_solve(f, first);
         if (!theta.allFinite()) break;  // singular: keep the previous iterate
-        if (damp_step(model[i], theta, options.max_frequency_step)) ++result.damped_steps;
-        if (options.stability_projection && model[i].shape->n > 0) {
-          Eigen::VectorXd a = theta.head(model[i].shape->n);
+        if (damp_step(n, block_theta(g), theta, options.max_frequency_step)) ++result.damped_steps;
+        if (options.stability_projection && n > 0) {
+          Eigen::VectorXd a = theta.head(n);
           if (project_stable(a)) {
-            theta.head(model[i].shape->n) = a;
+            theta.head(n) = a;
             ++result.projections;
           }
         }
         // A p^n coefficient of zero (the projection's roots at infinity, or an
         // unidentifiable direction) is not a model of this order: keep the previous iterate.
-        if (model[i].shape->n > 0 && !(std::abs(theta(model[i].shape->n - 1)) > 0.0)) break;
-        model[i].theta = theta;
-        x_hat[i] = simulate_scaled(model[i], input_of(i), T);
+        if (n > 0 && !(std::abs(theta(n - 1)) > 0.0)) break;
+        set_block_theta(g, theta);
+        for (int i : g) {
+          const auto k = static_cast<std::size_t>(i);
+          x_hat[k] = simulate_scaled(model[k], input_of(i), T, in_hold);
+        }
       }
     }
     const double change = relative_change(beta_scaled(), before);
@@ -412,33 +466,50 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   }
   unscale_into(model, result.model);
 
-  // Output error, noise variance and fit.
+  // Output error, noise variance and fit. The free parameters are the blocks':
+  // a shared A counts once.
+  int free = 0;
+  for (const auto& g : groups) free += static_cast<int>(block_theta(g).size());
   result.simulated = Eigen::VectorXd::Zero(N);
   for (const auto& x : x_hat) result.simulated += x;
   const Eigen::VectorXd e = (y - result.simulated).tail(used);
   const int nb = result.model.n_beta();
-  result.noise_variance = e.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, used - nb));
+  result.noise_variance = e.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, used - free));
   result.fit_percent = fit_percent(y.tail(used), result.simulated.tail(used));
 
-  // Covariance (IV sandwich): J = sum psi_hat psi^T with psi the output-error
-  // gradient (driven by u) and psi_hat the instrument (driven by z); in open loop
-  // both coincide and this is sigma^2 (sum psi psi^T)^{-1}.
+  // Covariance (IV sandwich) over the blocks' parameters: J = sum psi_hat psi^T
+  // with psi the output-error gradient (driven by u) and psi_hat the instrument
+  // (driven by z); in open loop both coincide and this is sigma^2 (sum psi psi^T)^{-1}.
+  // Then onto beta, where a shared A appears once per member (E below).
   if (options.closed_loop) simulate_loop_scaled(model, options.controller, data.r, T, z, y_loop);
-  Eigen::MatrixXd Psi(N, nb), PsiHat(N, nb);
-  Eigen::VectorXd D(nb);  // physical = scaled .* D^{-1}
-  for (std::size_t i = 0, o = 0; i < K; ++i) {
-    const int nt = model[i].shape->n_theta();
-    const Eigen::VectorXd& u = input_of(i);
-    const Eigen::VectorXd& zi = options.closed_loop ? z : u;
-    const Eigen::VectorXd xz = options.closed_loop ? simulate_scaled(model[i], z, T) : x_hat[i];
-    // The gradient filters are 1/A_i on the submodel output and 1/(p^l A_i) on the
-    // input: exactly the regressor/instrument construction with noise-free signals.
-    const Filtered g = filter_block(model[i], x_hat[i], u, x_hat[i], u, T, options.output_hold);
-    const Filtered gh = filter_block(model[i], xz, zi, xz, zi, T, options.output_hold);
-    Psi.middleCols(o, nt) = g.psi;
+  Eigen::MatrixXd Psi(N, free), PsiHat(N, free);
+  Eigen::VectorXd D(free);                       // physical = scaled .* D^{-1}
+  Eigen::MatrixXd E = Eigen::MatrixXd::Zero(nb, free);  // beta = E * (blocks' parameters)
+  for (std::size_t gi = 0, o = 0; gi < groups.size(); ++gi) {
+    const auto& g = groups[gi];
+    const ScaledSubmodel& lead = model[static_cast<std::size_t>(g.front())];
+    const int n = lead.shape->n, mb = lead.shape->m + 1;
+    const int nt = n + static_cast<int>(g.size()) * mb;
+    const Signals u = inputs_of(g);
+    const Signals zi = options.closed_loop ? Signals{&z} : u;
+    const Eigen::VectorXd x = block_output(g);
+    const Eigen::VectorXd xz = options.closed_loop ? simulate_scaled(lead, z, T) : x;
+    // The gradient filters are 1/A on the block's output and 1/(p^l A) on the
+    // inputs: exactly the regressor/instrument construction with noise-free signals.
+    const Filtered grad = filter_block(lead, x, u, x, u, T, options.output_hold, in_hold);
+    const Filtered gh = filter_block(lead, xz, zi, xz, zi, T, options.output_hold, in_hold);
+    Psi.middleCols(o, nt) = grad.psi;
     PsiHat.middleCols(o, nt) = gh.psi;  // rows before `first` are dropped below
-    D.segment(o, nt) = scaling(*model[i].shape, model[i].ws);
-    o += nt;
+    const Eigen::VectorXd d = scaling(*lead.shape, lead.ws);
+    D.segment(o, n) = d.head(n);
+    for (std::size_t q = 0; q < g.size(); ++q) {
+      const int bo = result.model.offset(g[q]);
+      const int c = static_cast<int>(o) + n + static_cast<int>(q) * mb;
+      D.segment(c, mb) = d.tail(mb);
+      for (int j = 0; j < n; ++j) E(bo + j, static_cast<int>(o) + j) = 1.0;
+      for (int j = 0; j < mb; ++j) E(bo + n + j, c + j) = 1.0;
+    }
+    o += static_cast<std::size_t>(nt);
   }
   const Eigen::MatrixXd J = PsiHat.bottomRows(used).transpose() * Psi.bottomRows(used);
   const Eigen::MatrixXd S = PsiHat.bottomRows(used).transpose() * PsiHat.bottomRows(used);
@@ -448,14 +519,15 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
     const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(d.asDiagonal() * S * d.asDiagonal());
     const Eigen::VectorXd& ev = eig.eigenvalues();  // ascending
     result.information_condition =
-        eig.info() == Eigen::Success && ev(0) > 0.0 ? ev(nb - 1) / ev(0) : std::numeric_limits<double>::infinity();
-    result.weakest_direction = eig.eigenvectors().col(0);
+        eig.info() == Eigen::Success && ev(0) > 0.0 ? ev(free - 1) / ev(0) : std::numeric_limits<double>::infinity();
+    result.weakest_direction = E * eig.eigenvectors().col(0);
+    if (free != nb) result.weakest_direction.normalize();
   }
   const Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> cod(J);
   const Eigen::MatrixXd Jinv = cod.pseudoInverse();
   const Eigen::MatrixXd cov_scaled = result.noise_variance * Jinv * S * Jinv.transpose();
-  const Eigen::VectorXd Dinv = D.cwiseInverse();
-  result.covariance = Dinv.asDiagonal() * cov_scaled * Dinv.asDiagonal();
+  const Eigen::MatrixXd cov_free = D.cwiseInverse().asDiagonal() * cov_scaled * D.cwiseInverse().asDiagonal();
+  result.covariance = E * cov_free * E.transpose();
   return result;
 }
 

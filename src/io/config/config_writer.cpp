@@ -167,6 +167,7 @@ void write_model(YamlWriter& w, const Config& config, const AdditiveModel& model
     const std::size_t c = configured_index(config, s.name, i);
     write_submodel(w, 2, s);
     if (!model.inputs.empty()) w.key(3, "input", quoted(model.input_name(s.input)));
+    if (!s.poles_of.empty()) w.key(3, "poles_of", quoted(s.poles_of));
     w.number(3, "forgetting", c < config.submodel_settings.size() ? config.submodel_settings[c].forgetting : 1.0);
     if (c < config.submodel_settings.size() && config.submodel_settings[c].random_walk)
       w.number(3, "random_walk", *config.submodel_settings[c].random_walk);

@@ -204,12 +204,19 @@ void parse_model(const Map& model, Config& config) {
   const std::vector<Value> items = list.items();
   if (items.empty()) list.fail("must list at least one submodel");
   std::vector<SubmodelEntry> entries;
+  std::vector<Value> poles_of;  // the keys, for an error on their line
   for (const auto& item : items) {
     const Map m(item);
     entries.push_back(
-        parse_submodel(m, {"input", "forgetting", "random_walk", "stabilisation", "min_memory", "initial_covariance"},
+        parse_submodel(m,
+                       {"input", "poles_of", "forgetting", "random_walk", "stabilisation", "min_memory",
+                        "initial_covariance"},
                        config.output_derivatives));
     entries.back().submodel.input = parse_submodel_input(m, config.model.inputs);
+    if (const auto p = m.get("poles_of")) {
+      poles_of.push_back(*p);
+      entries.back().submodel.poles_of = p->text();
+    }
     SubmodelSettings settings;
     if (const auto f = m.get("forgetting")) {
       settings.forgetting = f->number();
@@ -225,6 +232,17 @@ void parse_model(const Map& model, Config& config) {
     config.submodel_settings.push_back(settings);
   }
   check_unique_names(items, entries);
+  // Each poles_of names a submodel with its own poles, of the same orders, on another input.
+  for (const Value& p : poles_of) {
+    AdditiveModel only = config.model;
+    for (auto& s : only.submodels)
+      if (s.poles_of != p.text()) s.poles_of.clear();
+    try {
+      pole_groups(only);
+    } catch (const std::invalid_argument& e) {
+      p.fail(e.what());
+    }
+  }
 }
 
 DiscreteTransferFunction parse_controller(const Map& c) {
