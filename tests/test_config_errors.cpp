@@ -220,7 +220,8 @@ TEST(ConfigErrors, TransferFunctionOrders) {
             "test.yaml:4: key 'model.submodels[0].a': missing required key (kind transfer_function)");
   EXPECT_EQ(parse_error(edit(kTf, "a: [0.1, 0.01]", "wn: 3")),
             "test.yaml:6: key 'model.submodels[0].wn': unknown key for kind transfer_function (allowed: name, "
-            "kind, a, b, rigid_poles, input, poles_of, forgetting, random_walk, stabilisation, min_memory, initial_covariance)");
+            "kind, a, b, rigid_poles, input, poles_of, forgetting, random_walk, stabilisation, min_memory, "
+            "initial_covariance)");
 }
 
 TEST(ConfigErrors, UnstableTransferFunction) {

@@ -304,8 +304,8 @@ TEST(SeveralInputsFit, OneResonanceOnTwoInputsSharesItsPolesAndIsBetterDetermine
   const double wn_std_shared = modalwatch::modal_std(shared.model.submodels[0], c0).wn;
   const double wn_std_own = std::min(modalwatch::modal_std(own.model.submodels[0], own.theta_covariance(0)).wn,
                                      modalwatch::modal_std(own.model.submodels[1], own.theta_covariance(1)).wn);
-  std::printf("3 Hz resonance on two inputs: wn std %.3g rad/s shared, %.3g on the better input alone\n",
-              wn_std_shared, wn_std_own);
+  std::printf("3 Hz resonance on two inputs: wn std %.3g rad/s shared, %.3g on the better input alone\n", wn_std_shared,
+              wn_std_own);
   EXPECT_LT(wn_std_shared, wn_std_own);
   // The shared A counts once in the noise variance's degrees of freedom: the
   // same residual as the two separate fits' to within the noise.

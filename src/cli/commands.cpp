@@ -133,7 +133,8 @@ int fit(const FitArgs& args) {
     options.closed_loop = config.closed_loop;
     if (args.input_hold == "foh") {
       if (config.closed_loop)
-        throw InputError("--input-hold", "foh is for open-loop records (u is the controller's held output in closed loop)");
+        throw InputError("--input-hold",
+                         "foh is for open-loop records (u is the controller's held output in closed loop)");
       options.input_hold = Hold::foh;
     }
     options.controller = config.controller;

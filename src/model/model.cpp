@@ -224,9 +224,8 @@ std::complex<double> AdditiveModel::response(double w, int input) const {
 
 bool Submodel::operator==(const Submodel& other) const {
   return name == other.name && n == other.n && m == other.m && rigid_poles == other.rigid_poles &&
-         output_derivatives == other.output_derivatives &&
-         a.size() == other.a.size() && b.size() == other.b.size() && a == other.a && b == other.b &&
-         input == other.input && poles_of == other.poles_of;
+         output_derivatives == other.output_derivatives && a.size() == other.a.size() && b.size() == other.b.size() &&
+         a == other.a && b == other.b && input == other.input && poles_of == other.poles_of;
 }
 
 std::vector<std::vector<int>> pole_groups(const AdditiveModel& model) {

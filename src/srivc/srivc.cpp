@@ -337,7 +337,8 @@ FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const Sriv
     one_input = one_input && s.input == initial.submodels[0].input;
   }
   if (options.closed_loop && options.input_hold != Hold::zoh)
-    throw std::invalid_argument("fit: a closed loop's input is the controller's held output; input_hold foh is for open loop");
+    throw std::invalid_argument(
+        "fit: a closed loop's input is the controller's held output; input_hold foh is for open loop");
   if (options.closed_loop && !one_input)
     throw std::invalid_argument(
         "fit: a closed loop has the controller's one input; submodels on several inputs "
@@ -384,8 +385,7 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
 
   std::vector<Eigen::VectorXd> x_hat(K);  // G_i u_i: the submodel outputs on the record
   const Hold in_hold = options.input_hold;  // open loop only (checked in fit_srivc)
-  for (std::size_t i = 0; i < K; ++i)
-    x_hat[i] = simulate_scaled(model[i], input_of(static_cast<int>(i)), T, in_hold);
+  for (std::size_t i = 0; i < K; ++i) x_hat[i] = simulate_scaled(model[i], input_of(static_cast<int>(i)), T, in_hold);
   const auto block_output = [&](const std::vector<int>& g) {
     Eigen::VectorXd x = x_hat[static_cast<std::size_t>(g.front())];
     for (std::size_t q = 1; q < g.size(); ++q) x += x_hat[static_cast<std::size_t>(g[q])];
@@ -434,8 +434,8 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
         if (options.closed_loop) simulate_loop_scaled(model, options.controller, data.r, T, z, y_loop);
         const Eigen::VectorXd x_hat_z = options.closed_loop ? simulate_scaled(lead, z, T) : block_output(g);
         const Signals u = inputs_of(g);
-        const Filtered f =
-            filter_block(lead, y_tilde, u, x_hat_z, options.closed_loop ? Signals{&z} : u, T, options.output_hold, in_hold);
+        const Filtered f = filter_block(lead, y_tilde, u, x_hat_z, options.closed_loop ? Signals{&z} : u, T,
+                                        options.output_hold, in_hold);
         Eigen::VectorXd theta = iv_solve(f, first);
         if (!theta.allFinite()) break;  // singular: keep the previous iterate
         if (damp_step(n, block_theta(g), theta, options.max_frequency_step)) ++result.damped_steps;
@@ -483,7 +483,7 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   // Then onto beta, where a shared A appears once per member (E below).
   if (options.closed_loop) simulate_loop_scaled(model, options.controller, data.r, T, z, y_loop);
   Eigen::MatrixXd Psi(N, free), PsiHat(N, free);
-  Eigen::VectorXd D(free);                       // physical = scaled .* D^{-1}
+  Eigen::VectorXd D(free);                              // physical = scaled .* D^{-1}
   Eigen::MatrixXd E = Eigen::MatrixXd::Zero(nb, free);  // beta = E * (blocks' parameters)
   for (std::size_t gi = 0, o = 0; gi < groups.size(); ++gi) {
     const auto& g = groups[gi];

@@ -207,11 +207,9 @@ void parse_model(const Map& model, Config& config) {
   std::vector<Value> poles_of;  // the keys, for an error on their line
   for (const auto& item : items) {
     const Map m(item);
-    entries.push_back(
-        parse_submodel(m,
-                       {"input", "poles_of", "forgetting", "random_walk", "stabilisation", "min_memory",
-                        "initial_covariance"},
-                       config.output_derivatives));
+    entries.push_back(parse_submodel(
+        m, {"input", "poles_of", "forgetting", "random_walk", "stabilisation", "min_memory", "initial_covariance"},
+        config.output_derivatives));
     entries.back().submodel.input = parse_submodel_input(m, config.model.inputs);
     if (const auto p = m.get("poles_of")) {
       poles_of.push_back(*p);
