@@ -220,9 +220,9 @@ TEST_F(CliThreeModes, DiagnoseWithModesOnlyStartsFromTheData) {
 
 // A mode at 0.33 fs: its sampled output is far from held. With no
 // output_hold configured, a starting mode above a tenth of the sampling rate
-// makes `fit` assume foh, and both modes come out within 1 % and 20 %; under
-// zoh the second comes out 4 % low in frequency with 50 % too much damping.
-// The written model keeps the hold unset (the same rule then gives foh again).
+// makes `fit` assume foh, the cycles converge, and both modes come out within
+// 1 % and 20 %. The written model keeps the hold unset (the same rule then
+// gives foh again).
 TEST_F(Cli, FitWithoutAnOutputHoldFindsAModeAtAThirdOfTheSamplingRate) {
   const std::string plant =
       "sample_rate_hz: 100\n"
@@ -261,9 +261,13 @@ TEST_F(Cli, FitWithoutAnOutputHoldFindsAModeAtAThirdOfTheSamplingRate) {
   const Config held = load_config(path("fitted-zoh.yaml"));
   EXPECT_EQ(held.output_hold, Hold::zoh);
   ASSERT_EQ(held.model.submodels.size(), 2u);
-  const ModalParameters b = modal_parameters(held.model.submodels[1]);
-  EXPECT_GT(std::abs(b.hz() - hz[1]), 0.01 * hz[1]);
-  EXPECT_GT(std::abs(b.zeta - zeta[1]), 0.2 * zeta[1]);
+  // Read as held, the 33 Hz mode's output has no fixed point of the SRIVC
+  // cycles near the truth: they do not converge, and the fit returns the cycle
+  // of least output error, which it says. Under foh the cycles converge.
+  EXPECT_TRUE(contains(fit.output, "converged after")) << fit.output;
+  EXPECT_FALSE(contains(fit.output, "NOT converged")) << fit.output;
+  EXPECT_TRUE(contains(zoh.output, "NOT converged after")) << zoh.output;
+  EXPECT_TRUE(contains(zoh.output, "the one of least output error")) << zoh.output;
 }
 
 // A configured mode far above the Nyquist frequency comes out as a named

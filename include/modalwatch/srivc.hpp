@@ -75,6 +75,9 @@ struct FitResult {
   double fit_percent = 0.0;     // 100 (1 - ||y - y_hat|| / ||y - mean(y)||)
   int iterations = 0;
   bool converged = false;
+  // Not converged: the cycle whose model is returned, the one of least output
+  // error, when it is not the last (0 otherwise).
+  int best_iteration = 0;
   int projections = 0;                 // stability projections applied
   int damped_steps = 0;                // iterations shortened by the frequency trust region
   std::string start = "configured";    // which start won: "configured" or "unfactored"

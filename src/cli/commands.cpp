@@ -183,6 +183,9 @@ int fit(const FitArgs& args) {
     std::printf("%s after %d block-coordinate cycles (last change %.2e), %d stability projections\n",
                 result.converged ? "converged" : "NOT converged", result.iterations,
                 result.change_history.empty() ? 0.0 : result.change_history.back(), result.projections);
+    if (result.best_iteration > 0)
+      std::printf("returned cycle %d, the one of least output error (the cycles after it raised it)\n",
+                  result.best_iteration);
     std::vector<Eigen::MatrixXd> covariances;
     for (int i = 0; i < static_cast<int>(result.model.submodels.size()); ++i)
       covariances.push_back(result.theta_covariance(i));

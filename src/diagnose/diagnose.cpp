@@ -216,7 +216,8 @@ std::string next_mode_name(const AdditiveModel& m) {
   for (int i = 1;; ++i) {
     const std::string name = "added" + std::to_string(i);
     bool used = false;
-    for (const auto& s : m.submodels) used = used || s.name == name;
+    // With several inputs a mode's submodels are name_<input>.
+    for (const auto& s : m.submodels) used = used || s.name == name || s.name.rfind(name + "_", 0) == 0;
     if (!used) return name;
   }
 }
@@ -236,6 +237,7 @@ Candidate candidate_modes_per_input(const AugmentedModel& current, const Eigen::
   if (peak < 0) return invalid(EffectKind::mode, "no excited frequency");
   AugmentedModel m = current;
   const std::string name = next_mode_name(current.linear);
+  std::string leader;  // one resonance, one A: every input's view shares the first's
   for (int j = 0; j < current.linear.n_inputs(); ++j) {
     ModalParameters start;
     start.wn = 2.0 * std::numbers::pi * h.frequency_hz(peak);
@@ -245,6 +247,10 @@ Candidate candidate_modes_per_input(const AugmentedModel& current, const Eigen::
     m.linear.submodels.push_back(
         make_mode(name + "_" + current.linear.input_name(j), start, current.linear.output_derivatives()));
     m.linear.submodels.back().input = j;
+    if (leader.empty())
+      leader = m.linear.submodels.back().name;
+    else
+      m.linear.submodels.back().poles_of = leader;
   }
   Candidate c = finish(EffectKind::mode, fit_structure(m, ctx.est, ctx.options, true), ctx);
   if (c.valid) {
@@ -485,9 +491,11 @@ std::string number(double v) {
   return text;
 }
 
+// Resonances added: with several inputs one has a submodel per input, and
+// the further ones share the first's poles.
 int added_modes(const AugmentedModel& m) {
   int n = 0;
-  for (const auto& s : m.linear.submodels) n += s.name.rfind("added", 0) == 0 ? 1 : 0;
+  for (const auto& s : m.linear.submodels) n += s.name.rfind("added", 0) == 0 && s.poles_of.empty() ? 1 : 0;
   return n;
 }
 
