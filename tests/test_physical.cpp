@@ -147,6 +147,24 @@ TEST(CheckPhysical, CloseModesWithOppositeGainsAreMerged) {
   EXPECT_FALSE(check_physical(m, sharp, 0.05).changed());
 }
 
+// An accelerometer's mode above Nyquist is b0 p^2 on the band: no constant a
+// feedthrough could stand for, and no resonance of the record. It is left out
+// and the model refitted, unless it is the only submodel.
+TEST(CheckPhysical, AnAccelerometersModeAboveNyquistIsLeftOut) {
+  AdditiveModel m;
+  m.submodels = {make_mode("a", {10.0, 0.02, 1.0}, 2), make_mode("high", {80.0, 0.02, 0.5}, 2)};
+  const PhysicalCheck c = check_physical(m, Eigen::MatrixXd(), 0.05);  // Nyquist 62.8 rad/s
+  EXPECT_TRUE(c.refit);
+  EXPECT_EQ(c.findings[0].verdict, ModeVerdict::physical);
+  EXPECT_EQ(c.findings[1].verdict, ModeVerdict::removed);
+  EXPECT_NE(c.findings[1].reason.find("above the Nyquist frequency"), std::string::npos) << c.findings[1].reason;
+  ASSERT_EQ(c.model.submodels.size(), 1u);
+  EXPECT_EQ(c.model.submodels[0].name, "a");
+  AdditiveModel alone;
+  alone.submodels = {m.submodels[1]};
+  EXPECT_FALSE(check_physical(alone, Eigen::MatrixXd(), 0.05).changed());
+}
+
 // Two resonances seen from two inputs, each submodel on u2 sharing its u1
 // view's A: when the u1 views merge, b's u2 view goes with them into a's.
 TEST(CheckPhysical, AMergedResonanceTakesItsOtherInputsViewsAlong) {

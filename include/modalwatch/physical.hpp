@@ -7,7 +7,9 @@
 //   - a mode above the Nyquist frequency pi/T, or one whose response over the
 //     band [0, pi/T] is a constant within its uncertainty, acts as a static
 //     gain: it becomes a feedthrough submodel (make_rigid_body(name, b0, 0):
-//     G = b0, the same response on the band) and is named so;
+//     G = b0, the same response on the band) and is named so; measured as a
+//     velocity or acceleration it is b0 p^z on the band, which no submodel
+//     represents, and a mode above Nyquist is left out instead;
 //   - an unstable denominator (zeta <= 0, a_1 <= 0 or a_2 <= 0 for a mode) is
 //     reflected into the left half plane by the estimator's stability
 //     projection (section 4.7, project_stable), which keeps |A(jw)|;
@@ -33,6 +35,7 @@ enum class ModeVerdict {
   feedthrough,  // replaced by the constant b0 (kind feedthrough)
   unstable,     // projected to stability
   merged,       // removed: merged into `into`
+  removed,      // left out: above Nyquist as a velocity or acceleration sensor's mode
 };
 const char* verdict_name(ModeVerdict verdict);
 

@@ -222,6 +222,13 @@ std::string next_mode_name(const AdditiveModel& m) {
   }
 }
 
+// An added mode the fit puts at or above the Nyquist frequency is no
+// resonance of the record (the physical check would take it out again).
+bool above_nyquist(const AugmentedModel& m, const Context& ctx) {
+  const Submodel& s = m.linear.submodels.back();
+  return s.is_mode() && !(modal_parameters(s).wn < std::numbers::pi / ctx.est.data.sample_time());
+}
+
 // Several inputs: the residual's response to every input (H = S_eu S_uu^-1,
 // initial_modes.hpp) at its largest |H| over the excited band; one mode per
 // input there, each with that input's residue.
@@ -253,6 +260,8 @@ Candidate candidate_modes_per_input(const AugmentedModel& current, const Eigen::
       m.linear.submodels.back().poles_of = leader;
   }
   Candidate c = finish(EffectKind::mode, fit_structure(m, ctx.est, ctx.options, true), ctx);
+  if (c.valid && above_nyquist(c.model, ctx))
+    return invalid(EffectKind::mode, "the residual's peak was fitted above the Nyquist frequency");
   if (c.valid) {
     const ModalParameters p = modal_parameters(c.model.linear.submodels.back());
     c.params = {{"wn", p.wn}, {"zeta", p.zeta}, {"hz", p.hz()}};
@@ -282,6 +291,8 @@ Candidate candidate_mode(const AugmentedModel& current, const Eigen::VectorXd& y
   AugmentedModel m = current;
   m.linear.submodels.push_back(make_mode(next_mode_name(current.linear), start, z));
   Candidate c = finish(EffectKind::mode, fit_structure(m, ctx.est, ctx.options, true), ctx);
+  if (c.valid && above_nyquist(c.model, ctx))
+    return invalid(EffectKind::mode, "the residual's peak was fitted above the Nyquist frequency");
   if (c.valid) {
     const ModalParameters p = modal_parameters(c.model.linear.submodels.back());
     c.params = {{"wn", p.wn}, {"zeta", p.zeta}, {"gain", p.gain}, {"hz", p.hz()}};

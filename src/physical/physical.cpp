@@ -56,6 +56,8 @@ const char* verdict_name(ModeVerdict verdict) {
       return "unstable";
     case ModeVerdict::merged:
       return "merged";
+    case ModeVerdict::removed:
+      return "removed";
   }
   return "?";
 }
@@ -147,6 +149,23 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
   // Feedthrough: a mode above Nyquist, or a constant on the band within its
   // uncertainty. Not for a velocity or acceleration sensor: there such a mode
   // is b0 p^z on the band, no constant, and stays a mode.
+  // Measured as a derivative (velocity, acceleration), a mode above Nyquist is
+  // no constant on the band either, nor a resonance the samples show: it is
+  // left out (while another submodel remains) and the model refitted.
+  for (int i = 0; i < K; ++i) {
+    const Submodel& s = subs[i];
+    if (!s.is_mode() || s.output_derivatives == 0 || removed[i]) continue;
+    const ModalParameters p = modal_parameters(s);
+    if (p.wn < nyquist || std::count(removed.begin(), removed.end(), false) <= 1) continue;
+    removed[i] = true;
+    ModeFinding& f = out.findings[i];
+    f.verdict = ModeVerdict::removed;
+    f.reason = (f.reason.empty() ? "" : f.reason + "; then ") +
+               format("%.4g Hz is above the Nyquist frequency %.4g Hz", p.hz(), nyquist / (2.0 * std::numbers::pi)) +
+               " and, measured as " + output_kind_name(s.output_derivatives) +
+               ", acts on the band as b0 p^z: no resonance of the record; left out and refitted";
+    out.refit = true;
+  }
   for (int i = 0; i < K; ++i) {
     Submodel& s = subs[i];
     if (!s.is_mode() || s.output_derivatives != 0) continue;
