@@ -59,6 +59,11 @@ struct SrivcOptions {
   // Closed loop: u = C_d(q)(r - y); the record must carry r.
   bool closed_loop = false;
   DiscreteTransferFunction controller;
+  // When the cycles end without converging, return the cycle of least output
+  // error if it is at least 1 % below the last one's (FitResult::best_iteration).
+  // The batch tools (`fit`, `diagnose`) ask for it; the recursive estimator's
+  // warm-up fit and refits keep the last cycle.
+  bool best_cycle = false;
   // Samples at the start of the record that drive the prefilters and the model's
   // simulation but stay out of the estimate (eq. 8), the output error and the
   // covariance: a window cut from a running plant, whose model output, started

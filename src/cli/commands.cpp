@@ -131,6 +131,7 @@ int fit(const FitArgs& args) {
     const double T = data.sample_time();
     SrivcOptions options;
     options.closed_loop = config.closed_loop;
+    options.best_cycle = true;
     if (args.input_hold == "foh") {
       if (config.closed_loop)
         throw InputError("--input-hold",

@@ -60,6 +60,7 @@ bool srivc_start(const AdditiveModel& linear, const ModelEffects& e, const Recor
   if (e.drift_on) corrected.y.array() -= e.drift * (data.t.array() - data.t(0));
   SrivcOptions so;
   so.closed_loop = loop.closed;
+  so.best_cycle = true;
   so.controller = loop.controller;
   so.output_hold = options.output_hold;
   so.max_iterations = 60;

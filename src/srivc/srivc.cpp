@@ -423,8 +423,8 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   Eigen::VectorXd z, y_loop;
   // The cycles need not lower the output error every time: with many modes
   // they can pass a good model and wander on (the flexible structure's 467 Hz
-  // resonance is held at cycle 10 and lost by cycle 30). A fit that ends
-  // without converging returns its cycle of least output error.
+  // resonance is held at cycle 10 and lost by cycle 30). With best_cycle a fit
+  // that ends without converging returns its cycle of least output error.
   const auto output_error = [&] {
     Eigen::VectorXd e = y;
     for (const auto& x : x_hat) e -= x;
@@ -486,7 +486,7 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   }
   // Only for a clear gain (1 % of the output error's power): a fit that
   // hovers about its solution keeps its last cycle, as one that converges does.
-  if (!result.converged && best_iteration > 0 && best_iteration < result.iterations &&
+  if (options.best_cycle && !result.converged && best_iteration > 0 && best_iteration < result.iterations &&
       best_cost < 0.99 * output_error()) {
     for (std::size_t i = 0; i < K; ++i) {
       model[i].theta = best_theta[i];
