@@ -889,6 +889,7 @@ FlexibleFit fit_flexible(const std::vector<std::string>& inputs, modalwatch::Hol
   modalwatch::SrivcOptions options;
   options.output_hold = modalwatch::default_output_hold(start, est.sample_time());
   options.input_hold = input_hold;
+  options.best_cycle = true;  // as `fit` asks
   std::vector<modalwatch::ModeFinding> findings;
   FlexibleFit out;
   out.start = start;
