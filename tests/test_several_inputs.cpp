@@ -252,10 +252,8 @@ void expect_truth(const AdditiveModel& fitted, const std::vector<std::string>& n
   }
 }
 
-TEST(SeveralInputsFit, EachSubmodelIsFittedFromItsOwnInput) {
-  const Record data = two_input_record(0.0);
-  ASSERT_EQ(data.inputs(), 2);
-  // Start 10 % off in frequency, damping and gain.
+// The true submodels started 10 % off in frequency, damping and gain.
+AdditiveModel start_off_the_truth() {
   AdditiveModel start;
   start.inputs = {"u1", "u2"};
   for (const Truth& t : kTruth) {
@@ -266,6 +264,13 @@ TEST(SeveralInputsFit, EachSubmodelIsFittedFromItsOwnInput) {
     start.submodels.push_back(modalwatch::make_mode(t.name, p));
     start.submodels.back().input = t.input;
   }
+  return start;
+}
+
+TEST(SeveralInputsFit, EachSubmodelIsFittedFromItsOwnInput) {
+  const Record data = two_input_record(0.0);
+  ASSERT_EQ(data.inputs(), 2);
+  AdditiveModel start = start_off_the_truth();
   const modalwatch::FitResult fit = modalwatch::fit_srivc(data, start, {});
   EXPECT_TRUE(fit.converged);
   EXPECT_EQ(fit.model.inputs, start.inputs);
@@ -280,16 +285,7 @@ TEST(SeveralInputsFit, EachSubmodelIsFittedFromItsOwnInput) {
 // than either submodel's alone.
 TEST(SeveralInputsFit, OneResonanceOnTwoInputsSharesItsPolesAndIsBetterDetermined) {
   const Record data = two_input_record(0.0);
-  AdditiveModel start;
-  start.inputs = {"u1", "u2"};
-  for (const Truth& t : kTruth) {
-    ModalParameters p = t.modal;
-    p.wn *= 1.1;
-    p.zeta *= 0.8;
-    p.gain *= 1.1;
-    start.submodels.push_back(modalwatch::make_mode(t.name, p));
-    start.submodels.back().input = t.input;
-  }
+  AdditiveModel start = start_off_the_truth();
   const modalwatch::FitResult own = modalwatch::fit_srivc(data, start, {});
   start.submodels[1].a(0) *= 1.05;  // a member starts from its leader's A, whatever it holds
   start.submodels[1].poles_of = "a1";
