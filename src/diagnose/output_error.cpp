@@ -29,10 +29,12 @@ Eigen::VectorXd pack(const AugmentedModel& m) {
 }
 
 void unpack(const Eigen::VectorXd& p, AugmentedModel& m) {
-  const int nb = static_cast<int>(free_beta(m.linear).size());
+  ModelEffects& e = m.effects;
+  // The effects that are on take the last entries; the linear part the rest.
+  const int on = int(e.output_offset_on) + int(e.input_offset_on) + int(e.drift_on) + int(e.coulomb_on) + int(e.cubic_on);
+  const int nb = static_cast<int>(p.size()) - on;
   set_free_beta(m.linear, p.head(nb));
   int i = nb;
-  ModelEffects& e = m.effects;
   if (e.output_offset_on) e.output_offset = p(i++);
   if (e.input_offset_on) e.input_offset = p(i++);
   if (e.drift_on) e.drift = p(i++);
