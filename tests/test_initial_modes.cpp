@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <complex>
+#include <cstdio>
 #include <numbers>
 #include <random>
 
@@ -97,6 +98,37 @@ TEST(InitialModes, TheHoldsHalfSampleLagIsRemovedForAHeldInputOnly) {
     EXPECT_NEAR(std::abs(lag), 1.0, 1e-12) << hz;
     EXPECT_NEAR(std::arg(lag), -kPi * held.frequency_hz(k) * T, 1e-12) << hz;
   }
+}
+
+// Two modes whose half-power bandwidths (0.019 and 0.034 Hz) are narrower than
+// two bins even of 4 averages (0.024 Hz each; the default 8 have 0.049 Hz): the window, not the
+// mode, sets the peaks' width there, and leakage lowers the coherence at the
+// peaks. The estimate halves its bins while 4 averages remain, and a peak still
+// narrower than two bins starts below the bound it gives, zeta < df / f0,
+// instead of at a default 10 times the truth; the fit goes on to the truth.
+TEST(InitialModes, ModesNarrowerThanTwoBinsGetFinerBinsAndADampingUnderTheirBound) {
+  const double T = 0.01;
+  const std::vector<ModalParameters> truth{{2 * kPi * 8.0, 0.0012, 0.01}, {2 * kPi * 21.0, 0.0008, -0.006}};
+  const auto sim = simulate(plant_of(truth, 30.0), experiment(T, 120.0, 4));
+  const FrequencyResponse coarse = frequency_response(sim.record, false);
+  const FrequencyResponse h = resolving_response(sim.record, false);
+  EXPECT_EQ(coarse.segments, 10);
+  EXPECT_EQ(h.segments, 4);
+  const double df = h.frequency_hz(1) - h.frequency_hz(0);
+  EXPECT_NEAR(df, 0.5 * (coarse.frequency_hz(1) - coarse.frequency_hz(0)), 1e-12);
+  const std::vector<ModalParameters> peaks = resonance_peaks(h, 2);
+  ASSERT_EQ(peaks.size(), 2u);
+  for (std::size_t i = 0; i < 2; ++i) {
+    std::printf("peak %zu: %.4f Hz zeta %.5f (truth %.4f Hz, %.5f; bound df / f0 %.5f)\n", i, peaks[i].hz(),
+                peaks[i].zeta, truth[i].hz(), truth[i].zeta, df / peaks[i].hz());
+    ASSERT_LT(truth[i].zeta, df / truth[i].hz()) << i;
+    EXPECT_NEAR(peaks[i].hz(), truth[i].hz(), df) << i;
+    EXPECT_LT(peaks[i].zeta, df / peaks[i].hz()) << i;
+    EXPECT_GT(peaks[i].zeta, 0.1 * truth[i].zeta) << i;
+  }
+  std::vector<ModeFinding> findings;
+  const FitResult fit = fit_physical(sim.record, initial_modes(h, 2), SrivcOptions{}, findings);
+  expect_identified(truth, fit.model, "from the finer bins");
 }
 
 TEST(InitialModes, FewerPeaksThanAskedWhenTheDataShowFewer) {

@@ -13,7 +13,8 @@
 // not reach (the fit's instruments correct what remains). The resonances are
 // the local maxima of |H| over the excited band that rise most above their
 // surroundings (in |H|, not in dB: ripples where |H| is small rank low): damping from
-// the half-power bandwidth (default_zeta when the peak is not resolved), gain
+// the half-power bandwidth (default_zeta when it is not resolved, and at most
+// half the bound df / f0 when it is under two bins df), gain
 // from the peak, b0 = -2 zeta Im H(j wn) for b0 / (p^2/wn^2 + 2 zeta/wn p + 1).
 // A velocity or acceleration sensor (z = 1, 2) peaks at the same wn, but its
 // response is (j w)^z times the position's: the gain is read from H / (j wn)^z.
@@ -55,6 +56,13 @@ struct FrequencyResponse {
 FrequencyResponse frequency_response(const Record& data, bool closed_loop, int segment_length = 0,
                                      Hold input = Hold::zoh);
 
+// The estimate that resonances are read from (the starts of `fit` and
+// `diagnose`): frequency_response's, its segments doubled while a resonance
+// peak is narrower than two bins, at least 4 segments remain and the finer
+// estimate shows as many peaks. A lightly damped mode's leakage lowers the
+// coherence at its peak, which the peak test reads as noise.
+FrequencyResponse resolving_response(const Record& data, bool closed_loop, Hold input = Hold::zoh);
+
 struct PeakOptions {
   double default_zeta = 0.02;  // when the half-power bandwidth is not resolved
   // The searched band runs from the first to the last frequency with at least
@@ -91,7 +99,7 @@ std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int cou
 // measure the z-th derivative of their position (Submodel::output_derivatives).
 AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOptions& options = {},
                             const std::vector<std::string>& inputs = {}, int output_derivatives = 0);
-// The same from a record's frequency_response (held input, default segments).
+// The same from a record's resolving_response (held input).
 AdditiveModel initial_modes(const Record& data, int count, bool closed_loop, const PeakOptions& options = {},
                             int output_derivatives = 0);
 

@@ -167,9 +167,10 @@ int fit(const FitArgs& args) {
       std::printf("\n");
     } else {
       const AdditiveModel start =
-          modes ? modes_from_data(data.segment(settle, used), *modes, config.closed_loop, args.data, in_samples,
-                                  config.model.inputs.empty() ? inputs : config.model.inputs, output)
-                : config.model;
+          modes
+              ? modes_from_data(data.segment(settle, used), *modes, config.closed_loop, args.data, in_samples,
+                                config.model.inputs.empty() ? inputs : config.model.inputs, output, options.input_hold)
+              : config.model;
       options.output_hold = output_hold(config, start, T);
       result = fit_physical(data, start, options, findings);
     }

@@ -8,8 +8,8 @@
 #include "commands.hpp"
 #include "diagnose_report.hpp"
 #include "guarded.hpp"
-#include "table.hpp"
 #include "modalwatch/io/records.hpp"
+#include "table.hpp"
 
 #include "modalwatch/diagnose.hpp"
 #include "modalwatch/error.hpp"
@@ -147,7 +147,7 @@ int diagnose(const DiagnoseArgs& args) {
     const int output = output_kind(config, args.output, modes.has_value());
     const AdditiveModel initial = modes ? modes_from_data(est, *modes, config.closed_loop, args.data, in_samples,
                                                           config.model.inputs.empty() ? inputs : config.model.inputs,
-                                                          output)
+                                                          output, loop.interpolate_input ? Hold::foh : Hold::zoh)
                                         : config.model;
     options.output_hold = output_hold(config, initial, est.sample_time());
     DiagnoseResult r = diagnose(est, val, initial, loop, options);

@@ -21,9 +21,10 @@ void print_physical_findings(const std::vector<ModeFinding>& findings) {
 }
 
 AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name,
-                              bool in_samples, const std::vector<std::string>& inputs, int output_derivatives) {
+                              bool in_samples, const std::vector<std::string>& inputs, int output_derivatives,
+                              Hold input) {
   const AdditiveModel start =
-      initial_modes(frequency_response(data, closed_loop), count, {}, inputs, output_derivatives);
+      initial_modes(resolving_response(data, closed_loop, input), count, {}, inputs, output_derivatives);
   if (start.submodels.empty())
     throw InputError(data_name, "no resonance peak in the frequency response estimate: no mode to start from");
   const char* estimate = closed_loop ? "S_yr/S_ur" : data.inputs() > 1 ? "|H|, H = S_yu S_uu^-1" : "H1 = S_yu/S_uu";

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <complex>
+#include <limits>
 #include <numbers>
 #include <stdexcept>
 
@@ -14,6 +15,10 @@ namespace modalwatch {
 namespace {
 
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
+// Welch averages of the default segment length, and the fewest that a finer
+// resolution may leave (frequency_response).
+constexpr Eigen::Index kAveragedSegments = 8;
+constexpr Eigen::Index kFewestSegments = 4;
 
 struct Peak {
   Eigen::Index bin = 0;
@@ -90,17 +95,9 @@ double FrequencyResponse::magnitude(Eigen::Index k) const {
   return std::sqrt(sum);
 }
 
-FrequencyResponse frequency_response(const Record& data, bool closed_loop, int segment_length, Hold input) {
-  const Eigen::Index N = data.size();
-  if (closed_loop && !data.has_reference())
-    throw std::invalid_argument("frequency_response: closed loop needs the reference r in the record");
-  if (closed_loop && data.inputs() > 1)
-    throw std::invalid_argument("frequency_response: a closed loop has one input (the controller's u)");
-  if (segment_length <= 0) {
-    segment_length = 64;
-    while (9 * static_cast<Eigen::Index>(segment_length) <= 2 * N) segment_length *= 2;
-    segment_length = std::max(64, segment_length / 2);
-  }
+namespace {
+
+FrequencyResponse estimate_at(const Record& data, bool closed_loop, int segment_length, Hold input) {
   const double T = data.sample_time();
   FrequencyResponse out;
   if (data.inputs() > 1) {
@@ -133,12 +130,11 @@ FrequencyResponse frequency_response(const Record& data, bool closed_loop, int s
   return out;
 }
 
-namespace {
-
 // A resonance and the bin of its peak, where each input's residue is read.
 struct Resonance {
   ModalParameters modal;
   Eigen::Index bin = 0;
+  bool narrow = false;  // its half-power bandwidth spans two bins or fewer
 };
 
 std::vector<Resonance> find_resonances(const FrequencyResponse& h, int count, const PeakOptions& options,
@@ -205,16 +201,63 @@ std::vector<Resonance> find_resonances(const FrequencyResponse& h, int count, co
       width = 2.0 * (hi - f0);
     ModalParameters m;
     m.wn = kTwoPi * f0;
-    // A bandwidth under two bins is the Hann window's, not the mode's.
-    m.zeta = width > 2.0 * df ? width / (2.0 * f0) : options.default_zeta;
+    // A bandwidth under two bins is the Hann window's, not the mode's: the
+    // mode's is narrower still, zeta < df / f0, and it starts at half that
+    // bound when the default lies above it.
+    const bool narrow = width > 0.0 && width <= 2.0 * df;
+    m.zeta = width > 2.0 * df ? width / (2.0 * f0)
+             : narrow         ? std::min(options.default_zeta, 0.5 * df / f0)
+                              : options.default_zeta;
     m.gain = resonance_gain(h.response(k), m.wn, m.zeta, output_derivatives);
-    out.push_back({m, k});
+    out.push_back({m, k, narrow});
   }
   std::sort(out.begin(), out.end(), [](const Resonance& a, const Resonance& b) { return a.modal.wn < b.modal.wn; });
   return out;
 }
 
+// Welch segments that overlap by half: 2 N / L - 1 of length L.
+Eigen::Index segments_of(Eigen::Index N, int segment_length) { return 2 * N / segment_length - 1; }
+
+// The longest power of two, at least 64, that still gives kAveragedSegments.
+int default_segment_length(Eigen::Index N) {
+  int length = 64;
+  while (segments_of(N, 2 * length) >= kAveragedSegments) length *= 2;
+  return length;
+}
+
 }  // namespace
+
+FrequencyResponse frequency_response(const Record& data, bool closed_loop, int segment_length, Hold input) {
+  if (closed_loop && !data.has_reference())
+    throw std::invalid_argument("frequency_response: closed loop needs the reference r in the record");
+  if (closed_loop && data.inputs() > 1)
+    throw std::invalid_argument("frequency_response: a closed loop has one input (the controller's u)");
+  if (segment_length <= 0) segment_length = default_segment_length(data.size());
+  return estimate_at(data, closed_loop, segment_length, input);
+}
+
+FrequencyResponse resolving_response(const Record& data, bool closed_loop, Hold input) {
+  const Eigen::Index N = data.size();
+  int length = default_segment_length(N);
+  FrequencyResponse h = frequency_response(data, closed_loop, length, input);
+  // A resonance narrower than two bins is the window's width, not the mode's,
+  // and its leakage lowers the coherence that the peak test trusts: a lightly
+  // damped mode can fail that test only because the bins are too wide.
+  // Finer bins, as long as enough segments remain to average and the fewer
+  // averages do not hide a resonance that the wider bins show.
+  constexpr int kAll = std::numeric_limits<int>::max();
+  std::vector<Resonance> peaks = find_resonances(h, kAll, PeakOptions{}, 0);
+  while (segments_of(N, 2 * length) >= kFewestSegments &&
+         std::any_of(peaks.begin(), peaks.end(), [](const Resonance& r) { return r.narrow; })) {
+    FrequencyResponse finer = frequency_response(data, closed_loop, 2 * length, input);
+    std::vector<Resonance> finer_peaks = find_resonances(finer, kAll, PeakOptions{}, 0);
+    if (finer_peaks.size() < peaks.size()) break;
+    length *= 2;
+    h = std::move(finer);
+    peaks = std::move(finer_peaks);
+  }
+  return h;
+}
 
 double resonance_gain(std::complex<double> h, double wn, double zeta, int output_derivatives) {
   // The peak of (j w)^z b0 / (p^2/wn^2 + ...) at wn: the position's h / (j wn)^z.
@@ -233,7 +276,7 @@ std::vector<ModalParameters> resonance_peaks(const FrequencyResponse& h, int cou
 
 AdditiveModel initial_modes(const Record& data, int count, bool closed_loop, const PeakOptions& options,
                             int output_derivatives) {
-  return initial_modes(frequency_response(data, closed_loop), count, options, {}, output_derivatives);
+  return initial_modes(resolving_response(data, closed_loop), count, options, {}, output_derivatives);
 }
 
 AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOptions& options,
