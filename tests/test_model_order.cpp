@@ -60,6 +60,28 @@ TEST(ModelOrder, ThreeModesAreChosenAndThoseFoundBeforeAreStable) {
     EXPECT_LT(s.orders[static_cast<std::size_t>(k)].bic, s.orders[static_cast<std::size_t>(k - 1)].bic);
 }
 
+// Three modes, the fits given too few cycles to settle the larger orders:
+// an unconverged fit still counts, with its cycle of least output error, and
+// the lowest BIC is the true order, not the largest order that converged.
+TEST(ModelOrder, AFitThatDidNotConvergeCountsWithItsBestCycle) {
+  const std::vector<ModalParameters> truth = {mode_at(4.0, 0.03, 1.0), mode_at(11.0, 0.02, -2.0),
+                                              mode_at(27.0, 0.04, 1.5)};
+  const auto sim = simulate(test_support::plant_of(truth, 30.0), test_support::open_loop_prbs(kT, 120.0, 7, 1, 14));
+  SrivcOptions options;
+  options.max_iterations = 24;  // the fit of one mode converges in 19, those of two and three do not
+  options.best_cycle = true;
+  OrderOptions order;
+  order.max_modes = 6;
+  const OrderSelection s = select_order(sim.record, options, order);
+  for (const OrderFit& o : s.orders)
+    std::printf("%d modes: BIC %.1f, %s after %d cycles\n", o.modes, o.bic,
+                o.fit.converged ? "converged" : "not converged", o.fit.iterations);
+  ASSERT_EQ(s.orders.size(), 3u);
+  EXPECT_TRUE(s.orders[0].fit.converged);
+  EXPECT_FALSE(s.orders[2].fit.converged);
+  expect_chosen(s, truth);
+}
+
 TEST(ModelOrder, TwoModesInClosedLoop) {
   const std::vector<ModalParameters> truth = {mode_at(6.0, 0.03, 1.0), mode_at(19.0, 0.02, 0.8)};
   const PlantSpec plant = test_support::plant_of(truth, 30.0);

@@ -4,7 +4,7 @@
 // estimate (initial_modes.hpp) and made physical (physical.hpp), are compared
 // by the Bayesian information criterion
 //
-//   BIC = N ln(sigma^2) + k ln N     (sigma^2 the output error's variance, k parameters)
+//   BIC = N ln(sigma^2) + k ln N     (sigma^2 the output error's variance, k free parameters)
 //
 // and drawn as the stabilisation diagram of modal analysis: per order the modes
 // found, each marked stable when the order below has a mode within
@@ -53,8 +53,9 @@ struct OrderSelection {
   // 1, 2, ... modes, up to max_modes; fewer when the data show fewer resonance
   // peaks or a fit fails (a record too short for the parameters).
   std::vector<OrderFit> orders;
-  // Index into orders of the lowest BIC among the converged fits (among all when
-  // none converged); -1 when no fit has a finite BIC.
+  // Index into orders of the lowest BIC (a fit that did not converge counts
+  // with its cycle of least output error when options.best_cycle is set); -1
+  // when no fit has a finite BIC.
   int chosen = -1;
 };
 

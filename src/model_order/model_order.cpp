@@ -7,11 +7,12 @@
 namespace modalwatch {
 namespace {
 
-// The resonances of a fitted model, ascending in wn.
+// The resonances of a fitted model, ascending in wn: once each, however many
+// inputs' submodels share its A(p).
 std::vector<ModalParameters> modes_of(const AdditiveModel& m) {
   std::vector<ModalParameters> out;
   for (const Submodel& s : m.submodels)
-    if (s.is_resonance()) out.push_back(modal_parameters(s));
+    if (s.is_resonance() && s.poles_of.empty()) out.push_back(modal_parameters(s));
   std::sort(out.begin(), out.end(), [](const ModalParameters& a, const ModalParameters& b) { return a.wn < b.wn; });
   return out;
 }
@@ -37,7 +38,8 @@ OrderSelection select_order(const Record& data, const SrivcOptions& options, con
   if (order.max_modes < 1) throw std::invalid_argument("select_order: max_modes must be at least 1");
   const Eigen::Index settle = std::min<Eigen::Index>(options.settle_samples, data.size());
   const Record used = data.segment(settle, data.size() - settle);
-  const FrequencyResponse h = frequency_response(used, options.closed_loop);  // one estimate serves every order
+  // One estimate serves every order.
+  const FrequencyResponse h = resolving_response(used, options.closed_loop, options.input_hold);
   OrderSelection out;
   for (int k = 1; k <= order.max_modes; ++k) {
     const AdditiveModel start = initial_modes(h, k, order.peaks, order.inputs, order.output_derivatives);
@@ -52,19 +54,20 @@ OrderSelection select_order(const Record& data, const SrivcOptions& options, con
     }
     const double N = static_cast<double>(used.size());
     if (std::isfinite(f.fit.noise_variance) && f.fit.noise_variance > 0.0 && f.fit.model.beta().allFinite())
-      f.bic = N * std::log(f.fit.noise_variance) + f.fit.model.n_beta() * std::log(N);
+      // A shared A(p) is one set of parameters, however many inputs see it.
+      f.bic = N * std::log(f.fit.noise_variance) + static_cast<double>(free_beta(f.fit.model).size()) * std::log(N);
     f.diagram = stabilise(modes_of(f.fit.model),
                           out.orders.empty() ? std::vector<StabilisedMode>{} : out.orders.back().diagram, order);
     out.orders.push_back(std::move(f));
   }
-  // The lowest BIC of the converged fits; of all when none converged.
-  for (const bool need_converged : {true, false}) {
-    for (int i = 0; i < static_cast<int>(out.orders.size()); ++i) {
-      const OrderFit& o = out.orders[static_cast<std::size_t>(i)];
-      if (!std::isfinite(o.bic) || (need_converged && !o.fit.converged)) continue;
-      if (out.chosen < 0 || o.bic < out.orders[static_cast<std::size_t>(out.chosen)].bic) out.chosen = i;
-    }
-    if (out.chosen >= 0) break;
+  // The lowest BIC. A fit that did not converge counts too: it returns its
+  // cycle of least output error, and on a record of many lightly damped modes
+  // the orders that hold them all are the ones the block-coordinate iteration
+  // no longer settles.
+  for (int i = 0; i < static_cast<int>(out.orders.size()); ++i) {
+    const OrderFit& o = out.orders[static_cast<std::size_t>(i)];
+    if (!std::isfinite(o.bic)) continue;
+    if (out.chosen < 0 || o.bic < out.orders[static_cast<std::size_t>(out.chosen)].bic) out.chosen = i;
   }
   return out;
 }
