@@ -60,6 +60,9 @@ bool srivc_start(const AdditiveModel& linear, const ModelEffects& e, const Recor
   if (e.drift_on) corrected.y.array() -= e.drift * (data.t.array() - data.t(0));
   SrivcOptions so;
   so.closed_loop = loop.closed;
+  // The input as the simulation takes it: interpolated between samples (a
+  // band-limited input) only in open loop.
+  so.input_hold = loop.interpolate_input && !loop.closed ? Hold::foh : Hold::zoh;
   so.best_cycle = true;
   so.controller = loop.controller;
   so.output_hold = options.output_hold;
