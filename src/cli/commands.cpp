@@ -177,8 +177,10 @@ int fit(const FitArgs& args) {
 
     char rate[48] = "";
     if (!in_samples) std::snprintf(rate, sizeof rate, " at %g Hz", 1.0 / T);
-    std::printf("modalwatch fit: %lld samples%s, %s loop, %zu submodels, %d parameters\n", static_cast<long long>(used),
-                rate, config.closed_loop ? "closed" : "open", result.model.submodels.size(), result.model.n_beta());
+    // Free parameters: a resonance's A shared by several inputs counts once.
+    std::printf("modalwatch fit: %lld samples%s, %s loop, %zu submodels, %lld parameters\n",
+                static_cast<long long>(used), rate, config.closed_loop ? "closed" : "open",
+                result.model.submodels.size(), static_cast<long long>(free_beta(result.model).size()));
     if (settle > 0)
       std::printf("(the %lld samples before --from run the filters and the model only)\n",
                   static_cast<long long>(settle));
