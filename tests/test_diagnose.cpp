@@ -88,6 +88,13 @@ Diagnosed run(const PlantSpec& plant, bool closed) {
     }
   }
   std::printf("  stop: %s\n", d.result.stop_reason.c_str());
+  // Every added step, as made physical, lowers the validation RMS of the
+  // refit without it by more than min_improvement, and its credit says by how much.
+  for (std::size_t k = 1; k < d.result.steps.size(); ++k) {
+    const DiagnoseStep& s = d.result.steps[k];
+    EXPECT_LT(s.validation_rms, (1.0 - DiagnoseOptions{}.min_improvement) * s.refit_validation_rms) << s.effect;
+    EXPECT_DOUBLE_EQ(s.credit, s.refit_validation_rms - s.validation_rms) << s.effect;
+  }
   return d;
 }
 

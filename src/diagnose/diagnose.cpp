@@ -21,7 +21,9 @@
 // criterion BIC = N ln(MSE_est) + k ln N on the estimation part is reported,
 // and the best candidate is added only when its credit is more than
 // DiagnoseOptions::min_improvement of the refit's validation RMS and it lowers
-// the refit's BIC.
+// the refit's BIC. The added step is the candidate made physical
+// (physical.hpp), which must still earn that much: a merge or a removal can
+// undo what the candidate gained, and the next candidate is tried instead.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -335,7 +337,8 @@ Candidate candidate_complex_modes(const AugmentedModel& current, const Context& 
     s.b(1) = 0.0;
     ++modes;
   }
-  if (modes == 0) return invalid(EffectKind::complex_modes, "no mode with a real residue that may take b1 p (none as acceleration)");
+  if (modes == 0)
+    return invalid(EffectKind::complex_modes, "no mode with a real residue that may take b1 p (none as acceleration)");
   Candidate c = finish(EffectKind::complex_modes, fit_structure(m, ctx.est, ctx.options, true), ctx);
   if (c.valid) c.params = {{"modes", static_cast<double>(modes)}};
   return c;
@@ -690,10 +693,19 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
                  (findings.empty() ? std::string("refitted") : findings.front().reason) + ")";
         continue;
       }
+      // The step is the physical model, and it earns its credit as such: a
+      // merge or a removal can undo what the candidate gained.
+      if (!(base_rms - s.validation_rms > options.min_improvement * base_rms)) {
+        c.valid = false;
+        c.credit = std::numeric_limits<double>::quiet_NaN();
+        c.note = "made physical, validation RMS " + number(s.validation_rms) + " against " + number(base_rms) +
+                 " without it (" + (findings.empty() ? std::string("refitted") : findings.front().reason) + ")";
+        continue;
+      }
       s.physical = findings;
       s.modal_std = modal_std;
       s.refit_validation_rms = base_rms;
-      s.credit = c.credit;
+      s.credit = base_rms - s.validation_rms;
       next = std::move(s);
       break;
     }
@@ -701,9 +713,10 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
     if (!next) {
       std::string diverged;
       for (const Candidate& c : candidates)
-        if (!c.note.empty() && c.note.starts_with("diverges once"))
+        if (!c.note.empty() && (c.note.starts_with("diverges once") || c.note.starts_with("made physical")))
           diverged += std::string(diverged.empty() ? ": " : ", ") + effect_name(c.kind) + " (" + c.note + ")";
-      stop(DiagnoseStop::not_fitted, "no candidate the rules admit simulates once made physical" + diverged);
+      stop(DiagnoseStop::not_fitted,
+           "no candidate the rules admit simulates and keeps its credit once made physical" + diverged);
       break;
     }
     result.steps.push_back(std::move(*next));
