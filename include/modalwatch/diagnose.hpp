@@ -68,6 +68,9 @@ struct LoopSpec {
   // every T / substeps (a cubic term makes harmonics near Nyquist when
   // w T ~ 0.7, as on the Silverbox). 1 is the simulator's structure.
   int substeps = 1;
+  // The input between samples as the simulation takes it (interpolated only in
+  // open loop), for the fits that start it.
+  Hold input_hold() const { return interpolate_input && !closed ? Hold::foh : Hold::zoh; }
 };
 
 // The model's output on a record (open loop from the measured u, closed loop

@@ -145,10 +145,10 @@ int diagnose(const DiagnoseArgs& args) {
     const std::optional<int> modes = args.modes ? args.modes : config.model_modes;
     const bool in_samples = time_in_samples(full, args.columns, config.sample_time);
     const int output = output_kind(config, args.output, modes.has_value());
-    const AdditiveModel initial = modes ? modes_from_data(est, *modes, config.closed_loop, args.data, in_samples,
-                                                          config.model.inputs.empty() ? inputs : config.model.inputs,
-                                                          output, loop.interpolate_input ? Hold::foh : Hold::zoh)
-                                        : config.model;
+    const AdditiveModel initial =
+        modes ? modes_from_data(est, *modes, config.closed_loop, args.data, in_samples,
+                                config.model.inputs.empty() ? inputs : config.model.inputs, output, loop.input_hold())
+              : config.model;
     options.output_hold = output_hold(config, initial, est.sample_time());
     DiagnoseResult r = diagnose(est, val, initial, loop, options);
     r.stop_reason += stop_option(r.stop);

@@ -62,9 +62,7 @@ bool srivc_start(const AdditiveModel& linear, const ModelEffects& e, const Recor
   if (e.drift_on) corrected.y.array() -= e.drift * (data.t.array() - data.t(0));
   SrivcOptions so;
   so.closed_loop = loop.closed;
-  // The input as the simulation takes it: interpolated between samples (a
-  // band-limited input) only in open loop.
-  so.input_hold = loop.interpolate_input && !loop.closed ? Hold::foh : Hold::zoh;
+  so.input_hold = loop.input_hold();
   so.best_cycle = true;
   so.controller = loop.controller;
   so.output_hold = options.output_hold;
@@ -678,6 +676,7 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
     // projected) so that it no longer simulates: such a candidate is not added,
     // and the next one the rules admit is.
     std::optional<DiagnoseStep> next;
+    std::string rejected;  // the admitted candidates that failed once made physical, and why
     for (Candidate& c : candidates) {
       if (!c.valid) continue;
       if (!(c.credit > options.min_improvement * base_rms)) break;
@@ -686,20 +685,19 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
       const double cost = c.estimation_rms * c.estimation_rms * static_cast<double>(estimation.size());
       const Refined chosen = make_physical({c.model, cost, {}}, est, options, findings, modal_std);
       DiagnoseStep s = make_step(effect_name(c.kind), c.params, chosen.model, chosen.cost, est, val, options);
-      if (!std::isfinite(s.estimation_rms) || !std::isfinite(s.validation_rms)) {
-        c.valid = false;
-        c.credit = std::numeric_limits<double>::quiet_NaN();
-        c.note = "diverges once made physical (" +
-                 (findings.empty() ? std::string("refitted") : findings.front().reason) + ")";
-        continue;
-      }
       // The step is the physical model, and it earns its credit as such: a
       // merge or a removal can undo what the candidate gained.
-      if (!(base_rms - s.validation_rms > options.min_improvement * base_rms)) {
+      std::string why;
+      if (!std::isfinite(s.estimation_rms) || !std::isfinite(s.validation_rms))
+        why = "diverges once made physical";
+      else if (!(base_rms - s.validation_rms > options.min_improvement * base_rms))
+        why = "made physical, validation RMS " + number(s.validation_rms) + " against " + number(base_rms) +
+              " without it";
+      if (!why.empty()) {
         c.valid = false;
         c.credit = std::numeric_limits<double>::quiet_NaN();
-        c.note = "made physical, validation RMS " + number(s.validation_rms) + " against " + number(base_rms) +
-                 " without it (" + (findings.empty() ? std::string("refitted") : findings.front().reason) + ")";
+        c.note = why + " (" + (findings.empty() ? std::string("refitted") : findings.front().reason) + ")";
+        rejected += std::string(rejected.empty() ? ": " : ", ") + effect_name(c.kind) + " (" + c.note + ")";
         continue;
       }
       s.physical = findings;
@@ -711,12 +709,8 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
     }
     now.ranking = candidates;
     if (!next) {
-      std::string diverged;
-      for (const Candidate& c : candidates)
-        if (!c.note.empty() && (c.note.starts_with("diverges once") || c.note.starts_with("made physical")))
-          diverged += std::string(diverged.empty() ? ": " : ", ") + effect_name(c.kind) + " (" + c.note + ")";
       stop(DiagnoseStop::not_fitted,
-           "no candidate the rules admit simulates and keeps its credit once made physical" + diverged);
+           "no candidate the rules admit simulates and keeps its credit once made physical" + rejected);
       break;
     }
     result.steps.push_back(std::move(*next));

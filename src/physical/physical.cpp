@@ -146,11 +146,8 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
                            : std::string("roots of A in the right half plane: reflected into the left half plane");
   }
 
-  // Feedthrough: a mode above Nyquist, or a constant on the band within its
-  // uncertainty. Not for a velocity or acceleration sensor: there such a mode
-  // is b0 p^z on the band, no constant, and stays a mode.
   // Measured as a derivative (velocity, acceleration), a mode above Nyquist is
-  // no constant on the band either, nor a resonance the samples show: it is
+  // b0 p^z on the band: no constant, nor a resonance the samples show. It is
   // left out (while another submodel remains) and the model refitted.
   for (int i = 0; i < K; ++i) {
     const Submodel& s = subs[i];
@@ -166,6 +163,8 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
                ", acts on the band as b0 p^z: no resonance of the record; left out and refitted";
     out.refit = true;
   }
+  // Feedthrough: a position sensor's mode above Nyquist, or a constant on the
+  // band within its uncertainty.
   for (int i = 0; i < K; ++i) {
     Submodel& s = subs[i];
     if (!s.is_mode() || s.output_derivatives != 0) continue;
@@ -183,8 +182,8 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
     }
     if (why.empty()) continue;
     f.verdict = ModeVerdict::feedthrough;  // after a projection too: the reasons add up
-    f.reason = (f.reason.empty() ? "" : f.reason + "; then ") + why +
-               format(": replaced by the feedthrough %.6g", s.b(0));
+    f.reason =
+        (f.reason.empty() ? "" : f.reason + "; then ") + why + format(": replaced by the feedthrough %.6g", s.b(0));
     const int input = s.input;
     s = make_rigid_body(s.name, s.b(0), 0);
     s.input = input;
@@ -233,8 +232,8 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
     f.verdict = ModeVerdict::merged;
     f.into = subs[best_i].name;
     f.reason = format("%.5g Hz (gain %.4g) is within %.2g joint std of", pj.hz(), pj.gain, best_score) + " " +
-               subs[best_i].name + format(" at %.5g Hz (gain %.4g): one resonance, merged and refitted", pi.hz(),
-                                          pi.gain);
+               subs[best_i].name +
+               format(" at %.5g Hz (gain %.4g): one resonance, merged and refitted", pi.hz(), pi.gain);
     out.refit = true;
   }
 
