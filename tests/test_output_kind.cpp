@@ -477,9 +477,9 @@ double modes_alone_validation_fit(const Record& full, int K, int z) {
 // accelerations: the same modes from the data, read as acceleration, follow
 // the validation part better than read as position (measured: F-16 level 1
 // 84.9 % against 83.5 %, robot arm 69.8 % against 67.4 %). The F-16's margin
-// depends on which six of its resonances the start takes: from bins of 0.049
-// Hz it was 87.3 against 70.9 %, from the finer bins its peaks need (0.024
-// Hz: every peak resolved, coherence 1 there) both readings fit well. With diagnose's
+// depends on which six of its resonances the start takes: from the 0.024 Hz
+// bins its peaks need (coherence 1 there) both readings fit well; the six
+// peaks of 0.049 Hz bins give 87.3 against 70.9 %. With diagnose's
 // effects the robot arm's position model goes further (complex residues and a
 // feedthrough: 89.6 %), which an acceleration's mode cannot take.
 TEST(OutputKindMeasured, TheAccelerometersRecordsFollowTheirModesBetterAsAcceleration) {
