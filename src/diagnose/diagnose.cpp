@@ -687,16 +687,16 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
       DiagnoseStep s = make_step(effect_name(c.kind), c.params, chosen.model, chosen.cost, est, val, options);
       // The step is the physical model, and it earns its credit as such: a
       // merge or a removal can undo what the candidate gained.
-      std::string why;
+      std::string failed;
       if (!std::isfinite(s.estimation_rms) || !std::isfinite(s.validation_rms))
-        why = "diverges once made physical";
+        failed = "diverges once made physical";
       else if (!(base_rms - s.validation_rms > options.min_improvement * base_rms))
-        why = "made physical, validation RMS " + number(s.validation_rms) + " against " + number(base_rms) +
-              " without it";
-      if (!why.empty()) {
+        failed = "made physical, validation RMS " + number(s.validation_rms) + " against " + number(base_rms) +
+                 " without it";
+      if (!failed.empty()) {
         c.valid = false;
         c.credit = std::numeric_limits<double>::quiet_NaN();
-        c.note = why + " (" + (findings.empty() ? std::string("refitted") : findings.front().reason) + ")";
+        c.note = failed + " (" + (findings.empty() ? std::string("refitted") : findings.front().reason) + ")";
         rejected += std::string(rejected.empty() ? ": " : ", ") + effect_name(c.kind) + " (" + c.note + ")";
         continue;
       }
