@@ -179,6 +179,67 @@ faults:
   return out;
 }
 
+// Three modes in closed loop under four sines (a scenario-bank record): 8
+// real equations for 9 parameters. Mode 2's gain falls by 20 % at 9935 s; the
+// output error diverges, the restored state waits to settle, and the wait ends
+// unsettled (the refit of that window was refused), so the updates resume from
+// the last good state and re-converge along what the sines leave open: mode
+// 1's gain goes 43 % off for thousands of seconds, with an output error that
+// stays tens of times the noise.
+struct UnsettledResumeUnderFourSines {
+  Config config;
+  Record record;
+  static constexpr double kStep = 9935.353200319523;            // s
+  static constexpr double kPublishPeriod = 38.919510646551785;  // s, the bank's
+};
+
+inline UnsettledResumeUnderFourSines unsettled_resume_under_four_sines() {
+  UnsettledResumeUnderFourSines out;
+  out.config = parse_config(R"(
+sample_rate_hz: 29.573855911314674
+model:
+  loop: closed
+  submodels:
+    - {name: mode1, kind: mode, wn: 0.393077917800018, zeta: 0.2816878928678508, gain: 0.4867821553394498, forgetting: 0.9999565670604587}
+    - {name: mode2, kind: mode, wn: 1.848674193846916, zeta: 0.024752086877906643, gain: 2.871161205864938, forgetting: 0.9999565670604587}
+    - {name: mode3, kind: mode, wn: 33.21858967647595, zeta: 0.006265099369117527, gain: 0.6744369843586847, forgetting: 0.9999565670604587}
+controller:
+  numerator: [0.007119102904130105, -0.006933590265703404]
+  denominator: [1.0, -1.0]
+plant:
+  noise_variance: 1.636023414136173e-07
+  modes:
+    - {name: mode1, kind: mode, wn: 0.40353972268164595, zeta: 0.27658750935559145, gain: 0.4841534089224407}
+    - name: mode2
+      kind: mode
+      wn: 1.870750319155973
+      zeta: 0.020918120484903425
+      gain: 3.186098882319423
+      trajectory:
+        gain: [[9935.353200319523, 3.186098882319423], [9935.387013969086, 2.548879105855539]]
+    - {name: mode3, kind: mode, wn: 33.40114766782241, zeta: 0.006262217436285542, gain: 0.6565104464401178}
+simulation:
+  duration: 17680.339789141704
+  seed: 63234942
+  reference:
+    type: sum_of_sines
+    amplitudes: [1.0, 1.0, 1.0, 1.0]
+    frequencies_rad_s: [0.057644276798433244, 0.43208861603354426, 2.0612635189005033, 37.90450290319642]
+estimator:
+  warmup: 778.5254675292862
+  fit_on_warmup: true
+faults:
+  learn_window: 2335.5764025878584
+  false_alarm_interval: 1000.0
+  wn: {sigma: 4.0, relative: 0.03, hold: 778.5254675292862, clear_time: 778.5254675292862}
+  zeta: {sigma: 6.0, relative: 0.5, hold: 778.5254675292862, clear_time: 778.5254675292862}
+  gain: {sigma: 4.0, relative: 0.1, hold: 778.5254675292862, clear_time: 778.5254675292862}
+)",
+                            "unsettled-resume-under-four-sines.yaml");
+  out.record = simulate(*out.config.plant, *out.config.experiment).record;
+  return out;
+}
+
 inline SignalSpec prbs(double amplitude, int bits = 12, int clock = 2) {
   SignalSpec s;
   s.kind = SignalSpec::Kind::prbs;

@@ -163,6 +163,7 @@ struct MetricsEndpoint::Impl {
   std::array<prometheus::Gauge*, n_states> state{};
   prometheus::Gauge* stale = nullptr;
   prometheus::Gauge* low_excitation = nullptr;
+  prometheus::Gauge* misfit = nullptr;
   std::vector<prometheus::Counter*> counters;
   std::vector<std::uint64_t> counter_base;  // the totals last seen
   prometheus::Histogram* tick = nullptr;
@@ -203,6 +204,10 @@ MetricsEndpoint::MetricsEndpoint(const MetricsSettings& settings, std::string ax
       &gauge_family("modalwatch_input_stale", "1 when no sample arrived for longer than daemon.stale_time.").Add({});
   m.low_excitation =
       &gauge_family("modalwatch_low_excitation", "1 when the excitation is too low for flagging.").Add({});
+  m.misfit = &gauge_family("modalwatch_model_misfit",
+                           "1 while the model leaves an output error above the noise level it had before the "
+                           "estimator's last reset: the estimates are re-converging and no flag rises.")
+                  .Add({});
   for (const CounterSeries& series : kCounterSeries)
     m.counters.push_back(&prometheus::BuildCounter()
                               .Name(series.name)
@@ -247,6 +252,7 @@ void MetricsEndpoint::update(const MetricsSnapshot& s) {
   for (int st = 0; st < n_states; ++st) m.state[static_cast<std::size_t>(st)]->Set(st == now ? 1.0 : 0.0);
   m.stale->Set(s.stale ? 1.0 : 0.0);
   m.low_excitation->Set(s.low_excitation ? 1.0 : 0.0);
+  m.misfit->Set(s.misfit ? 1.0 : 0.0);
 
   for (std::size_t k = 0; k < m.counters.size(); ++k) {
     const std::uint64_t total = kCounterSeries[k].get(s);

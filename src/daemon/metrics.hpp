@@ -72,6 +72,7 @@ struct MetricsSnapshot {
   std::array<ModeMetrics, Daemon::kMaxModes> modes{};
   bool warming_up = true;       // the estimator's warm-up window (state 0)
   bool low_excitation = false;  // flags suppressed for lack of excitation
+  bool misfit = false;          // flags suppressed while the model does not fit (EstimatorStatus::misfit)
   bool stale = false;           // no input for longer than daemon.stale_time
   DaemonCounters counters;
   TickHistogram tick;

@@ -73,6 +73,7 @@ constexpr HealthBit kHealthBits[] = {
     {Fault::HEALTH_OVERRUN, "overrun", &Snapshot::overrun},
     {Fault::HEALTH_SAMPLES_LOST, "samples_lost", &Snapshot::samples_lost},
     {Fault::HEALTH_SENDER_RESTART, "sender_restart", &Snapshot::sender_restart},
+    {Fault::HEALTH_MODEL_MISFIT, "model_misfit", &Snapshot::misfit},
 };
 
 }  // namespace
@@ -147,6 +148,7 @@ void Publisher::export_metrics(const Snapshot& s) {
   }
   m.warming_up = s.warming_up;
   m.low_excitation = s.low_excitation;
+  m.misfit = s.misfit;
   m.stale = s.stale;
   m.counters = s.counters;
   m.tick = s.tick;
@@ -233,7 +235,7 @@ void Publisher::publish_fault_status(const Snapshot& s) {
   msg.state = daemon_state(s);
   msg.n_modes = s.n_modes;
   msg.modes.resize(static_cast<std::size_t>(s.n_modes));
-  const bool valid = !s.warming_up && !s.low_excitation;
+  const bool valid = !s.warming_up && !s.low_excitation && !s.misfit;
   for (int i = 0; i < s.n_modes; ++i) {
     const auto k = static_cast<std::size_t>(i);
     const ModeStatus& mode = s.modes[k];

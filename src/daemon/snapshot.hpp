@@ -34,6 +34,7 @@ struct Snapshot {
   // The estimator's state.
   bool warming_up = true;
   bool low_excitation = false;
+  bool misfit = false;  // EstimatorStatus::misfit
   std::array<ModalParameters, kMaxModes> value{}, std_dev{};
   double residual_rms = 0.0;
   const char* reset_reason = "";    // static string from the estimator

@@ -260,6 +260,7 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
     rediscretise(b);
   }
   joint.restore_good();
+  noise_at_reset = noise_at_reset > 0.0 ? std::min(noise_at_reset, e_var_good) : e_var_good;
   // The noise level goes back with the state. The first residuals on the
   // restarted filters are their transient, not noise: they must not set e_var
   // again (as the very first residual does), only the outlier test restarts

@@ -194,6 +194,16 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   constexpr double kSettledRatio = 1.25;
   const bool diverging =
       allow_update && e_var_good > 0.0 && e_short > cfg.divergence_ratio * cfg.divergence_ratio * e_var_good;
+  // Misfit (EstimatorStatus::misfit): after a reset, until the output error is
+  // back near the noise level before it. Not while the wait for that holds the
+  // estimates (e_var keeps its value then), nor from a refit's window (e_var
+  // is set to that level, e_short falls to it): from a wait that ends
+  // unsettled, where the updates resume and e_var takes the misfit for noise.
+  // Over, with e_short and e_var both back: e_short alone, over a fraction of a
+  // slow sine's period, dips with it.
+  const double noise_level = kSettledRatio * kSettledRatio * noise_at_reset;
+  if (noise_at_reset > 0.0 && settling == 0 && !(std::max(e_short, e_var) > noise_level)) noise_at_reset = 0.0;
+  status.misfit = noise_at_reset > 0.0 && e_var > noise_level;
   // A change below the divergence: the CUSUM's increment is the log-likelihood
   // ratio of e between N(0, kappa e_var_good) and N(0, e_var_good),
   // -ln(kappa)/2 + (1 - 1/kappa) e^2 / (2 e_var_good) (kappa = change_ratio), on the
