@@ -166,14 +166,14 @@ struct EstimatorStatus {
   const char* last_reset_reason = "";
   bool warming_up = true;
   bool low_excitation = false;
-  // The short-term output error is above divergence_ratio^2 times the sensor's
-  // noise level: the model does not describe the data, and its estimates are
-  // no measurement of the plant (a fault detector raises no flag on them). The
-  // noise level is the last good state's, or after a reset the one before it
-  // until the error is back near it: where the wait after a reset ends
-  // unsettled, the updates resume and the noise estimate grows with the
-  // misfit, which it must not hide. Not carried by a checkpoint (a restored
-  // estimator judges against its last good level).
+  // The model does not describe the data, and its estimates are no
+  // measurement of the plant (a fault detector raises no flag on them): after
+  // a reset whose wait to settle ended unsettled, the updates run again while
+  // the output error is above 1.25x the RMS the last good state had before the
+  // reset. The noise estimate then grows with the model's error, which it must
+  // not hide. Over once the error (long and short term) is back there. Not
+  // while the wait holds the estimates, nor after an accepted refit. Not
+  // carried by a checkpoint.
   bool misfit = false;
   bool warmup_fit_used = false;  // theta(t0) from the offline fit on the warm-up window (else kWarmupFitNotUsed)
   std::uint64_t fits = 0;  // windows whose fit has ended (the warm-up's, refits; used or not)

@@ -111,7 +111,8 @@ struct RecursiveEstimator::Impl {
   double e_alpha = 0.0;  // its forgetting
   std::uint64_t e_count = 0;
   double e_short = 0.0;  // the same over a few samples: divergence detector
-  double noise_at_reset = 0.0;  // e_var_good at the last reset, until e_short is back near it (status.misfit)
+  double noise_at_reset =
+      0.0;  // e_var_good at the last reset, until e_short and e_var are back near it (status.misfit)
   double e_short_alpha = 0.0;
   double e_var_good = 0.0;      // e_var when the last good state was saved
   double change_cusum = 0.0;    // Page's CUSUM on e^2 / e_var_good (EstimatorSettings::change_ratio)
