@@ -64,6 +64,20 @@ inline PaperModeThreeStep paper_mode_three_step(double step = -0.03, double at =
   return out;
 }
 
+// A config with plant: and simulation: sections (a scenario-bank record's), and
+// the record it simulates.
+struct SimulatedRecord {
+  Config config;
+  Record record;
+};
+
+inline SimulatedRecord simulated_record(const std::string& yaml, const std::string& name) {
+  SimulatedRecord out;
+  out.config = parse_config(yaml, name);
+  out.record = simulate(*out.config.plant, *out.config.experiment).record;
+  return out;
+}
+
 // Four modes in closed loop under a multisine (a scenario-bank record, 700 s
 // of its 993): mode 3 is weak (gain 0.0044) and 50 rad/s below mode 4 (0.063),
 // whose gain steps by -20 % at 590.7 s. The change test names both. An
@@ -71,14 +85,8 @@ inline PaperModeThreeStep paper_mode_three_step(double step = -0.03, double at =
 // 160 rad/s, gain -0.002) to cancel part of that change, and stay there with
 // the residual 1.5x the noise, below the divergence ratio (measured; over the
 // whole record mode 2 then drifted too, and both got false flags).
-struct WeakModeBesideAGainStep {
-  Config config;
-  Record record;
-};
-
-inline WeakModeBesideAGainStep weak_mode_beside_a_gain_step() {
-  WeakModeBesideAGainStep out;
-  out.config = parse_config(R"(
+inline SimulatedRecord weak_mode_beside_a_gain_step() {
+  return simulated_record(R"(
 sample_rate_hz: 706.0302900810594
 model:
   loop: closed
@@ -116,9 +124,7 @@ estimator:
   warmup: 43.8508
   fit_on_warmup: true
 )",
-                            "weak-mode-beside-a-gain-step.yaml");
-  out.record = simulate(*out.config.plant, *out.config.experiment).record;
-  return out;
+                          "weak-mode-beside-a-gain-step.yaml");
 }
 
 // Two modes in closed loop under three sines (a scenario-bank record): six real
@@ -128,14 +134,8 @@ estimator:
 // Mode 2's stiffness falls by 18 % over 53 s from 255.5 s (wn -9.5 %, gain
 // +22 %); mode 1's estimate moves along the trade (gain +11 %, measured) and
 // stays there.
-struct TradeBetweenModes {
-  Config config;
-  Record record;
-};
-
-inline TradeBetweenModes trade_between_modes() {
-  TradeBetweenModes out;
-  out.config = parse_config(R"(
+inline SimulatedRecord trade_between_modes() {
+  return simulated_record(R"(
 sample_rate_hz: 143.98161962223307
 model:
   loop: closed
@@ -174,9 +174,7 @@ faults:
   zeta: {sigma: 6.0, relative: 0.5, hold: 17.168858125681783, clear_time: 17.168858125681783}
   gain: {sigma: 4.0, relative: 0.1, hold: 17.168858125681783, clear_time: 17.168858125681783}
 )",
-                            "trade-between-modes.yaml");
-  out.record = simulate(*out.config.plant, *out.config.experiment).record;
-  return out;
+                          "trade-between-modes.yaml");
 }
 
 // Three modes in closed loop under four sines (a scenario-bank record): 8
@@ -186,16 +184,8 @@ faults:
 // the last good state and re-converge along what the sines leave open: mode
 // 1's gain goes 43 % off for thousands of seconds, with an output error that
 // stays tens of times the noise.
-struct UnsettledResumeUnderFourSines {
-  Config config;
-  Record record;
-  static constexpr double kStep = 9935.353200319523;            // s
-  static constexpr double kPublishPeriod = 38.919510646551785;  // s, the bank's
-};
-
-inline UnsettledResumeUnderFourSines unsettled_resume_under_four_sines() {
-  UnsettledResumeUnderFourSines out;
-  out.config = parse_config(R"(
+inline SimulatedRecord unsettled_resume_under_four_sines() {
+  return simulated_record(R"(
 sample_rate_hz: 29.573855911314674
 model:
   loop: closed
@@ -235,9 +225,7 @@ faults:
   zeta: {sigma: 6.0, relative: 0.5, hold: 778.5254675292862, clear_time: 778.5254675292862}
   gain: {sigma: 4.0, relative: 0.1, hold: 778.5254675292862, clear_time: 778.5254675292862}
 )",
-                            "unsettled-resume-under-four-sines.yaml");
-  out.record = simulate(*out.config.plant, *out.config.experiment).record;
-  return out;
+                          "unsettled-resume-under-four-sines.yaml");
 }
 
 inline SignalSpec prbs(double amplitude, int bits = 12, int clock = 2) {

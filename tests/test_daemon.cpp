@@ -350,7 +350,7 @@ TEST_F(DaemonInProcess, CountsTheChangeTestsCovarianceBoostsAsTheEstimatorMakesT
 // their estimate after a sign change of their gain
 // (modalwatch_mode_restores_total), as many as step() reports.
 TEST_F(DaemonInProcess, CountsTheModesReturnedAfterASignChangeAsTheEstimatorReturnsThem) {
-  const test_support::WeakModeBesideAGainStep loop = test_support::weak_mode_beside_a_gain_step();
+  const test_support::SimulatedRecord loop = test_support::weak_mode_beside_a_gain_step();
   const Record& r = loop.record;
   const std::uint64_t restores = steps_flagged(loop.config, r, kModeRestored);
   ASSERT_GT(restores, 0u);

@@ -978,7 +978,7 @@ TEST(RecursiveEstimator, WithoutTheHoldAHealthyNeighbourAbsorbsPartOfTheChange) 
 // goes back to its last good estimate and keeps it while mode 4 re-converges
 // after its gain step (estimator_support.hpp says what happens otherwise).
 TEST(RecursiveEstimator, AWeakModeWhoseGainChangesSignGoesBackToItsEstimateAndTheChangeToItsNeighbour) {
-  const WeakModeBesideAGainStep loop = weak_mode_beside_a_gain_step();
+  const SimulatedRecord loop = weak_mode_beside_a_gain_step();
   const Config& c = loop.config;
   const Record& r = loop.record;
   RecursiveEstimator est(c.model, c.estimator);
@@ -1060,7 +1060,7 @@ DetectorRun run_detector(const Config& c, const Record& r, double period,
 // covariance), so mode 1's move along it when mode 2 changes is no fault of
 // mode 1; mode 2's is flagged.
 TEST(RecursiveEstimator, ATradeBetweenModesThatTheExcitationLeavesOpenIsNoFaultOfTheHealthyMode) {
-  const TradeBetweenModes loop = trade_between_modes();
+  const SimulatedRecord loop = trade_between_modes();
   constexpr double kPeriod = 0.8612210386668856;  // the bank's publish period
   double gain_std_joint = 0.0, gain_std_given = 0.0, gain1 = 0.0;
   const DetectorRun run = run_detector(loop.config, loop.record, kPeriod, [&](double t, const RecursiveEstimator& est) {
@@ -1092,21 +1092,20 @@ TEST(RecursiveEstimator, ATradeBetweenModesThatTheExcitationLeavesOpenIsNoFaultO
 // before the reset. No flag rises on them: mode 1's gain, 43 % off along what
 // the sines leave open, was flagged at 24 sigma.
 TEST(RecursiveEstimator, EstimatesWhoseModelNoLongerFitsTheDataRaiseNoFlag) {
-  const UnsettledResumeUnderFourSines loop = unsettled_resume_under_four_sines();
+  const SimulatedRecord loop = unsettled_resume_under_four_sines();
+  constexpr double kStep = 9935.353200319523;            // s, mode 2's gain step
+  constexpr double kPublishPeriod = 38.919510646551785;  // s, the bank's
   double misfit_since = -1.0, worst_gain1 = 0.0;
   const double gain1 = loop.config.plant->modes[0].modal.gain;
-  const DetectorRun run = run_detector(loop.config, loop.record, UnsettledResumeUnderFourSines::kPublishPeriod,
-                                       [&](double t, const RecursiveEstimator& est) {
-                                         if (est.status().misfit && misfit_since < 0.0) misfit_since = t;
-                                         if (est.status().misfit)
-                                           worst_gain1 =
-                                               std::max(worst_gain1, std::abs(est.mode(0).value.gain / gain1 - 1.0));
-                                       });
+  const DetectorRun run =
+      run_detector(loop.config, loop.record, kPublishPeriod, [&](double t, const RecursiveEstimator& est) {
+        if (est.status().misfit && misfit_since < 0.0) misfit_since = t;
+        if (est.status().misfit) worst_gain1 = std::max(worst_gain1, std::abs(est.mode(0).value.gain / gain1 - 1.0));
+      });
   std::printf("resets %llu; misfit from %.0f s (the step at %.0f s); mode 1's gain meanwhile up to %.0f %% off\n",
-              static_cast<unsigned long long>(run.status.resets), misfit_since, UnsettledResumeUnderFourSines::kStep,
-              100.0 * worst_gain1);
+              static_cast<unsigned long long>(run.status.resets), misfit_since, kStep, 100.0 * worst_gain1);
   EXPECT_GE(run.status.resets, 1u);
-  EXPECT_GT(misfit_since, UnsettledResumeUnderFourSines::kStep);
+  EXPECT_GT(misfit_since, kStep);
   EXPECT_GT(worst_gain1, 0.3);  // what the flag would have been about
   for (const FlagChange& f : run.flags) EXPECT_EQ(f.mode, 1) << "a flag on a healthy mode";
 }
