@@ -1041,7 +1041,7 @@ DetectorRun run_detector(const Config& c, const Record& r, double period,
       joint[i] = est.mode_covariance(static_cast<int>(i));
       given_others[i] = est.mode_covariance_given_others(static_cast<int>(i));
     }
-    const bool valid = !fit_sample && !st.warming_up && !st.low_excitation && !st.misfit;
+    const bool valid = !fit_sample && st.estimates_measure_plant();
     changes.clear();
     detector.update(r.t(k), value, joint, valid, changes, evidence_span, &given_others);
     if (valid) evidence_span = 0.0;

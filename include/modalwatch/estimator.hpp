@@ -175,6 +175,9 @@ struct EstimatorStatus {
   // while the wait holds the estimates, nor after an accepted refit. Not
   // carried by a checkpoint.
   bool misfit = false;
+  // Whether the estimates are a measurement a fault detector may act on (its
+  // update()'s `valid`): not while warming up, with low excitation or misfit.
+  bool estimates_measure_plant() const noexcept { return !warming_up && !low_excitation && !misfit; }
   bool warmup_fit_used = false;  // theta(t0) from the offline fit on the warm-up window (else kWarmupFitNotUsed)
   std::uint64_t fits = 0;  // windows whose fit has ended (the warm-up's, refits; used or not)
   // s of data the last (re)fit's estimate rests on, the fitted part of its

@@ -447,7 +447,7 @@ class FlagRecorder {
       settle_covariances_[i] = estimator.mode_covariance_given_others(static_cast<int>(i));
     }
     changes_.clear();
-    const bool valid = !fit_sample && !st.warming_up && !st.low_excitation && !st.misfit;
+    const bool valid = !fit_sample && st.estimates_measure_plant();
     detector_.update(static_cast<double>(utime - utime0_) * 1e-6, values_, covariances_, valid, changes_,
                      evidence_span_, &settle_covariances_);
     if (valid) evidence_span_ = 0.0;

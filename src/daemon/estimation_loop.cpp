@@ -331,6 +331,7 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
   snap.warming_up = st.warming_up;
   snap.low_excitation = st.low_excitation;
   snap.misfit = st.misfit;
+  snap.estimates_valid = st.estimates_measure_plant();
   snap.reset_reason = st.last_reset_reason;
   snap.warmup_fit_seconds = fitter_.last_fit_seconds();
   snap.warmup_fit_used = st.warmup_fit_used;
@@ -348,7 +349,7 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
   if (update_detector) {
     flag_changes_.clear();
     const double t = static_cast<double>(last_utime_ - utime0_) * 1e-6;
-    const bool valid = !st.warming_up && !st.low_excitation && !st.misfit;
+    const bool valid = st.estimates_measure_plant();
     // capacity reserved: no allocation
     detector_->update(t, mode_values_, mode_covariances_, valid, flag_changes_, evidence_span_, &settle_covariances_);
     if (valid) evidence_span_ = 0.0;

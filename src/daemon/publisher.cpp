@@ -235,7 +235,7 @@ void Publisher::publish_fault_status(const Snapshot& s) {
   msg.state = daemon_state(s);
   msg.n_modes = s.n_modes;
   msg.modes.resize(static_cast<std::size_t>(s.n_modes));
-  const bool valid = !s.warming_up && !s.low_excitation && !s.misfit;
+  const bool valid = s.estimates_valid;
   for (int i = 0; i < s.n_modes; ++i) {
     const auto k = static_cast<std::size_t>(i);
     const ModeStatus& mode = s.modes[k];

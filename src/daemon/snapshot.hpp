@@ -35,6 +35,7 @@ struct Snapshot {
   bool warming_up = true;
   bool low_excitation = false;
   bool misfit = false;  // EstimatorStatus::misfit
+  bool estimates_valid = false;  // EstimatorStatus::estimates_measure_plant(): the detector's `valid`
   std::array<ModalParameters, kMaxModes> value{}, std_dev{};
   double residual_rms = 0.0;
   const char* reset_reason = "";    // static string from the estimator
