@@ -147,6 +147,29 @@ TEST(CheckPhysical, CloseModesWithOppositeGainsAreMerged) {
   EXPECT_FALSE(check_physical(m, sharp, 0.05).changed());
 }
 
+// A poorly determined mode far from another is no split of it: their peaks do
+// not overlap, so the two cannot cancel, however wide the frequency's std.
+TEST(CheckPhysical, ModesWhosePeaksDoNotOverlapAreNotMerged) {
+  AdditiveModel m;
+  const double w1 = 2 * kPi * 9.17, w2 = 2 * kPi * 36.0;
+  m.submodels = {make_mode("low", {w1, 0.007, 1.0}), make_mode("high", {w2, 0.05, -0.05})};
+  // std of wn: 0.01 rad/s for "low", 200 rad/s (32 Hz) for "high": the gap
+  // of 169 rad/s is within one joint std, but 24 times the half-widths
+  // zeta wn (0.4 + 11.3 rad/s).
+  Eigen::MatrixXd cov = Eigen::MatrixXd::Zero(6, 6);
+  const double s1 = 0.01 * 2.0 / std::pow(w1, 3), s2 = 200.0 * 2.0 / std::pow(w2, 3);
+  cov(1, 1) = s1 * s1;
+  cov(4, 4) = s2 * s2;
+  const PhysicalCheck c = check_physical(m, cov, 1.0 / 400.0);
+  EXPECT_GT(c.findings[1].fitted_std.wn, w2 - w1);
+  EXPECT_FALSE(c.changed()) << c.findings[1].reason;
+  // The same uncertainty with the peaks overlapping (36 Hz damped at 0.8): merged.
+  AdditiveModel wide = m;
+  wide.submodels[1] = make_mode("high", {w2, 0.8, -0.05});
+  const PhysicalCheck merged = check_physical(wide, cov, 1.0 / 400.0);
+  EXPECT_EQ(merged.findings[1].verdict, ModeVerdict::merged) << merged.findings[1].reason;
+}
+
 // An accelerometer's mode above Nyquist is b0 p^2 on the band: no constant a
 // feedthrough could stand for, and no resonance of the record. It is left out
 // and the model refitted, unless it is the only submodel.

@@ -53,8 +53,9 @@ struct PhysicalOptions {
   // b0 (1/A(jw) - 1), stays below this many of its standard deviations (from
   // the covariance of a_1, a_2) at every w in (0, pi/T].
   double band_sigmas = 2.0;
-  // Two modes merge when |wn_i - wn_j| is below this many joint standard
-  // deviations sqrt(var wn_i + var wn_j).
+  // Two modes with opposite gains merge when |wn_i - wn_j| is below this many
+  // joint standard deviations sqrt(var wn_i + var wn_j) and below the sum of
+  // their half-power half-widths zeta_i wn_i + zeta_j wn_j (their peaks overlap).
   double merge_sigmas = 1.0;
 };
 

@@ -16,7 +16,9 @@ run time, and a check of every step's model in summary.json:
   - above Nyquist: a mode with wn >= pi fs;
   - cancelling: two modes on one input with opposite gains whose natural
     frequencies are closer than their joint standard deviation
-    sqrt(s_i^2 + s_j^2) (two inputs' views of one resonance share its poles);
+    sqrt(s_i^2 + s_j^2) and than their half-power half-widths
+    zeta_i wn_i + zeta_j wn_j (peaks further apart do not cancel; two inputs'
+    views of one resonance share its poles);
 
 which must all be "none". The physical check inside diagnose corrects such
 modes as it goes; the last column counts what it corrected (summary.json's
@@ -137,7 +139,8 @@ def check_step(step, fs):
             if a.get("input") != b.get("input") or a["gain"] * b["gain"] >= 0:
                 continue
             joint = math.hypot(a.get("wn_std", 0.0), b.get("wn_std", 0.0))
-            if abs(a["wn"] - b["wn"]) <= joint:
+            overlap = abs(a["zeta"]) * a["wn"] + abs(b["zeta"]) * b["wn"]
+            if abs(a["wn"] - b["wn"]) <= min(joint, overlap):
                 bad.append(f"{a['name']}/{b['name']} cancel ({abs(a['wn'] - b['wn']):.3g} <= {joint:.3g} rad/s)")
     return bad
 
@@ -172,10 +175,12 @@ def modes_text(step):
     for s in step["submodels"]:
         if s["kind"] == "mode":
             continue
-        if not s["a"]:
+        if s["rigid_poles"]:
+            out.append("rigid body")
+        elif not s["a"]:
             out.append("feedthrough")
         else:
-            out.append("rigid body" if s["rigid_poles"] else "transfer function")
+            out.append("transfer function")
     return ", ".join(out) or "-"
 
 

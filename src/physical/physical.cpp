@@ -190,8 +190,11 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
     out.refit = true;
   }
 
-  // Merges: modes closer than their joint uncertainty with opposite-sign gains,
-  // the closest pair (in joint standard deviations) first.
+  // Merges: modes closer than their joint uncertainty with opposite-sign gains
+  // whose resonances overlap, the closest pair (in joint standard deviations)
+  // first. Two resonances cancel only where their peaks share a band: apart
+  // by more than their half-power half-widths (zeta wn each), the sum keeps
+  // both peaks whatever the uncertainty of a poorly excited one's frequency.
   for (;;) {
     int best_i = -1, best_j = -1;
     double best_score = options.merge_sigmas;
@@ -205,6 +208,7 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
         const double si = out.findings[i].fitted_std.wn, sj = out.findings[j].fitted_std.wn;
         const double joint = std::sqrt(si * si + sj * sj);
         const double gap = std::abs(pi.wn - pj.wn);
+        if (!(gap <= std::abs(pi.zeta) * pi.wn + std::abs(pj.zeta) * pj.wn)) continue;
         const double score = joint > 0.0 ? gap / joint : (gap == 0.0 ? 0.0 : options.merge_sigmas + 1.0);
         if (score <= best_score) {
           best_score = score;
@@ -233,7 +237,10 @@ PhysicalCheck check_physical(const AdditiveModel& fitted, const Eigen::MatrixXd&
     f.into = subs[best_i].name;
     f.reason = format("%.5g Hz (gain %.4g) is within %.2g joint std of", pj.hz(), pj.gain, best_score) + " " +
                subs[best_i].name +
-               format(" at %.5g Hz (gain %.4g): one resonance, merged and refitted", pi.hz(), pi.gain);
+               format(
+                   " at %.5g Hz (gain %.4g) and within their half-power bandwidths: one resonance, merged and "
+                   "refitted",
+                   pi.hz(), pi.gain);
     out.refit = true;
   }
 
