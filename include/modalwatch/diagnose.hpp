@@ -161,7 +161,10 @@ struct Refit {
 };
 
 struct DiagnoseStep {
-  std::string effect = "none";  // effect_name of the added effect
+  // effect_name of the added effect; "refit" for a last step that adds none:
+  // the model before it refitted alone, taken when that earns what an effect
+  // must (its refit_validation_rms is then that model's validation RMS).
+  std::string effect = "none";
   EffectParams params;
   AugmentedModel model;
   double estimation_rms = 0.0;

@@ -534,6 +534,34 @@ DiagnoseStep make_step(const std::string& effect, const EffectParams& params, co
   return s;
 }
 
+// The refit alone of the last step, measured when the augmentation stopped, is
+// the same structure closer to the data (more refinement from a fresh SRIVC
+// start): where it earns what an effect must (more than min_improvement of
+// the validation RMS, made physical), it is the result, as a last step
+// "refit", rather than the less refined model it improves on.
+void adopt_refit(DiagnoseResult& result, const Problem& est, const Problem& val, const DiagnoseOptions& options) {
+  const DiagnoseStep& last = result.steps.back();
+  const double base = last.validation_rms;
+  const double needed = (1.0 - options.min_improvement) * base;
+  if (!last.refit.valid || !(last.refit.validation_rms < needed) || !(last.refit.estimation_rms <= last.estimation_rms))
+    return;
+  std::vector<ModeFinding> findings;
+  std::vector<ModalParameters> modal_std;
+  const double n = static_cast<double>(est.data.size());
+  const Refined chosen =
+      make_physical({last.refit.model, last.refit.estimation_rms * last.refit.estimation_rms * n, {}}, est, options,
+                    findings, modal_std);
+  DiagnoseStep s = make_step("refit", {}, chosen.model, chosen.cost, est, val, options);
+  if (!std::isfinite(s.estimation_rms) || !(s.validation_rms < needed)) return;
+  s.physical = std::move(findings);
+  s.modal_std = std::move(modal_std);
+  s.refit_validation_rms = base;
+  s.credit = base - s.validation_rms;
+  result.stop_reason += "; the last model refitted alone lowers the validation RMS " + number(base) + " -> " +
+                        number(s.validation_rms) + " and is the result";
+  result.steps.push_back(std::move(s));
+}
+
 }  // namespace
 
 const char* stop_name(DiagnoseStop stop) {
@@ -715,6 +743,7 @@ DiagnoseResult diagnose(const Record& estimation, const Record& validation, cons
     }
     result.steps.push_back(std::move(*next));
   }
+  adopt_refit(result, est, val, options);
   return result;
 }
 
