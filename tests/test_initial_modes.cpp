@@ -131,6 +131,56 @@ TEST(InitialModes, ModesNarrowerThanTwoBinsGetFinerBinsAndADampingUnderTheirBoun
   expect_identified(truth, fit.model, "from the finer bins");
 }
 
+// A plant without a resonance: two real poles (zeta 1.5 at 2 Hz). The closest
+// non-resonant response to its estimate is a lag of two poles near the
+// plant's, and the fit goes on from it to the truth.
+TEST(NonResonantStart, ALagOfTwoRealPolesStartsFromALagAndIsFitted) {
+  const std::vector<ModalParameters> truth{{2 * kPi * 2.0, 1.5, 2.0}};
+  const auto sim = simulate(plant_of(truth, 60.0), experiment(0.01, 100.0, 5));
+  const FrequencyResponse h = resolving_response(sim.record, false);
+  const NonResonantStart start = non_resonant_start(h);
+  ASSERT_EQ(start.structure, "a lag of two poles (zeta >= 0.7)");
+  ASSERT_TRUE(start.submodel.is_mode());
+  const ModalParameters p = modal_parameters(start.submodel);
+  std::printf("start: %.3f Hz zeta %.2f gain %.3f, relative error %.3f\n", p.hz(), p.zeta, p.gain,
+              start.relative_error);
+  // A start: within a factor of two in frequency and gain.
+  EXPECT_GT(p.wn, truth[0].wn / 2.0);
+  EXPECT_LT(p.wn, truth[0].wn * 2.0);
+  EXPECT_GT(p.gain, truth[0].gain / 2.0);
+  EXPECT_LT(p.gain, truth[0].gain * 2.0);
+  AdditiveModel model;
+  model.submodels = {start.submodel};
+  std::vector<ModeFinding> findings;
+  const FitResult fit = fit_physical(sim.record, model, SrivcOptions{}, findings);
+  ASSERT_EQ(fit.model.submodels.size(), 1u);
+  const ModalParameters f = modal_parameters(fit.model.submodels[0]);
+  EXPECT_NEAR(f.wn, truth[0].wn, 0.02 * truth[0].wn);
+  EXPECT_NEAR(f.zeta, truth[0].zeta, 0.05 * truth[0].zeta);
+  EXPECT_NEAR(f.gain, truth[0].gain, 0.02 * truth[0].gain);
+}
+
+// A free mass, b0 / p^2, measured as a position and as a velocity: a rigid body
+// of the same gain either way (a velocity sensor's response is p times it),
+// within the 20 % the Welch estimate of a drifting position allows.
+TEST(NonResonantStart, AFreeMassStartsFromARigidBody) {
+  for (const int z : {0, 1}) {
+    PlantSpec plant;
+    PlantMode mass;
+    mass.resonant = false;
+    mass.submodel = make_rigid_body("mass", 0.5, 2, z);
+    plant.modes.push_back(mass);
+    plant.noise_variance = 1e-8;
+    const auto sim = simulate(plant, experiment(0.01, 100.0, 6));
+    const FrequencyResponse h = resolving_response(sim.record, false);
+    const NonResonantStart start = non_resonant_start(h, {}, z);
+    EXPECT_EQ(start.structure, "a rigid body b0/p^2") << z;
+    EXPECT_EQ(start.submodel.rigid_poles, 2) << z;
+    EXPECT_EQ(start.submodel.output_derivatives, z);
+    EXPECT_NEAR(start.submodel.b(0), 0.5, 0.1) << z;
+  }
+}
+
 TEST(InitialModes, FewerPeaksThanAskedWhenTheDataShowFewer) {
   const std::vector<ModalParameters> truth{{2 * kPi * 5.0, 0.03, 0.06}};
   const auto sim = simulate(plant_of(truth, 40.0), experiment(0.01, 100.0, 2));

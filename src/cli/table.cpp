@@ -23,10 +23,21 @@ void print_physical_findings(const std::vector<ModeFinding>& findings) {
 AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name,
                               bool in_samples, const std::vector<std::string>& inputs, int output_derivatives,
                               Hold input) {
-  const AdditiveModel start =
-      initial_modes(resolving_response(data, closed_loop, input), count, {}, inputs, output_derivatives);
-  if (start.submodels.empty())
-    throw InputError(data_name, "no resonance peak in the frequency response estimate: no mode to start from");
+  const FrequencyResponse h = resolving_response(data, closed_loop, input);
+  AdditiveModel start = initial_modes(h, count, {}, inputs, output_derivatives);
+  if (start.submodels.empty()) {
+    const NonResonantStart lag = non_resonant_start(h, {}, output_derivatives);
+    if (lag.structure.empty())
+      throw InputError(data_name, "no resonance peak in the frequency response estimate" +
+                                      std::string(data.inputs() > 1 ? " (several inputs)" : "") +
+                                      ": no mode to start from");
+    std::printf(
+        "WARNING: no resonance peak in the frequency response estimate: starting from %s, the closest "
+        "non-resonant response to it over %.4g..%.4g %s (relative RMS error %.2g)\n",
+        lag.structure.c_str(), lag.band_hz[0], lag.band_hz[1], frequency_unit(in_samples), lag.relative_error);
+    start.submodels.push_back(lag.submodel);
+    return start;
+  }
   const char* estimate = closed_loop ? "S_yr/S_ur" : data.inputs() > 1 ? "|H|, H = S_yu S_uu^-1" : "H1 = S_yu/S_uu";
   std::printf("initial modes from the data (peaks of %s):", estimate);
   std::size_t found = 0;

@@ -137,24 +137,31 @@ struct Resonance {
   bool narrow = false;  // its half-power bandwidth spans two bins or fewer
 };
 
-std::vector<Resonance> find_resonances(const FrequencyResponse& h, int count, const PeakOptions& options,
-                                       int output_derivatives) {
+// The searched band: from the first to the last excited frequency, without
+// DC; false when it has fewer than three bins.
+bool excited_band(const FrequencyResponse& h, const PeakOptions& options, Eigen::Index& first, Eigen::Index& last) {
   const Eigen::Index F = h.frequency_hz.size();
-  std::vector<Resonance> out;
-  if (count <= 0 || F < 4) return out;
-  // The searched band: from the first to the last excited frequency, without DC.
+  if (F < 4) return false;
   const double excited = options.excited_fraction * h.excitation.tail(F - 1).maxCoeff();
-  Eigen::Index first = -1, last = -1;
+  first = last = -1;
   for (Eigen::Index k = 1; k < F; ++k)
     if (h.excitation(k) > excited) {
       if (first < 0) first = k;
       last = k;
     }
-  if (first < 0) return out;
+  if (first < 0) return false;
   // A coloured input that rolls off: the output follows it on, without a gap.
   while (first > 1 && h.coherence(first - 1) >= options.coherent) --first;
   while (last + 1 < F && h.coherence(last + 1) >= options.coherent) ++last;
-  if (last - first < 2) return out;
+  return last - first >= 2;
+}
+
+std::vector<Resonance> find_resonances(const FrequencyResponse& h, int count, const PeakOptions& options,
+                                       int output_derivatives) {
+  const Eigen::Index F = h.frequency_hz.size();
+  std::vector<Resonance> out;
+  Eigen::Index first = -1, last = -1;
+  if (count <= 0 || !excited_band(h, options, first, last)) return out;
   Eigen::VectorXd logh(F);
   for (Eigen::Index k = 0; k < F; ++k) logh(k) = std::log(std::max(h.magnitude(k), 1e-300));
 
@@ -303,6 +310,65 @@ AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOpt
       if (j > 0) model.submodels.back().poles_of = model.submodels[model.submodels.size() - 1 - j].name;
     }
   return model;
+}
+
+NonResonantStart non_resonant_start(const FrequencyResponse& h, const PeakOptions& options, int output_derivatives) {
+  NonResonantStart out;
+  Eigen::Index first = -1, last = -1;
+  if (h.inputs() != 1 || !excited_band(h, options, first, last)) return out;
+  const int z = output_derivatives;
+  using C = std::complex<double>;
+  // The real b0 of least relative error sum gamma^2 |H - b0 g|^2 / (|H|^2 f)
+  // (the squared coherence gamma^2 discounts the bins where noise makes H; 1/f
+  // weighs each decade alike, as a Bode plot reads, where the bins crowd the
+  // top decade), and that error relative to sum gamma^2 / f.
+  Eigen::VectorXd weight(last - first + 1);
+  double total = 0.0;
+  for (Eigen::Index k = first; k <= last; ++k) {
+    const double per_decade = std::clamp(h.coherence(k), 0.0, 1.0) / h.frequency_hz(k);
+    weight(k - first) = per_decade / std::max(std::norm(h.response(k)), 1e-300);
+    total += per_decade;
+  }
+  auto fit = [&](auto&& g, double& b0) {
+    double gh = 0.0, gg = 0.0;
+    for (Eigen::Index k = first; k <= last; ++k) {
+      const C gk = g(kTwoPi * h.frequency_hz(k));
+      gh += weight(k - first) * (std::conj(gk) * h.response(k)).real();
+      gg += weight(k - first) * std::norm(gk);
+    }
+    b0 = gg > 0.0 ? gh / gg : 0.0;
+    double e = 0.0;
+    for (Eigen::Index k = first; k <= last; ++k)
+      e += weight(k - first) * std::norm(h.response(k) - b0 * g(kTwoPi * h.frequency_hz(k)));
+    return total > 0.0 ? e / total : std::numeric_limits<double>::infinity();
+  };
+  double best = std::numeric_limits<double>::infinity();
+  auto consider = [&](double e, Submodel s, std::string what) {
+    if (!(e < best) || !(s.b(0) != 0.0)) return;
+    best = e;
+    out.submodel = std::move(s);
+    out.structure = std::move(what);
+  };
+  double b0 = 0.0;
+  if (z == 0) consider(fit([](double) { return C(1.0); }, b0), make_rigid_body("direct", b0, 0), "a feedthrough b0");
+  for (const int l : {1, 2}) {
+    const double e = fit([&](double w) { return std::pow(C(0.0, w), z - l); }, b0);
+    consider(e, make_rigid_body("rigid", b0, l, z), l == 1 ? "a rigid body b0/p" : "a rigid body b0/p^2");
+  }
+  // A lag of two real (or critically damped) poles, its corner on a grid
+  // from a decade below the band to a decade above it.
+  const double w_lo = 0.1 * kTwoPi * h.frequency_hz(first), w_hi = 10.0 * kTwoPi * h.frequency_hz(last);
+  constexpr int kGrid = 121;
+  for (const double zeta : {0.7, 1.0, 2.0, 5.0})
+    for (int i = 0; i < kGrid; ++i) {
+      const double wn = w_lo * std::pow(w_hi / w_lo, static_cast<double>(i) / (kGrid - 1));
+      const double e =
+          fit([&](double w) { return std::pow(C(0.0, w), z) / C(1.0 - w * w / (wn * wn), 2.0 * zeta * w / wn); }, b0);
+      consider(e, make_mode("mode1", {wn, zeta, b0}, z), "a lag of two poles (zeta >= 0.7)");
+    }
+  if (std::isfinite(best)) out.relative_error = std::sqrt(best);
+  out.band_hz = {h.frequency_hz(first), h.frequency_hz(last)};
+  return out;
 }
 
 }  // namespace modalwatch
