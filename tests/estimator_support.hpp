@@ -178,13 +178,11 @@ faults:
 }
 
 // Three modes in closed loop under four sines (a scenario-bank record): 8
-// real equations for 9 parameters. Mode 2's gain falls by 20 % at 9935 s; the
-// output error diverges, the restored state waits to settle, and the wait ends
-// unsettled (the refit of that window was refused), so the updates resume from
-// the last good state and re-converge along what the sines leave open: mode
-// 1's gain goes 43 % off for thousands of seconds, with an output error that
-// stays tens of times the noise.
-inline SimulatedRecord unsettled_resume_under_four_sines() {
+// real equations for 9 parameters. Mode 2's gain falls by 20 % at 9935 s and
+// the output error diverges. A refit of all three submodels on the window
+// after it was refused; the updates then resumed from the last good state and
+// re-converged along what the sines leave open, mode 1's gain 43 % off.
+inline SimulatedRecord gain_step_under_four_sines() {
   return simulated_record(R"(
 sample_rate_hz: 29.573855911314674
 model:
@@ -225,7 +223,104 @@ faults:
   zeta: {sigma: 6.0, relative: 0.5, hold: 778.5254675292862, clear_time: 778.5254675292862}
   gain: {sigma: 4.0, relative: 0.1, hold: 778.5254675292862, clear_time: 778.5254675292862}
 )",
-                          "unsettled-resume-under-four-sines.yaml");
+                          "gain-step-under-four-sines.yaml");
+}
+
+// The same plant and sines, nothing of it changing: a resonance the model
+// lacks (8 rad/s) appears at 9935 s. No refit of the modelled submodels,
+// alone or together, describes it, so the wait after the divergence ends
+// unsettled and the updates resume on a model that no longer fits.
+inline SimulatedRecord unmodelled_mode_appears_under_a_multisine() {
+  return simulated_record(R"(
+sample_rate_hz: 29.573855911314674
+model:
+  loop: closed
+  submodels:
+    - {name: mode1, kind: mode, wn: 0.393077917800018, zeta: 0.2816878928678508, gain: 0.4867821553394498, forgetting: 0.9999565670604587}
+    - {name: mode2, kind: mode, wn: 1.848674193846916, zeta: 0.024752086877906643, gain: 2.871161205864938, forgetting: 0.9999565670604587}
+    - {name: mode3, kind: mode, wn: 33.21858967647595, zeta: 0.006265099369117527, gain: 0.6744369843586847, forgetting: 0.9999565670604587}
+controller:
+  numerator: [0.007119102904130105, -0.006933590265703404]
+  denominator: [1.0, -1.0]
+plant:
+  noise_variance: 1.636023414136173e-07
+  modes:
+    - {name: mode1, kind: mode, wn: 0.40353972268164595, zeta: 0.27658750935559145, gain: 0.4841534089224407}
+    - {name: mode2, kind: mode, wn: 1.870750319155973, zeta: 0.020918120484903425, gain: 3.186098882319423}
+    - {name: mode3, kind: mode, wn: 33.40114766782241, zeta: 0.006262217436285542, gain: 0.6565104464401178}
+    - name: mode4
+      kind: mode
+      wn: 8.0
+      zeta: 0.05
+      gain: 1.0e-9
+      trajectory:
+        gain: [[9935.353200319523, 1.0e-9], [9935.387013969086, 3.0]]
+simulation:
+  duration: 17680.339789141704
+  seed: 63234942
+  reference:
+    type: multisine
+    f_min_hz: 0.02
+    f_max_hz: 8.0
+    period_s: 50.0
+    rms: 1.0
+estimator:
+  warmup: 778.5254675292862
+  fit_on_warmup: true
+faults:
+  learn_window: 2335.5764025878584
+  false_alarm_interval: 1000.0
+  wn: {sigma: 4.0, relative: 0.03, hold: 778.5254675292862, clear_time: 778.5254675292862}
+  zeta: {sigma: 6.0, relative: 0.5, hold: 778.5254675292862, clear_time: 778.5254675292862}
+  gain: {sigma: 4.0, relative: 0.1, hold: 778.5254675292862, clear_time: 778.5254675292862}
+)",
+                          "unmodelled-mode-appears-under-a-multisine.yaml");
+}
+
+// Two modes in open loop under a 66 Hz square wave (a scenario-bank record):
+// mode 1 (39 Hz) lies below the fundamental, so the odd harmonics leave its
+// gain and frequency free to trade. Mode 2's damping doubles at 17.61 s; the
+// output error diverges, and a refit of every submodel on the window after
+// it either wanders off (not converged: the wait ends unsettled) or, from its
+// best cycle, moves mode 1 by 4 % in wn and -13 % in gain to absorb the
+// change's onset.
+inline SimulatedRecord damping_step_under_a_square_wave() {
+  return simulated_record(R"(
+sample_rate_hz: 5675.121123806123
+model:
+  loop: open
+  submodels:
+    - {name: mode1, kind: mode, wn: 249.49139178524618, zeta: 0.005100426723406181, gain: 3.188273524237246e-05, forgetting: 0.9998615150256197}
+    - {name: mode2, kind: mode, wn: 2904.326708278052, zeta: 0.03328795407469526, gain: 7.156807679134529e-06, forgetting: 0.9998615150256197}
+plant:
+  noise_variance: 2.153180549381822e-16
+  modes:
+    - {name: mode1, kind: mode, wn: 246.91043867886748, zeta: 0.00504905383558566, gain: 2.982498747884131e-05}
+    - name: mode2
+      kind: mode
+      wn: 2871.7572725344203
+      zeta: 0.039271592023474244
+      gain: 6.584051252078926e-06
+      trajectory:
+        zeta: [[17.60653497014473, 0.039271592023474244], [17.606711177837603, 0.07854318404694849]]
+simulation:
+  duration: 29.849343069969763
+  seed: 788248294
+  input:
+    type: square
+    frequency_hz: 65.98978050937353
+    amplitude: 1.0
+estimator:
+  warmup: 1.2723957502350374
+  fit_on_warmup: true
+faults:
+  learn_window: 3.8171872507051123
+  false_alarm_interval: 1000.0
+  wn: {sigma: 4.0, relative: 0.03, hold: 1.2723957502350374, clear_time: 1.2723957502350374}
+  zeta: {sigma: 6.0, relative: 0.5, hold: 1.2723957502350374, clear_time: 1.2723957502350374}
+  gain: {sigma: 4.0, relative: 0.1, hold: 1.2723957502350374, clear_time: 1.2723957502350374}
+)",
+                          "damping-step-under-a-square-wave.yaml");
 }
 
 inline SignalSpec prbs(double amplitude, int bits = 12, int clock = 2) {

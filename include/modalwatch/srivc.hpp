@@ -69,6 +69,11 @@ struct SrivcOptions {
   // covariance: a window cut from a running plant, whose model output, started
   // from rest, needs them to catch up (`modalwatch fit --from`).
   Eigen::Index settle_samples = 0;
+  // Per submodel (empty: none frozen): a frozen submodel keeps its given
+  // parameters, and its simulated output is subtracted from the data as any
+  // other's (eq. 15); only the other blocks are estimated. The covariance is
+  // still over every block (with the frozen ones as given).
+  std::vector<bool> frozen;
 };
 
 struct FitResult {

@@ -438,6 +438,7 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
     for (const auto& g : groups) {
       const ScaledSubmodel& lead = model[static_cast<std::size_t>(g.front())];
       const int n = lead.shape->n;
+      if (const auto f = static_cast<std::size_t>(g.front()); f < options.frozen.size() && options.frozen[f]) continue;
       for (int s = 0; s < options.srivc_per_block; ++s) {
         // Residual output of this block (eq. 15): the data less the other submodels.
         Eigen::VectorXd y_tilde = y;
