@@ -177,12 +177,10 @@ faults:
                           "trade-between-modes.yaml");
 }
 
-// Three modes in closed loop under four sines (a scenario-bank record): 8
-// real equations for 9 parameters. Mode 2's gain falls by 20 % at 9935 s and
-// the output error diverges. A refit of all three submodels on the window
-// after it was refused; the updates then resumed from the last good state and
-// re-converged along what the sines leave open, mode 1's gain 43 % off.
-inline SimulatedRecord gain_step_under_four_sines() {
+// Three modes in closed loop (a scenario-bank record), with the plant's modes
+// and the reference given: the config and the record it simulates.
+inline SimulatedRecord three_mode_loop(const std::string& plant_modes, const std::string& reference,
+                                       const std::string& name) {
   return simulated_record(R"(
 sample_rate_hz: 29.573855911314674
 model:
@@ -197,23 +195,11 @@ controller:
 plant:
   noise_variance: 1.636023414136173e-07
   modes:
-    - {name: mode1, kind: mode, wn: 0.40353972268164595, zeta: 0.27658750935559145, gain: 0.4841534089224407}
-    - name: mode2
-      kind: mode
-      wn: 1.870750319155973
-      zeta: 0.020918120484903425
-      gain: 3.186098882319423
-      trajectory:
-        gain: [[9935.353200319523, 3.186098882319423], [9935.387013969086, 2.548879105855539]]
-    - {name: mode3, kind: mode, wn: 33.40114766782241, zeta: 0.006262217436285542, gain: 0.6565104464401178}
-simulation:
+)" + plant_modes + R"(simulation:
   duration: 17680.339789141704
   seed: 63234942
   reference:
-    type: sum_of_sines
-    amplitudes: [1.0, 1.0, 1.0, 1.0]
-    frequencies_rad_s: [0.057644276798433244, 0.43208861603354426, 2.0612635189005033, 37.90450290319642]
-estimator:
+)" + reference + R"(estimator:
   warmup: 778.5254675292862
   fit_on_warmup: true
 faults:
@@ -223,29 +209,40 @@ faults:
   zeta: {sigma: 6.0, relative: 0.5, hold: 778.5254675292862, clear_time: 778.5254675292862}
   gain: {sigma: 4.0, relative: 0.1, hold: 778.5254675292862, clear_time: 778.5254675292862}
 )",
-                          "gain-step-under-four-sines.yaml");
+                          name);
 }
 
-// The same plant and sines, nothing of it changing: a resonance the model
-// lacks (8 rad/s) appears at 9935 s. No refit of the modelled submodels,
-// alone or together, describes it, so the wait after the divergence ends
-// unsettled and the updates resume on a model that no longer fits.
+// Under four sines: 8 real equations for 9 parameters. Mode 2's gain falls
+// by 20 % at 9935 s and the output error diverges. A refit of all three
+// submodels on the window after it was refused; the updates then resumed
+// from the last good state and re-converged along what the sines leave open,
+// mode 1's gain 43 % off.
+inline SimulatedRecord gain_step_under_four_sines() {
+  return three_mode_loop(
+      R"(    - {name: mode1, kind: mode, wn: 0.40353972268164595, zeta: 0.27658750935559145, gain: 0.4841534089224407}
+    - name: mode2
+      kind: mode
+      wn: 1.870750319155973
+      zeta: 0.020918120484903425
+      gain: 3.186098882319423
+      trajectory:
+        gain: [[9935.353200319523, 3.186098882319423], [9935.387013969086, 2.548879105855539]]
+    - {name: mode3, kind: mode, wn: 33.40114766782241, zeta: 0.006262217436285542, gain: 0.6565104464401178}
+)",
+      R"(    type: sum_of_sines
+    amplitudes: [1.0, 1.0, 1.0, 1.0]
+    frequencies_rad_s: [0.057644276798433244, 0.43208861603354426, 2.0612635189005033, 37.90450290319642]
+)",
+      "gain-step-under-four-sines.yaml");
+}
+
+// The same plant under a multisine, nothing of it changing: a resonance the
+// model lacks (8 rad/s) appears at 9935 s. No refit of the modelled
+// submodels, alone or together, describes it, so the wait after the
+// divergence ends unsettled and the updates resume on a model that no longer fits.
 inline SimulatedRecord unmodelled_mode_appears_under_a_multisine() {
-  return simulated_record(R"(
-sample_rate_hz: 29.573855911314674
-model:
-  loop: closed
-  submodels:
-    - {name: mode1, kind: mode, wn: 0.393077917800018, zeta: 0.2816878928678508, gain: 0.4867821553394498, forgetting: 0.9999565670604587}
-    - {name: mode2, kind: mode, wn: 1.848674193846916, zeta: 0.024752086877906643, gain: 2.871161205864938, forgetting: 0.9999565670604587}
-    - {name: mode3, kind: mode, wn: 33.21858967647595, zeta: 0.006265099369117527, gain: 0.6744369843586847, forgetting: 0.9999565670604587}
-controller:
-  numerator: [0.007119102904130105, -0.006933590265703404]
-  denominator: [1.0, -1.0]
-plant:
-  noise_variance: 1.636023414136173e-07
-  modes:
-    - {name: mode1, kind: mode, wn: 0.40353972268164595, zeta: 0.27658750935559145, gain: 0.4841534089224407}
+  return three_mode_loop(
+      R"(    - {name: mode1, kind: mode, wn: 0.40353972268164595, zeta: 0.27658750935559145, gain: 0.4841534089224407}
     - {name: mode2, kind: mode, wn: 1.870750319155973, zeta: 0.020918120484903425, gain: 3.186098882319423}
     - {name: mode3, kind: mode, wn: 33.40114766782241, zeta: 0.006262217436285542, gain: 0.6565104464401178}
     - name: mode4
@@ -255,26 +252,14 @@ plant:
       gain: 1.0e-9
       trajectory:
         gain: [[9935.353200319523, 1.0e-9], [9935.387013969086, 3.0]]
-simulation:
-  duration: 17680.339789141704
-  seed: 63234942
-  reference:
-    type: multisine
+)",
+      R"(    type: multisine
     f_min_hz: 0.02
     f_max_hz: 8.0
     period_s: 50.0
     rms: 1.0
-estimator:
-  warmup: 778.5254675292862
-  fit_on_warmup: true
-faults:
-  learn_window: 2335.5764025878584
-  false_alarm_interval: 1000.0
-  wn: {sigma: 4.0, relative: 0.03, hold: 778.5254675292862, clear_time: 778.5254675292862}
-  zeta: {sigma: 6.0, relative: 0.5, hold: 778.5254675292862, clear_time: 778.5254675292862}
-  gain: {sigma: 4.0, relative: 0.1, hold: 778.5254675292862, clear_time: 778.5254675292862}
 )",
-                          "unmodelled-mode-appears-under-a-multisine.yaml");
+      "unmodelled-mode-appears-under-a-multisine.yaml");
 }
 
 // Two modes in open loop under a 66 Hz square wave (a scenario-bank record):
