@@ -1019,32 +1019,19 @@ DetectorRun run_detector(const Config& c, const Record& r, double period,
                          const std::function<void(double, const RecursiveEstimator&)>& each = {}) {
   RecursiveEstimator est(c.model, c.estimator);
   FaultDetector detector(fault_detector_settings(c));
-  const auto K = c.model.submodels.size();
-  std::vector<ModalParameters> value(K);
-  std::vector<Eigen::Matrix3d> joint(K), given_others(K);
+  DetectorInput input(est);
   std::vector<FlagChange> changes;
   DetectorRun out;
-  double next = 0.0, evidence_span = 0.0;
-  std::uint64_t fits = 0;
-  bool warming_up = true;
+  double next = 0.0;
   for (Eigen::Index k = 0; k < r.size(); ++k) {
     est.step(Sample{r.t(k), r.u(k), r.y(k), r.has_reference() ? r.r(k) : 0.0});
     const EstimatorStatus& st = est.status();
-    const bool fit_sample = (warming_up && !st.warming_up) || st.fits != fits;
-    warming_up = st.warming_up;
-    fits = st.fits;
-    if (fit_sample) evidence_span = st.fitted_window;
+    const bool fit_sample = input.fitted_in_step(st);
     if (r.t(k) < next) continue;
     next += period;
-    for (std::size_t i = 0; i < K; ++i) {
-      value[i] = est.mode(static_cast<int>(i)).value;
-      joint[i] = est.mode_covariance(static_cast<int>(i));
-      given_others[i] = est.mode_covariance_given_others(static_cast<int>(i));
-    }
-    const bool valid = !fit_sample && st.estimates_measure_plant();
+    input.read(est);
     changes.clear();
-    detector.update(r.t(k), value, joint, valid, changes, evidence_span, &given_others);
-    if (valid) evidence_span = 0.0;
+    input.update(detector, r.t(k), !fit_sample && st.estimates_measure_plant(), changes);
     out.flags.insert(out.flags.end(), changes.begin(), changes.end());
     if (each) each(r.t(k), est);
   }

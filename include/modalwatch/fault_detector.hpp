@@ -210,4 +210,39 @@ class FaultDetector {
   double last_t_ = 0.0;
 };
 
+class RecursiveEstimator;
+struct EstimatorStatus;
+
+// The fault detector's input from a recursive estimator, as the daemon and
+// `track` both feed it: every mode's estimate with its joint covariance and its
+// covariance given the other modes, and the evidence span of a (re)fit, which
+// the first valid update after the fit carries (FaultDetector::update). Sized
+// at construction, so that read() and update() do not allocate.
+class DetectorInput {
+ public:
+  explicit DetectorInput(const RecursiveEstimator& estimator);
+
+  // A (re)fit's estimates were applied: they stand for its window
+  // (EstimatorStatus::fitted_window) at the next valid update.
+  void fitted(double window) { evidence_span_ = window; }
+  // Where fits run within step() (track, the tests), after each step: true on
+  // the sample whose step ended a warm-up fit or a refit, which is then
+  // fitted(). The daemon's fitter holds the input meanwhile and reports that
+  // sample as warming up: no update there is valid, nor here.
+  bool fitted_in_step(const EstimatorStatus& status);
+  // Takes the estimator's current estimates.
+  void read(const RecursiveEstimator& estimator);
+  // One detector update on what read() took last; appends the flag changes.
+  void update(FaultDetector& detector, double t, bool valid, std::vector<FlagChange>& changes);
+
+  const std::vector<ModalParameters>& value() const { return value_; }
+
+ private:
+  std::vector<ModalParameters> value_;
+  std::vector<Eigen::Matrix3d> covariance_, settle_covariance_;
+  double evidence_span_ = 0.0;
+  bool warming_up_;     // the estimator's status after the previous step
+  std::uint64_t fits_;  // ... and its windows fitted
+};
+
 }  // namespace modalwatch

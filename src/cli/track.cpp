@@ -409,14 +409,10 @@ class FlagRecorder {
  public:
   FlagRecorder(const Config& config, const RecursiveEstimator& estimator)
       : detector_(fault_detector_settings(config)),
-        warming_up_(estimator.status().warming_up),
-        fits_(estimator.status().fits),
+        input_(estimator),
         names_(detector_.status().size()),
         period_us_(std::max<std::int64_t>(1, std::llround(config.daemon.publish_period * 1e6))) {
     for (std::size_t i = 0; i < names_.size(); ++i) names_[i] = config.model.submodels[i].name;
-    values_.resize(names_.size());
-    covariances_.assign(names_.size(), Eigen::Matrix3d::Zero());
-    settle_covariances_.assign(names_.size(), Eigen::Matrix3d::Zero());
     changes_.reserve(kQuantities * names_.size());
   }
 
@@ -425,10 +421,7 @@ class FlagRecorder {
     const EstimatorStatus& st = estimator.status();
     // A refit runs within one step() here, where the daemon's fitter holds the
     // input: the sample that ends a window counts as a warm-up sample either way.
-    const bool fit_sample = (warming_up_ && !st.warming_up) || st.fits != fits_;
-    warming_up_ = st.warming_up;
-    fits_ = st.fits;
-    if (fit_sample) evidence_span_ = st.fitted_window;
+    const bool fit_sample = input_.fitted_in_step(st);
     const std::int64_t utime = std::llround(t * 1e6);
     if (!have_time_) {
       have_time_ = true;
@@ -441,16 +434,10 @@ class FlagRecorder {
     if (utime < next_publish_) return;
     next_publish_ += period_us_;
     if (next_publish_ <= utime) next_publish_ = utime + period_us_;
-    for (std::size_t i = 0; i < values_.size(); ++i) {
-      values_[i] = estimator.mode(static_cast<int>(i)).value;
-      covariances_[i] = estimator.mode_covariance(static_cast<int>(i));
-      settle_covariances_[i] = estimator.mode_covariance_given_others(static_cast<int>(i));
-    }
+    input_.read(estimator);
     changes_.clear();
     const bool valid = !fit_sample && st.estimates_measure_plant();
-    detector_.update(static_cast<double>(utime - utime0_) * 1e-6, values_, covariances_, valid, changes_,
-                     evidence_span_, &settle_covariances_);
-    if (valid) evidence_span_ = 0.0;
+    input_.update(detector_, static_cast<double>(utime - utime0_) * 1e-6, valid, changes_);
     for (const FlagChange& c : changes_) {
       static constexpr const char* kQuantityNames[kQuantities] = {"wn", "zeta", "gain"};
       char line[256];
@@ -469,12 +456,8 @@ class FlagRecorder {
 
  private:
   FaultDetector detector_;
-  bool warming_up_;  // the estimator's status after the previous sample
-  std::uint64_t fits_ = 0;       // ... and its windows fitted
-  double evidence_span_ = 0.0;  // a (re)fit's window, until the detector's next valid update
+  DetectorInput input_;
   std::vector<std::string> names_;
-  std::vector<ModalParameters> values_;
-  std::vector<Eigen::Matrix3d> covariances_, settle_covariances_;
   std::vector<FlagChange> changes_;
   std::int64_t period_us_, utime0_ = 0, last_utime_ = 0, next_publish_ = 0;
   bool have_time_ = false;

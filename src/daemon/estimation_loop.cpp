@@ -57,6 +57,7 @@ EstimationLoop::EstimationLoop(const Config& config, const std::optional<Checkpo
       all_counters_(counters),
       start_ns_(start_ns),
       estimator_(config.model, with_deferred_fit(config.estimator)),
+      detector_input_(estimator_),
       fitter_(estimator_) {
   const auto K = config.model.submodels.size();
   std::vector<std::optional<ModeBaseline>> restored_baselines;
@@ -85,9 +86,6 @@ EstimationLoop::EstimationLoop(const Config& config, const std::optional<Checkpo
   }
   set_detector(restored_baselines);
   sample_.further_inputs = config.model.n_inputs() - 1;
-  mode_values_.resize(K);
-  mode_covariances_.assign(K, Eigen::Matrix3d::Zero());
-  settle_covariances_.assign(K, Eigen::Matrix3d::Zero());
   flag_changes_.reserve(kQuantities * K);
 }
 
@@ -145,7 +143,7 @@ void EstimationLoop::run() noexcept {
     const bool final_stop = request == stop_requested;
     if (fit_in_flight_ && fitter_.take_applied()) {  // the estimator is ours again
       fit_in_flight_ = false;
-      evidence_span_ = estimator_.status().fitted_window;
+      detector_input_.fitted(estimator_.status().fitted_window);
     }
     if (probe_ && !probe_fired_ && !fit_in_flight_ && backlog_size_ == 0 && !estimator_.status().warming_up &&
         read(counters_.snapshots) > 0) {
@@ -316,7 +314,7 @@ void EstimationLoop::process(const StampedSample& s) noexcept {
 
 void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool update_detector) noexcept {
   Snapshot& snap = next_snapshot_;
-  const int K = static_cast<int>(mode_values_.size());
+  const int K = static_cast<int>(detector_input_.value().size());
   // During the warm-up fit the estimator is the fitter's: the cached status and
   // the last values stand in (flags are suppressed while warming up anyway).
   const EstimatorStatus& st = fit_in_flight_ ? status_before_fit_ : estimator_.status();
@@ -336,13 +334,11 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
   snap.warmup_fit_seconds = fitter_.last_fit_seconds();
   snap.warmup_fit_used = st.warmup_fit_used;
   warming_up_.store(st.warming_up, std::memory_order_relaxed);
-  for (int i = 0; i < K && !fit_in_flight_; ++i) {
+  if (!fit_in_flight_) detector_input_.read(estimator_);
+  for (int i = 0; i < K; ++i) {
     const auto k = static_cast<std::size_t>(i);
-    const ModeEstimate m = estimator_.mode(i);
-    mode_values_[k] = snap.value[k] = m.value;
-    snap.std_dev[k] = m.std;
-    mode_covariances_[k] = estimator_.mode_covariance(i);
-    settle_covariances_[k] = estimator_.mode_covariance_given_others(i);
+    snap.value[k] = detector_input_.value()[k];
+    if (!fit_in_flight_) snap.std_dev[k] = estimator_.mode(i).std;
   }
   if (!fit_in_flight_) snap.residual_rms = estimator_.residual_rms();
   snap.n_changes = 0;
@@ -351,8 +347,7 @@ void EstimationLoop::push_snapshot(Snapshot::Kind kind, std::int64_t now, bool u
     const double t = static_cast<double>(last_utime_ - utime0_) * 1e-6;
     const bool valid = st.estimates_measure_plant();
     // capacity reserved: no allocation
-    detector_->update(t, mode_values_, mode_covariances_, valid, flag_changes_, evidence_span_, &settle_covariances_);
-    if (valid) evidence_span_ = 0.0;
+    detector_input_.update(*detector_, t, valid, flag_changes_);
     for (const FlagChange& c : flag_changes_) {
       if (snap.n_changes == kMaxEntries) break;
       snap.changes[static_cast<std::size_t>(snap.n_changes++)] = c;

@@ -132,9 +132,7 @@ class EstimationLoop {
   std::optional<FaultDetector> detector_;
   std::vector<bool> baseline_configured_;  // per mode: the baseline is the config's
   FaultSettings detector_faults_;          // the config's faults: section the detector was made for
-  std::vector<ModalParameters> mode_values_;
-  std::vector<Eigen::Matrix3d> mode_covariances_;  // the detector's input, sized at construction
-  std::vector<Eigen::Matrix3d> settle_covariances_;  // ... for its learning's settle test
+  DetectorInput detector_input_;
   std::vector<FlagChange> flag_changes_;
   TickHistogram tick_histogram_;  // durations of the loop's ticks, for the metrics endpoint
 
@@ -166,7 +164,6 @@ class EstimationLoop {
   // holds the input in backlog_, a FIFO preallocated at construction.
   WarmupFitter fitter_;
   bool fit_in_flight_ = false;
-  double evidence_span_ = 0.0;  // a (re)fit's window, until the detector's next valid update
   EstimatorStatus status_before_fit_;
   std::vector<StampedSample> backlog_;
   std::size_t backlog_head_ = 0, backlog_size_ = 0;
