@@ -308,6 +308,89 @@ faults:
                           "damping-step-under-a-square-wave.yaml");
 }
 
+// Two modes in closed loop under a multisine (a scenario-bank record): mode 1
+// is lightly damped (zeta 0.0073, its decay time 0.44 memories, so the memory
+// floor allows no covariance boost), and its gain falls by 20 % over 31.8 s
+// from 77.6 s. The updates lag the ramp and wind mode 1's gain and damping
+// along their trade; the output error rises with them, slowly enough that a
+// noise level saved as good along the way followed it (measured: gain -48 %,
+// zeta -41 %, the error 15x the noise at 124 s, then a false gain flag on mode 2).
+inline SimulatedRecord gain_ramp_of_a_lightly_damped_mode() {
+  return simulated_record(R"(
+sample_rate_hz: 214.21397670118947
+model:
+  loop: closed
+  submodels:
+    - {name: mode1, kind: mode, wn: 48.240674959018335, zeta: 0.006560097730862823, gain: 0.003656417562050187, forgetting: 0.9992841803865425}
+    - {name: mode2, kind: mode, wn: 89.7023789423213, zeta: 0.0703549150844342, gain: 0.0017014456091756214, forgetting: 0.9992841803865425}
+controller:
+  numerator: [0.20145459419660125, -0.0]
+  denominator: [1.0, -1.0]
+plant:
+  noise_variance: 6.016942311775738e-08
+  modes:
+    - name: mode1
+      kind: mode
+      wn: 48.16505900955873
+      zeta: 0.007293904590697782
+      gain: 0.003707346334235492
+      trajectory:
+        gain: [[77.58934518496783, 0.003707346334235492], [109.40801613434319, 0.002965877067388394]]
+    - {name: mode2, kind: mode, wn: 90.6398580939788, zeta: 0.06930696547754488, gain: 0.001699594803071147}
+simulation:
+  duration: 173.26323304837177
+  seed: 1062612362
+  reference: {type: multisine, f_min_hz: 3.8328536128420505, f_max_hz: 21.638672185207, period_s: 0.5218044313769149, rms: 1.0}
+estimator:
+  warmup: 6.521516576617677
+  fit_on_warmup: true
+faults:
+  learn_window: 19.56454972985303
+  false_alarm_interval: 1000.0
+  wn: {sigma: 4.0, relative: 0.03, hold: 6.521516576617677, clear_time: 6.521516576617677}
+  zeta: {sigma: 6.0, relative: 0.5, hold: 6.521516576617677, clear_time: 6.521516576617677}
+  gain: {sigma: 4.0, relative: 0.1, hold: 6.521516576617677, clear_time: 6.521516576617677}
+)",
+                          "gain-ramp-of-a-lightly-damped-mode.yaml");
+}
+
+// Three healthy modes in closed loop under a multisine (a scenario-bank
+// record, 800 s of its 1601; memory 16 s).
+inline SimulatedRecord healthy_three_modes_under_a_multisine() {
+  return simulated_record(R"(
+sample_rate_hz: 302.14539104709166
+model:
+  loop: closed
+  submodels:
+    - {name: mode1, kind: mode, wn: 19.270559362335444, zeta: 0.007941739055052742, gain: 0.044226400165212225, forgetting: 0.9997932602853008}
+    - {name: mode2, kind: mode, wn: 40.76161140419778, zeta: 0.026482677949680983, gain: 0.04307701852710262, forgetting: 0.9997932602853008}
+    - {name: mode3, kind: mode, wn: 197.7464178212024, zeta: 0.06548179699903393, gain: 0.054422799456519344, forgetting: 0.9997932602853008}
+controller:
+  numerator: [2.0536902362751936, -2.0474292605646447]
+  denominator: [1.0, -1.0]
+plant:
+  noise_variance: 3.000275569799234e-07
+  modes:
+    - {name: mode1, kind: mode, wn: 19.625464178006222, zeta: 0.009238673159162651, gain: 0.045739107686655255}
+    - {name: mode2, kind: mode, wn: 40.10984015771588, zeta: 0.02232911018880087, gain: 0.04129803637739738}
+    - {name: mode3, kind: mode, wn: 192.42889832094065, zeta: 0.06263227478221679, gain: 0.059488064781143477}
+simulation:
+  duration: 800.0
+  seed: 1216453464
+  reference: {type: multisine, f_min_hz: 1.5617448172013055, f_max_hz: 45.93901554225813, period_s: 1.280618944895275, rms: 1.0}
+estimator:
+  warmup: 16.008849194214967
+  fit_on_warmup: true
+faults:
+  learn_window: 48.0265475826449
+  false_alarm_interval: 1000.0
+  wn: {sigma: 4.0, relative: 0.03, hold: 16.008849194214967, clear_time: 16.008849194214967}
+  zeta: {sigma: 6.0, relative: 0.5, hold: 16.008849194214967, clear_time: 16.008849194214967}
+  gain: {sigma: 4.0, relative: 0.1, hold: 16.008849194214967, clear_time: 16.008849194214967}
+)",
+                          "healthy-three-modes-under-a-multisine.yaml");
+}
+
 inline SignalSpec prbs(double amplitude, int bits = 12, int clock = 2) {
   SignalSpec s;
   s.kind = SignalSpec::Kind::prbs;

@@ -1157,6 +1157,71 @@ TEST(RecursiveEstimator, AGainStepUnderFourSinesIsRefittedOnItsModeAlone) {
   EXPECT_TRUE(gain2);
 }
 
+// A drift the updates lag does not become the noise level: the last good
+// state stays the one that fitted, the divergence test measures against it,
+// and the refit after the ramp finds the new gain. Mode 1's -20 % gain is
+// flagged at -20 % (not along the gain-damping trade), mode 2 keeps its own.
+TEST(RecursiveEstimator, AGainRampTheUpdatesLagIsNotTakenForTheNoiseLevel) {
+  const SimulatedRecord loop = gain_ramp_of_a_lightly_damped_mode();
+  constexpr double kRampEnd = 109.40801613434319;        // s
+  constexpr double kMemory = 6.521516576617677;          // s, also the hold
+  constexpr double kPublishPeriod = 0.3267760632521384;  // s, the bank's
+  const auto& truth = loop.config.plant->modes;
+  ModalParameters mode1, mode2;
+  const DetectorRun run =
+      run_detector(loop.config, loop.record, kPublishPeriod, [&](double, const RecursiveEstimator& est) {
+        mode1 = est.mode(0).value;
+        mode2 = est.mode(1).value;
+      });
+  EXPECT_FALSE(run.status.misfit);
+  bool gain1 = false;
+  for (const FlagChange& f : run.flags) {
+    EXPECT_EQ(f.mode, 0) << "a flag on the healthy mode";
+    if (f.mode == 0 && f.quantity == Quantity::gain && f.raised) {
+      gain1 = true;
+      EXPECT_NEAR(f.deviation_relative, -0.2, 0.02);
+      EXPECT_LT(f.time - kRampEnd, 2.0 * kMemory);
+    }
+  }
+  EXPECT_TRUE(gain1);
+  EXPECT_NEAR(mode1.gain, 0.002965877067388394, 0.01 * 0.002965877067388394);
+  EXPECT_NEAR(mode1.zeta, truth[0].modal.zeta, 0.02 * truth[0].modal.zeta);
+  EXPECT_NEAR(mode2.gain, truth[1].modal.gain, 0.02 * truth[1].modal.gain);
+}
+
+// The noise rising threefold in RMS halfway through a healthy record: no
+// submodel's instrument explains the larger error, so the change test takes
+// it for a new noise level within a few alarms and stops boosting (the good
+// state's level followed the error up before, and boosted on each alarm had
+// it not), nothing is flagged and every estimate stays within 1 % of the truth.
+TEST(RecursiveEstimator, ARiseOfTheNoiseLevelIsNoChangeOfThePlant) {
+  SimulatedRecord loop = healthy_three_modes_under_a_multisine();
+  constexpr double kRise = 400.0;                        // s
+  constexpr double kMemory = 16.008849194214967;         // s
+  constexpr double kPublishPeriod = 0.8009389094480096;  // s, the bank's
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> extra(0.0, std::sqrt(8.0 * loop.config.plant->noise_variance));
+  for (Eigen::Index k = 0; k < loop.record.size(); ++k)
+    if (loop.record.t(k) >= kRise) loop.record.y(k) += extra(rng);
+  const auto& truth = loop.config.plant->modes;
+  std::vector<ModalParameters> at_end(3);
+  std::uint64_t boosts_two_memories_on = 0;  // the boosts up to kRise + 2 memories
+  const DetectorRun run =
+      run_detector(loop.config, loop.record, kPublishPeriod, [&](double t, const RecursiveEstimator& est) {
+        for (int i = 0; i < 3; ++i) at_end[static_cast<std::size_t>(i)] = est.mode(i).value;
+        if (t <= kRise + 2.0 * kMemory) boosts_two_memories_on = est.status().boosts;
+      });
+  EXPECT_TRUE(run.flags.empty());
+  EXPECT_GE(run.status.noise_changes, 1u);
+  EXPECT_EQ(run.status.boosts, boosts_two_memories_on) << "boosted on the noise more than two memories on";
+  EXPECT_EQ(run.status.resets, 0u);
+  for (std::size_t i = 0; i < 3; ++i) {
+    EXPECT_NEAR(at_end[i].wn, truth[i].modal.wn, 0.01 * truth[i].modal.wn) << "mode " << i + 1;
+    EXPECT_NEAR(at_end[i].zeta, truth[i].modal.zeta, 0.01 * truth[i].modal.zeta) << "mode " << i + 1;
+    EXPECT_NEAR(at_end[i].gain, truth[i].modal.gain, 0.01 * truth[i].modal.gain) << "mode " << i + 1;
+  }
+}
+
 // step() runs one of two compilations of the same source (portable x86-64, and
 // AVX2 with fused multiply-add where the CPU has it). FMA rounds a b + c once
 // instead of twice, so the two may differ by round-off only: 2^-53 ~ 1.1e-16

@@ -159,6 +159,7 @@ struct EstimatorStatus {
   std::uint64_t covariance_clamps = 0;
   std::uint64_t resets = 0;  // returns to the last good state
   std::uint64_t boosts = 0;  // covariance boosts after a change of the output error (change_ratio)
+  std::uint64_t noise_changes = 0;  // changes of the output error no submodel explains: a new noise level
   // Modes returned to their last good estimate because their gain had changed
   // sign (a well-determined one): a mode that did so no longer describes its
   // physical mode but cancels a neighbour's change.

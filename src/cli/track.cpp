@@ -611,6 +611,8 @@ int track(const TrackArgs& args) {
     else
       std::fprintf(stderr, "  resets: 0\n");
     std::fprintf(stderr, "  covariance boosts on a change: %llu\n", static_cast<unsigned long long>(st.boosts));
+    std::fprintf(stderr, "  noise level changes (no submodel explains the error): %llu\n",
+                 static_cast<unsigned long long>(st.noise_changes));
     std::fprintf(stderr, "  modes restored after a sign change of their gain: %llu\n",
                  static_cast<unsigned long long>(st.sign_restores));
     std::fprintf(stderr, "  rejected non-finite: %llu\n", static_cast<unsigned long long>(st.rejected_nonfinite));

@@ -147,6 +147,21 @@ std::uint64_t RecursiveEstimator::Impl::transient_samples(double decay) const {
   return samples < 1e12 ? static_cast<std::uint64_t>(samples) : std::uint64_t{1000000000000};
 }
 
+namespace {
+
+// The score test's bound for white noise: s^T F^-1 s / sigma^2 is then about
+// chi-square with n_theta degrees of freedom over two (s and F sum with the
+// same exponential weights), so t = that / n_theta stays below
+// chi2_{n_theta}(1 - 1e-4) / (2 n_theta), the quantile by Wilson and Hilferty.
+double explained_score(int n_theta) {
+  constexpr double kZ = 3.719;  // the standard normal's 1 - 1e-4 quantile
+  const double k = std::max(1, n_theta), c = 2.0 / (9.0 * k);
+  const double q = k * std::pow(1.0 - c + kZ * std::sqrt(c), 3);
+  return q / (2.0 * k);
+}
+
+}  // namespace
+
 void RecursiveEstimator::Impl::save_good() {
   for (auto& b : blocks) {
     b.good_theta = b.theta;
@@ -173,6 +188,13 @@ void RecursiveEstimator::Impl::save_good() {
 // held by a later boost that names another one: it may be re-converging from
 // a share it took at the first. The divergence test and the CUSUM wait a tenth
 // of a memory, while the boosted blocks move.
+// Where no block explains more of the error than white noise of its recent
+// variance would (every t, taken with e_short for sigma^2, below
+// explained_score()) at two alarms in a row, the noise level changed, not the
+// plant: the current state is good at the new level, and nothing is boosted.
+// One such alarm alone boosts as any other: it may be a change's onset, which
+// the next alarm, a tenth of a memory on, explains (held back until then, the
+// boost came 0.05 to 0.4 memories later on the bank, and one change was lost).
 bool RecursiveEstimator::Impl::boost_changed_blocks() {
   constexpr double kChangeBoost = 10.0, kShareOfLargest = 0.5, kWait = 0.1;
   const auto score_test = [this](const detail::Block& b) {
@@ -181,7 +203,25 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
     return std::isfinite(t) ? t : 0.0;
   };
   double largest = 0.0;
-  for (const auto& b : blocks) largest = std::max(largest, score_test(b));
+  bool explained = false;
+  for (const auto& b : blocks) {
+    const double t = score_test(b);
+    largest = std::max(largest, t);
+    explained = explained || t * e_var_good > explained_score(b.nt) * e_short;
+  }
+  if (!explained && unexplained_alarm) {  // twice in a row: the noise level changed, not the plant
+    save_good();
+    e_var_good = std::max(e_var, e_short);
+    ++status.noise_changes;
+    unexplained_alarm = false;
+    for (auto& b : blocks) {
+      b.score.setZero();
+      b.score_info.setZero();
+    }
+    rearm = static_cast<std::uint64_t>(kWait / (1.0 - e_alpha));
+    return false;
+  }
+  unexplained_alarm = !explained;
   bool boosted = false;
   std::uint64_t hold = 0;  // updates the blocks not named keep their estimate
   for (auto& b : blocks) {

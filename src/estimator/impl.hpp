@@ -30,6 +30,14 @@ inline constexpr char kResetDegenerate[] = "non-finite or degenerate update (NaN
 inline constexpr char kResetRefit[] =
     "output error diverged (residual RMS above divergence_ratio x its last good value): refit on a new warm-up window";
 
+// Settled: the output error's RMS within this factor of its last good value
+// (the state the estimates, and the tests of change and divergence, rest on).
+inline constexpr double kSettledRatio = 1.25;
+// An output error below this fraction of the outputs summed into y_hat is
+// their round-off (10^4 times it, far below any sensor's resolution: a 24-bit
+// converter resolves 6e-8 of its range), not noise.
+inline constexpr double kRoundOff = 1e-12;
+
 // The warm-up's buffer holds a refit's window too (may_refit()): the samples
 // before the reset that drive its prefilters, then its fitted part (at most a
 // warm-up window), up to this many warm-up windows more than the warm-up's.
@@ -117,6 +125,7 @@ struct RecursiveEstimator::Impl {
   double e_var_good = 0.0;      // e_var when the last good state was saved
   double change_cusum = 0.0;    // Page's CUSUM on e^2 / e_var_good (EstimatorSettings::change_ratio)
   double change_drift = 0.0, change_gain = 0.0;  // its increment: drift + gain e^2 / e_var_good
+  bool unexplained_alarm = false;                // its last alarm was one no submodel explains (boost_changed_blocks)
   std::uint64_t rearm = 0;      // samples until the divergence detector is armed again
   std::uint64_t settling = 0;   // after a filter restart: samples left to catch up (no update meanwhile)
   std::uint64_t transient = 0;  // ... of which the first ones, while the modes' free response dies out
