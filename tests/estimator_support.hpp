@@ -313,8 +313,9 @@ faults:
 // floor allows no covariance boost), and its gain falls by 20 % over 31.8 s
 // from 77.6 s. The updates lag the ramp and wind mode 1's gain and damping
 // along their trade; the output error rises with them, slowly enough that a
-// noise level saved as good along the way followed it (measured: gain -48 %,
-// zeta -41 %, the error 15x the noise at 124 s, then a false gain flag on mode 2).
+// noise level saved as good along the way followed it (measured at 124 s: gain
+// 35 % below the truth, zeta 41 %, the error 21x the noise; then a false gain
+// flag on mode 2).
 inline SimulatedRecord gain_ramp_of_a_lightly_damped_mode() {
   return simulated_record(R"(
 sample_rate_hz: 214.21397670118947
