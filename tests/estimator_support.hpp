@@ -1,6 +1,7 @@
 #pragma once
 // What the recursive estimator's test suites share: the paper's config, its
 // settings with other forgetting or warm-up, and simple plants and inputs.
+#include <cstdio>
 #include <string>
 #include <utility>
 #include <vector>
@@ -62,6 +63,21 @@ inline PaperModeThreeStep paper_mode_three_step(double step = -0.03, double at =
   out.record = simulate(plant, e).record;
   c.estimator = with_warmup_fit(settings_for(c, {0.999, 0.999, 0.999}, 1000));
   return out;
+}
+
+// The faults: section the scenario bank writes for a memory of `memory` s: the
+// baseline learned over three memories, each flag held and cleared over one.
+inline std::string bank_faults(double memory) {
+  char yaml[512];
+  std::snprintf(yaml, sizeof yaml, R"(faults:
+  learn_window: %.17g
+  false_alarm_interval: 1000.0
+  wn: {sigma: 4.0, relative: 0.03, hold: %.17g, clear_time: %.17g}
+  zeta: {sigma: 6.0, relative: 0.5, hold: %.17g, clear_time: %.17g}
+  gain: {sigma: 4.0, relative: 0.1, hold: %.17g, clear_time: %.17g}
+)",
+                3.0 * memory, memory, memory, memory, memory, memory, memory);
+  return yaml;
 }
 
 // A config with plant: and simulation: sections (a scenario-bank record's), and
@@ -167,13 +183,7 @@ simulation:
 estimator:
   warmup: 17.168858125681783
   fit_on_warmup: true
-faults:
-  learn_window: 51.506574377045354
-  false_alarm_interval: 1000.0
-  wn: {sigma: 4.0, relative: 0.03, hold: 17.168858125681783, clear_time: 17.168858125681783}
-  zeta: {sigma: 6.0, relative: 0.5, hold: 17.168858125681783, clear_time: 17.168858125681783}
-  gain: {sigma: 4.0, relative: 0.1, hold: 17.168858125681783, clear_time: 17.168858125681783}
-)",
+)" + bank_faults(17.168858125681783),
                           "trade-between-modes.yaml");
 }
 
@@ -202,13 +212,7 @@ plant:
 )" + reference + R"(estimator:
   warmup: 778.5254675292862
   fit_on_warmup: true
-faults:
-  learn_window: 2335.5764025878584
-  false_alarm_interval: 1000.0
-  wn: {sigma: 4.0, relative: 0.03, hold: 778.5254675292862, clear_time: 778.5254675292862}
-  zeta: {sigma: 6.0, relative: 0.5, hold: 778.5254675292862, clear_time: 778.5254675292862}
-  gain: {sigma: 4.0, relative: 0.1, hold: 778.5254675292862, clear_time: 778.5254675292862}
-)",
+)" + bank_faults(778.5254675292862),
                           name);
 }
 
@@ -298,13 +302,7 @@ simulation:
 estimator:
   warmup: 1.2723957502350374
   fit_on_warmup: true
-faults:
-  learn_window: 3.8171872507051123
-  false_alarm_interval: 1000.0
-  wn: {sigma: 4.0, relative: 0.03, hold: 1.2723957502350374, clear_time: 1.2723957502350374}
-  zeta: {sigma: 6.0, relative: 0.5, hold: 1.2723957502350374, clear_time: 1.2723957502350374}
-  gain: {sigma: 4.0, relative: 0.1, hold: 1.2723957502350374, clear_time: 1.2723957502350374}
-)",
+)" + bank_faults(1.2723957502350374),
                           "damping-step-under-a-square-wave.yaml");
 }
 
@@ -345,13 +343,7 @@ simulation:
 estimator:
   warmup: 6.521516576617677
   fit_on_warmup: true
-faults:
-  learn_window: 19.56454972985303
-  false_alarm_interval: 1000.0
-  wn: {sigma: 4.0, relative: 0.03, hold: 6.521516576617677, clear_time: 6.521516576617677}
-  zeta: {sigma: 6.0, relative: 0.5, hold: 6.521516576617677, clear_time: 6.521516576617677}
-  gain: {sigma: 4.0, relative: 0.1, hold: 6.521516576617677, clear_time: 6.521516576617677}
-)",
+)" + bank_faults(6.521516576617677),
                           "gain-ramp-of-a-lightly-damped-mode.yaml");
 }
 
@@ -382,13 +374,7 @@ simulation:
 estimator:
   warmup: 16.008849194214967
   fit_on_warmup: true
-faults:
-  learn_window: 48.0265475826449
-  false_alarm_interval: 1000.0
-  wn: {sigma: 4.0, relative: 0.03, hold: 16.008849194214967, clear_time: 16.008849194214967}
-  zeta: {sigma: 6.0, relative: 0.5, hold: 16.008849194214967, clear_time: 16.008849194214967}
-  gain: {sigma: 4.0, relative: 0.1, hold: 16.008849194214967, clear_time: 16.008849194214967}
-)",
+)" + bank_faults(16.008849194214967),
                           "healthy-three-modes-under-a-multisine.yaml");
 }
 

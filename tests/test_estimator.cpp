@@ -6,7 +6,9 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <limits>
 #include <numbers>
+#include <optional>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -1042,6 +1044,31 @@ DetectorRun run_detector(const Config& c, const Record& r, double period,
   return out;
 }
 
+// What a run over a record where one mode alone changed must show: no flag on
+// any other mode, and the changed quantity's flag raised on it within `within`
+// s of `from`, at `deviation` (relative, +- 2 %) where one is given.
+struct TheChange {
+  int mode;
+  Quantity quantity;
+  double from;    // s
+  double within;  // s
+  std::optional<double> deviation;
+};
+
+void expect_the_change_alone_flagged(const DetectorRun& run, const TheChange& change) {
+  bool raised = false;
+  for (const FlagChange& f : run.flags) {
+    EXPECT_EQ(f.mode, change.mode) << "a flag on a mode that did not change";
+    if (f.mode != change.mode || f.quantity != change.quantity || !f.raised) continue;
+    raised = true;
+    if (change.deviation) {
+      EXPECT_NEAR(f.deviation_relative, *change.deviation, 0.02);
+    }
+    EXPECT_LT(f.time - change.from, change.within);
+  }
+  EXPECT_TRUE(raised) << "mode " << change.mode + 1 << "'s change was not flagged";
+}
+
 // On the record whose excitation leaves a trade between the two modes open:
 // what the estimator reports for mode 1 holds that trade (its joint
 // covariance), so mode 1's move along it when mode 2 changes is no fault of
@@ -1057,16 +1084,11 @@ TEST(RecursiveEstimator, ATradeBetweenModesThatTheExcitationLeavesOpenIsNoFaultO
       gain_std_given = std::sqrt(est.mode_covariance_given_others(0)(2, 2)) / gain1;
     }
   });
-  bool mode2_wn = false;
-  for (const FlagChange& f : run.flags) {
-    EXPECT_EQ(f.mode, 1) << "a flag on the healthy mode";
-    mode2_wn = mode2_wn || (f.mode == 1 && f.quantity == Quantity::wn && f.raised);
-  }
   std::printf(
       "mode 1's gain before the change: %.2f %% std jointly, %.2f %% with mode 2 known; mode 1 at the end: "
       "gain %+.1f %%\n",
       100.0 * gain_std_joint, 100.0 * gain_std_given, 100.0 * (gain1 / 5.263613953500341e-06 - 1.0));
-  EXPECT_TRUE(mode2_wn);
+  expect_the_change_alone_flagged(run, {1, Quantity::wn, 255.5, std::numeric_limits<double>::infinity(), std::nullopt});
   // The joint std is the bound's order (3.2 %), not the block's own (0.15 %).
   EXPECT_GT(gain_std_joint, 1.0e-2);
   EXPECT_LT(gain_std_given, 0.4e-2);
@@ -1119,15 +1141,7 @@ TEST(RecursiveEstimator, AChangeOfOneModeIsRefittedWithTheOthersHeld) {
       });
   EXPECT_GE(run.status.resets, 1u);
   EXPECT_FALSE(run.status.misfit);
-  bool zeta2 = false;
-  for (const FlagChange& f : run.flags) {
-    EXPECT_EQ(f.mode, 1) << "a flag on the healthy mode";
-    if (f.mode == 1 && f.quantity == Quantity::zeta && f.raised) {
-      zeta2 = true;
-      EXPECT_LT(f.time - kStep, 4.0 * kMemory);
-    }
-  }
-  EXPECT_TRUE(zeta2);
+  expect_the_change_alone_flagged(run, {1, Quantity::zeta, kStep, 4.0 * kMemory, std::nullopt});
   // At the end, every estimate within 0.5 % of the truth (mode 2's damping doubled).
   EXPECT_NEAR(mode1.wn, truth[0].modal.wn, 0.005 * truth[0].modal.wn);
   EXPECT_NEAR(mode1.gain, truth[0].modal.gain, 0.005 * truth[0].modal.gain);
@@ -1145,16 +1159,7 @@ TEST(RecursiveEstimator, AGainStepUnderFourSinesIsRefittedOnItsModeAlone) {
   const DetectorRun run = run_detector(loop.config, loop.record, kPublishPeriod);
   EXPECT_GE(run.status.resets, 1u);
   EXPECT_FALSE(run.status.misfit);
-  bool gain2 = false;
-  for (const FlagChange& f : run.flags) {
-    EXPECT_EQ(f.mode, 1) << "a flag on a healthy mode";
-    if (f.mode == 1 && f.quantity == Quantity::gain && f.raised) {
-      gain2 = true;
-      EXPECT_NEAR(f.deviation_relative, -0.2, 0.02);
-      EXPECT_LT(f.time - kStep, 1.5 * kMemory);
-    }
-  }
-  EXPECT_TRUE(gain2);
+  expect_the_change_alone_flagged(run, {1, Quantity::gain, kStep, 1.5 * kMemory, -0.2});
 }
 
 // A drift the updates lag does not become the noise level: the last good
@@ -1174,16 +1179,7 @@ TEST(RecursiveEstimator, AGainRampTheUpdatesLagIsNotTakenForTheNoiseLevel) {
         mode2 = est.mode(1).value;
       });
   EXPECT_FALSE(run.status.misfit);
-  bool gain1 = false;
-  for (const FlagChange& f : run.flags) {
-    EXPECT_EQ(f.mode, 0) << "a flag on the healthy mode";
-    if (f.mode == 0 && f.quantity == Quantity::gain && f.raised) {
-      gain1 = true;
-      EXPECT_NEAR(f.deviation_relative, -0.2, 0.02);
-      EXPECT_LT(f.time - kRampEnd, 2.0 * kMemory);
-    }
-  }
-  EXPECT_TRUE(gain1);
+  expect_the_change_alone_flagged(run, {0, Quantity::gain, kRampEnd, 2.0 * kMemory, -0.2});
   EXPECT_NEAR(mode1.gain, 0.002965877067388394, 0.01 * 0.002965877067388394);
   EXPECT_NEAR(mode1.zeta, truth[0].modal.zeta, 0.02 * truth[0].modal.zeta);
   EXPECT_NEAR(mode2.gain, truth[1].modal.gain, 0.02 * truth[1].modal.gain);

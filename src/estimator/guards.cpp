@@ -209,19 +209,13 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
     largest = std::max(largest, t);
     explained = explained || t * e_var_good > explained_score(b.nt) * e_short;
   }
-  if (!explained && unexplained_alarm) {  // twice in a row: the noise level changed, not the plant
+  const bool noise_changed = !explained && unexplained_alarm;  // twice in a row: the noise, not the plant
+  unexplained_alarm = !explained && !noise_changed;
+  if (noise_changed) {
     save_good();
     e_var_good = std::max(e_var, e_short);
     ++status.noise_changes;
-    unexplained_alarm = false;
-    for (auto& b : blocks) {
-      b.score.setZero();
-      b.score_info.setZero();
-    }
-    rearm = static_cast<std::uint64_t>(kWait / (1.0 - e_alpha));
-    return false;
   }
-  unexplained_alarm = !explained;
   bool boosted = false;
   std::uint64_t hold = 0;  // updates the blocks not named keep their estimate
   for (auto& b : blocks) {
@@ -235,7 +229,7 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
       boost = std::clamp(floor_forget / std::min(forget, floor_forget), 1.0, kChangeBoost);
       forget = std::min(forget, floor_forget);
     }
-    b.named = boost > 1.0 && score_test(b) >= kShareOfLargest * largest;
+    b.named = !noise_changed && boost > 1.0 && score_test(b) >= kShareOfLargest * largest;
     if (b.named) {
       boosted = true;
       b.P *= boost;

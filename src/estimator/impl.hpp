@@ -172,6 +172,12 @@ struct RecursiveEstimator::Impl {
   void bridge_plant_loop(double r, double z);
   std::uint64_t transient_samples(double decay = 0.1) const;
   double shortest_decay_time() const;
+  // The round-off of y_hat: kRoundOff of the outputs summed into it.
+  double round_off_level() const {
+    double outputs = 0.0;
+    for (const auto& b : blocks) outputs += std::abs(b.xu);
+    return kRoundOff * outputs;
+  }
   void save_good();
   void restore_good(const char* reason);
   bool boost_changed_blocks();  // true when a block was boosted

@@ -148,11 +148,7 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   // how y_hat was rounded (with FMA or without). kRoundOff, relative to the
   // outputs summed into y_hat, is 10^4 times their round-off and far below any
   // sensor's resolution (a 24-bit converter resolves 6e-8 of its range).
-  const auto above_round_off = [&] {
-    double sum = 0.0;
-    for (const auto& b : blocks) sum += std::abs(b.xu);
-    return std::abs(e) > kRoundOff * sum;
-  };
+  const auto above_round_off = [&] { return std::abs(e) > round_off_level(); };
   // While the restarted filters settle (settling > 0), the output error is
   // mostly their transient, not noise: e_var (and with it every std) keeps its
   // value, and e_short follows the error to tell when the transient has died out.
@@ -363,13 +359,9 @@ inline unsigned RecursiveEstimator::Impl::finish_update() {
     // measured against the level before the change meanwhile, the change test
     // alarms again and boosts a neighbour too (a weak mode beside a gain step).
     // An output error at round-off (noise-free data) says nothing either way.
-    bool adapting = false;
-    double outputs = 0.0;
-    for (const auto& b : blocks) {
-      adapting = adapting || b.adapting > 0;
-      outputs += std::abs(b.xu);
-    }
-    const bool round_off = !(e_var > kRoundOff * kRoundOff * outputs * outputs);
+    const bool adapting = std::any_of(blocks.begin(), blocks.end(), [](const auto& b) { return b.adapting > 0; });
+    const double round_off_level = this->round_off_level();
+    const bool round_off = !(e_var > round_off_level * round_off_level);
     const bool as_good = status.warming_up || adapting || round_off || !(e_var_good > 0.0) ||
                          !(e_var > kSettledRatio * kSettledRatio * e_var_good);
     if (e_short < 4.0 * e_var && as_good) save_good();
