@@ -39,7 +39,7 @@ namespace modalwatch::test_support {
 
 // config/flexible-beam-drift.yaml: 4096 Hz, modes "suspension" and "flex"; flex
 // loses 15 % stiffness over t in [30, 32] s.
-inline const std::string kDriftConfig = std::string(MODALWATCH_SOURCE_DIR) + "/config/flexible-beam-drift.yaml";
+inline const std::string kDriftConfig = test_support::source_file("config/flexible-beam-drift.yaml");
 constexpr double kDriftStart = 30.0;         // s
 constexpr std::int64_t kUtime0 = 1'000'000;  // us, utime of sample 0 on the wire
 

@@ -6,6 +6,8 @@
 #include <utility>
 #include <vector>
 
+#include "support.hpp"
+
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/record.hpp"
@@ -13,7 +15,7 @@
 
 namespace modalwatch::test_support {
 
-inline Config paper_config() { return load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/paper-sim.yaml"); }
+inline Config paper_config() { return load_config(test_support::source_file("config/paper-sim.yaml")); }
 
 inline EstimatorSettings settings_for(const Config& c, std::vector<double> forgetting, int warmup) {
   EstimatorSettings s = c.estimator;  // completed from the rest of the file by load_config

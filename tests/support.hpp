@@ -24,9 +24,29 @@ struct Outcome {
   std::string output;  // stdout and stderr
 };
 
+// A file of the source tree, or of the shared measured records, by its path
+// below them. Appended rather than std::string(dir) + "/...": GCC 12 warns of
+// a bounds overflow in that (a false positive, -Werror=array-bounds) where
+// the precompiled header moves its inlining.
+inline std::string source_file(const std::string& relative) {
+  std::string path = MODALWATCH_SOURCE_DIR;
+  path += '/';
+  path += relative;
+  return path;
+}
+inline std::string shared_file(const std::string& relative) {
+  std::string path = MODALWATCH_SHARED_DATA;
+  path += '/';
+  path += relative;
+  return path;
+}
+
 // Runs `modalwatch <args>` and collects its exit code and output.
 inline Outcome run_cli(const std::string& args) {
-  const std::string cmd = std::string(MODALWATCH_CLI) + " " + args + " 2>&1";
+  std::string cmd = MODALWATCH_CLI;
+  cmd += ' ';
+  cmd += args;
+  cmd += " 2>&1";
   FILE* pipe = popen(cmd.c_str(), "r");
   std::string out;
   std::array<char, 4096> buf{};

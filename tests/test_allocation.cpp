@@ -14,11 +14,12 @@
 #include <gtest/gtest.h>
 
 #include "allocation_counter.hpp"
-#include "simulation_support.hpp"
 #include "modalwatch/estimator.hpp"
 #include "modalwatch/fault_detector.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/simulator.hpp"
+#include "simulation_support.hpp"
+#include "support.hpp"
 
 namespace modalwatch {
 namespace {
@@ -34,7 +35,7 @@ struct Data {
 const Data& data() {
   static const Data d = [] {
     Data out;
-    out.config = load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/paper-sim.yaml");
+    out.config = load_config(test_support::source_file("config/paper-sim.yaml"));
     ExperimentSpec e = *out.config.experiment;
     e.duration = 330.0;  // 6600 samples: warm-up, lead-in, 5000 counted steps
     e.closed_loop = true;

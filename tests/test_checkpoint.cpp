@@ -32,7 +32,7 @@ namespace {
 using test_support::error_of;
 using test_support::ScratchDir;
 
-Config paper_config() { return load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/paper-sim.yaml"); }
+Config paper_config() { return load_config(test_support::source_file("config/paper-sim.yaml")); }
 
 // A real state: the paper's closed loop, 100 s, warmed up after 50 s.
 Checkpoint real_checkpoint() {

@@ -27,7 +27,7 @@ Outcome run(const std::string& args) { return test_support::run_cli(args); }
 
 class Cli : public test_support::ScratchDir {
  public:
-  static std::string config(const std::string& name) { return std::string(MODALWATCH_SOURCE_DIR) + "/config/" + name; }
+  static std::string config(const std::string& name) { return test_support::source_file("config/" + name); }
 };
 
 bool contains(const std::string& text, const std::string& what) { return text.find(what) != std::string::npos; }
@@ -385,7 +385,7 @@ simulation:
   ASSERT_EQ(run("simulate --config " + cfg + " --out " + path("t.csv")).code, 0);
   const Table t = read_table(path("t.csv"));
   write_table(path("n.csv"), {"n", "u", "y"}, t.data(Eigen::all, std::vector<int>{0, t.column("u"), t.column("y")}));
-  const std::string script = std::string(MODALWATCH_SOURCE_DIR) + "/scripts/plot/plot_diagnose.py";
+  const std::string script = test_support::source_file("scripts/plot/plot_diagnose.py");
   const bool plots = fs::exists("/usr/bin/python3") &&
                      std::system("/usr/bin/python3 -c 'import matplotlib, numpy' 2>/dev/null") == 0;
   auto labels = [&](const std::string& report) {

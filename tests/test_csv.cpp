@@ -283,8 +283,6 @@ TEST_F(CsvTest, WriteFailureThrowsAndLeavesNothing) {
 
 // ---------------------------------------------------------------- shared data
 
-std::string shared(const std::string& name) { return std::string(MODALWATCH_SHARED_DATA) + "/" + name; }
-
 #if defined(__SANITIZE_ADDRESS__)
 constexpr bool kSanitized = true;  // ASan slows parsing several-fold
 #else
@@ -296,7 +294,7 @@ double seconds_since(std::chrono::steady_clock::time_point start) {
 }
 
 TEST(CsvShared, SilverboxLoadsFast) {
-  const auto p = shared("silverbox_snls80mv.csv");
+  const auto p = modalwatch::test_support::shared_file("silverbox_snls80mv.csv");
   if (!fs::exists(p)) GTEST_SKIP() << "shared data not found: " << p;
   const auto start = std::chrono::steady_clock::now();
   const auto rec = read_record(p);
@@ -309,7 +307,7 @@ TEST(CsvShared, SilverboxLoadsFast) {
 }
 
 TEST(CsvShared, EmpsTrainHasReference) {
-  const auto p = shared("emps_train.csv");
+  const auto p = modalwatch::test_support::shared_file("emps_train.csv");
   if (!fs::exists(p)) GTEST_SKIP() << "shared data not found: " << p;
   const auto rec = read_record(p);
   EXPECT_EQ(rec.size(), 24841);

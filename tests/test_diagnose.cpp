@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 
 #include "simulation_support.hpp"
+#include "support.hpp"
 
 #include "modalwatch/diagnose.hpp"
 #include "modalwatch/initial_modes.hpp"
@@ -555,7 +556,7 @@ TEST(DiagnoseMeasured, SilverboxFindsCubicStiffness) {
   const Record full = read_record(kShared + "/silverbox_snls80mv.csv");
   const Record est = full.segment(40650, 2 * 8692);
   const Record val = full.segment(100, 40475);  // the arrow
-  const Config config = load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/silverbox.yaml");
+  const Config config = load_config(test_support::source_file("config/silverbox.yaml"));
   DiagnoseOptions options;
   options.library = {EffectKind::mode, EffectKind::offset, EffectKind::coulomb, EffectKind::cubic};
   options.max_steps = 2;
@@ -581,7 +582,7 @@ TEST(DiagnoseMeasured, EmpsFindsCoulombFrictionAndTheOffset) {
   SKIP_WITHOUT_SHARED("emps_pulses_test.csv");
   const Record est = read_record(kShared + "/emps_train.csv");
   const Record val = read_record(kShared + "/emps_pulses_test.csv");
-  const Config config = load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/emps.yaml");
+  const Config config = load_config(test_support::source_file("config/emps.yaml"));
   LoopSpec loop;
   loop.closed = true;
   loop.controller = config.controller;
@@ -641,7 +642,7 @@ TEST(DiagnoseMeasured, F16AddsModesAtTheFrfPeaks) {
   const Eigen::Index n_est = 2 * 8192;
   const Record est = full.segment(0, n_est);
   const Record val = full.segment(0, n_est + 8192);  // simulated from rest, scored after n_est
-  const Config config = load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/f16.yaml");
+  const Config config = load_config(test_support::source_file("config/f16.yaml"));
   DiagnoseOptions options;
   options.library = {EffectKind::mode};
   options.max_steps = 2;

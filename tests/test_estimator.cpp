@@ -389,7 +389,7 @@ struct SteadyBeam {
   Record record;
 };
 SteadyBeam steady_beam(double duration) {
-  SteadyBeam b{load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/flexible-beam.yaml"), {}, {}};
+  SteadyBeam b{load_config(test_support::source_file("config/flexible-beam.yaml")), {}, {}};
   ExperimentSpec e = *b.config.experiment;
   e.duration = duration;
   b.plant = *b.config.plant;
@@ -515,7 +515,7 @@ struct SteppedBeam {
   double wn_before = 0.0, wn_after = 0.0;
 };
 SteppedBeam stepped_beam(double step, double burst, bool two_sines = false, double ramp = 1.0 / 4096) {
-  SteppedBeam b{load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/flexible-beam.yaml"), {}, {}};
+  SteppedBeam b{load_config(test_support::source_file("config/flexible-beam.yaml")), {}, {}};
   b.config.estimator.forgetting.assign(2, 0.9995);
   b.config.estimator.warmup_samples = 2 * 4096;
   ExperimentSpec e = *b.config.experiment;

@@ -43,7 +43,7 @@ std::string test_url() {
          "?ttl=0";
 }
 
-const std::string kConfig = std::string(MODALWATCH_SOURCE_DIR) + "/config/paper-sim.yaml";
+const std::string kConfig = test_support::source_file("config/paper-sim.yaml");
 constexpr std::int64_t kStart = 1'700'000'000'000'000;  // us
 
 class LcmLog : public ScratchDir {

@@ -610,7 +610,7 @@ TEST(SeveralInputsRecursive, StateRoundTripsThroughACheckpointAndRestoresWithThe
   EXPECT_NE(modalwatch::checkpoint_fingerprint(swapped), modalwatch::checkpoint_fingerprint(c));
   // A single-input model's fingerprint has no input in it: the paper's config
   // keeps the one its checkpoints were written with.
-  const Config paper = modalwatch::load_config(std::string(MODALWATCH_SOURCE_DIR) + "/config/paper-sim.yaml");
+  const Config paper = modalwatch::load_config(modalwatch::test_support::source_file("config/paper-sim.yaml"));
   EXPECT_EQ(modalwatch::checkpoint_fingerprint(paper), 0xd912ba8a93c4fd0dull);
 }
 
@@ -870,7 +870,7 @@ TEST_F(SeveralInputsCli, DiagnoseReportNamesEachSubmodelsInput) {
 // |H|, one submodel per input sharing one A per resonance, the batch output
 // hold, the physical check, and the order of lowest BIC. Estimation on the
 // first 70 % (diagnose's default split), validation on the rest.
-const std::string kFlexible = std::string(MODALWATCH_SHARED_DATA) + "/daisy_flexible_structure.csv";
+const std::string kFlexible = modalwatch::test_support::shared_file("daisy_flexible_structure.csv");
 
 struct FlexibleFit {
   AdditiveModel start;

@@ -14,6 +14,8 @@
 #include <gtest/gtest.h>
 #include <unsupported/Eigen/MatrixFunctions>
 
+#include "support.hpp"
+
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/simulator.hpp"
 
@@ -466,7 +468,7 @@ TEST(SimulatorErrors, RejectsInvalidSpecs) {
 
 // ---------------------------------------------------------------- shipped configurations
 
-std::string config_path(const std::string& name) { return std::string(MODALWATCH_SOURCE_DIR) + "/config/" + name; }
+std::string config_path(const std::string& name) { return test_support::source_file("config/" + name); }
 
 // The designed loops are stable with margin over the whole trajectory.
 void expect_robust_loop(const Config& config, const std::vector<double>& instants, double min_return,

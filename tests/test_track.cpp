@@ -46,7 +46,7 @@ long long summary_count(const std::string& output, const std::string& key) {
   return end > begin ? std::stoll(output.substr(begin, end - begin)) : -1;
 }
 
-std::string paper_config() { return std::string(MODALWATCH_SOURCE_DIR) + "/config/paper-sim.yaml"; }
+std::string paper_config() { return test_support::source_file("config/paper-sim.yaml"); }
 
 std::string expected_header() {
   std::string h = "t";

@@ -22,7 +22,7 @@ namespace {
 using test_support::Outcome;
 Outcome run(const std::string& args) { return test_support::run_cli(args); }
 
-std::string beam_config() { return std::string(MODALWATCH_SOURCE_DIR) + "/config/flexible-beam.yaml"; }
+std::string beam_config() { return test_support::source_file("config/flexible-beam.yaml"); }
 
 constexpr double kRate = 4096.0;
 constexpr double kDuration = 35.0;     // s: before the flexible mode's drift (t = 40 s)
@@ -154,9 +154,7 @@ TEST_F(TrackMissingData, RunsOfNonFiniteSamplesAreSkippedWithoutAReset) {
 // bridged by the plant's loop with the model standing in, the updates go on.
 class TrackGapDuringADrift : public test_support::ScratchDir {
  protected:
-  static std::string drift_config() {
-    return std::string(MODALWATCH_SOURCE_DIR) + "/config/flexible-beam-drift.yaml";
-  }
+  static std::string drift_config() { return test_support::source_file("config/flexible-beam-drift.yaml"); }
   // The time flex wn is first flagged by `track --faults` on the record with
   // the samples in [hole, hole + 64 T) removed (hole < 0: none); NaN if never.
   double flex_wn_flag(double hole) {

@@ -113,7 +113,9 @@ class Reader {
     const std::uint8_t v = u8(what);
     if (v > 1) {
       pos_ = at;
-      fail(std::string(what) + ": " + std::to_string(v) + " is not a boolean (0 or 1)");
+      std::string message = what;  // appended: GCC 12 warns falsely on std::string(what) + "..."
+      message += ": " + std::to_string(v) + " is not a boolean (0 or 1)";
+      fail(message);
     }
     return v == 1;
   }
@@ -126,7 +128,9 @@ class Reader {
     const double v = std::bit_cast<double>(u64(what));
     if (!std::isfinite(v)) {
       pos_ = at;
-      fail(std::string(what) + " is not finite");
+      std::string message = what;
+      message += " is not finite";
+      fail(message);
     }
     return v;
   }
