@@ -1015,6 +1015,7 @@ TEST(RecursiveEstimator, AWeakModeWhoseGainChangesSignGoesBackToItsEstimateAndTh
 struct DetectorRun {
   std::vector<FlagChange> flags;
   EstimatorStatus status;
+  std::vector<ModalParameters> modes;  // every submodel's estimate at the last update
 };
 
 DetectorRun run_detector(const Config& c, const Record& r, double period,
@@ -1035,6 +1036,8 @@ DetectorRun run_detector(const Config& c, const Record& r, double period,
     changes.clear();
     input.update(detector, r.t(k), !fit_sample && st.estimates_measure_plant(), changes);
     out.flags.insert(out.flags.end(), changes.begin(), changes.end());
+    out.modes.resize(static_cast<std::size_t>(est.submodels()));
+    for (int i = 0; i < est.submodels(); ++i) out.modes[static_cast<std::size_t>(i)] = est.mode(i).value;
     if (each) each(r.t(k), est);
   }
   out.status = est.status();
@@ -1076,14 +1079,15 @@ void expect_the_change_alone_flagged(const DetectorRun& run, const TheChange& ch
 TEST(RecursiveEstimator, ATradeBetweenModesThatTheExcitationLeavesOpenIsNoFaultOfTheHealthyMode) {
   const SimulatedRecord loop = trade_between_modes();
   constexpr double kPeriod = 0.8612210386668856;  // the bank's publish period
-  double gain_std_joint = 0.0, gain_std_given = 0.0, gain1 = 0.0;
+  double gain_std_joint = 0.0, gain_std_given = 0.0;
   const DetectorRun run = run_detector(loop.config, loop.record, kPeriod, [&](double t, const RecursiveEstimator& est) {
-    gain1 = est.mode(0).value.gain;
     if (t < 250.0) {  // before the change: mode 1's gain, relative std
+      const double gain1 = est.mode(0).value.gain;
       gain_std_joint = std::sqrt(est.mode_covariance(0)(2, 2)) / gain1;
       gain_std_given = std::sqrt(est.mode_covariance_given_others(0)(2, 2)) / gain1;
     }
   });
+  const double gain1 = run.modes[0].gain;
   std::printf(
       "mode 1's gain before the change: %.2f %% std jointly, %.2f %% with mode 2 known; mode 1 at the end: "
       "gain %+.1f %%\n",
@@ -1133,12 +1137,9 @@ TEST(RecursiveEstimator, AChangeOfOneModeIsRefittedWithTheOthersHeld) {
   constexpr double kMemory = 1.2723957502350374;          // s
   constexpr double kPublishPeriod = 0.06361097712710823;  // s, the bank's
   const auto& truth = loop.config.plant->modes;
-  ModalParameters mode1, mode2;
-  const DetectorRun run =
-      run_detector(loop.config, loop.record, kPublishPeriod, [&](double, const RecursiveEstimator& est) {
-        mode1 = est.mode(0).value;
-        mode2 = est.mode(1).value;
-      });
+  const DetectorRun run = run_detector(loop.config, loop.record, kPublishPeriod);
+  const ModalParameters& mode1 = run.modes[0];
+  const ModalParameters& mode2 = run.modes[1];
   EXPECT_GE(run.status.resets, 1u);
   EXPECT_FALSE(run.status.misfit);
   expect_the_change_alone_flagged(run, {1, Quantity::zeta, kStep, 4.0 * kMemory, std::nullopt});
@@ -1172,12 +1173,9 @@ TEST(RecursiveEstimator, AGainRampTheUpdatesLagIsNotTakenForTheNoiseLevel) {
   constexpr double kMemory = 6.521516576617677;          // s, also the hold
   constexpr double kPublishPeriod = 0.3267760632521384;  // s, the bank's
   const auto& truth = loop.config.plant->modes;
-  ModalParameters mode1, mode2;
-  const DetectorRun run =
-      run_detector(loop.config, loop.record, kPublishPeriod, [&](double, const RecursiveEstimator& est) {
-        mode1 = est.mode(0).value;
-        mode2 = est.mode(1).value;
-      });
+  const DetectorRun run = run_detector(loop.config, loop.record, kPublishPeriod);
+  const ModalParameters& mode1 = run.modes[0];
+  const ModalParameters& mode2 = run.modes[1];
   EXPECT_FALSE(run.status.misfit);
   expect_the_change_alone_flagged(run, {0, Quantity::gain, kRampEnd, 2.0 * kMemory, -0.2});
   EXPECT_NEAR(mode1.gain, 0.002965877067388394, 0.01 * 0.002965877067388394);
@@ -1200,17 +1198,16 @@ TEST(RecursiveEstimator, ARiseOfTheNoiseLevelIsNoChangeOfThePlant) {
   for (Eigen::Index k = 0; k < loop.record.size(); ++k)
     if (loop.record.t(k) >= kRise) loop.record.y(k) += extra(rng);
   const auto& truth = loop.config.plant->modes;
-  std::vector<ModalParameters> at_end(3);
   std::uint64_t boosts_two_memories_on = 0;  // the boosts up to kRise + 2 memories
   const DetectorRun run =
       run_detector(loop.config, loop.record, kPublishPeriod, [&](double t, const RecursiveEstimator& est) {
-        for (int i = 0; i < 3; ++i) at_end[static_cast<std::size_t>(i)] = est.mode(i).value;
         if (t <= kRise + 2.0 * kMemory) boosts_two_memories_on = est.status().boosts;
       });
   EXPECT_TRUE(run.flags.empty());
   EXPECT_GE(run.status.noise_changes, 1u);
   EXPECT_EQ(run.status.boosts, boosts_two_memories_on) << "boosted on the noise more than two memories on";
   EXPECT_EQ(run.status.resets, 0u);
+  const std::vector<ModalParameters>& at_end = run.modes;
   for (std::size_t i = 0; i < 3; ++i) {
     EXPECT_NEAR(at_end[i].wn, truth[i].modal.wn, 0.01 * truth[i].modal.wn) << "mode " << i + 1;
     EXPECT_NEAR(at_end[i].zeta, truth[i].modal.zeta, 0.01 * truth[i].modal.zeta) << "mode " << i + 1;

@@ -145,9 +145,7 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   constexpr int kOutlierRun = 10;
   // Nor is a residual at the round-off of y_hat an outlier: on noise-free data
   // e_var is round-off too, and a residual ten times it would say no more than
-  // how y_hat was rounded (with FMA or without). kRoundOff, relative to the
-  // outputs summed into y_hat, is 10^4 times their round-off and far below any
-  // sensor's resolution (a 24-bit converter resolves 6e-8 of its range).
+  // how y_hat was rounded (with FMA or without; round_off_level()).
   const auto above_round_off = [&] { return std::abs(e) > round_off_level(); };
   // While the restarted filters settle (settling > 0), the output error is
   // mostly their transient, not noise: e_var (and with it every std) keeps its
