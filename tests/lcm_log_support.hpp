@@ -4,8 +4,6 @@
 // (test_lcm_log) and that give them to the commands (test_lcm_log_commands).
 #include <lcm/lcm.h>
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -17,20 +15,11 @@
 #include "support.hpp"
 
 #include "modalwatch/io/config.hpp"
-#include "modalwatch/io/csv.hpp"
 #include "modalwatch/io/messages.hpp"
 #include "modalwatch/io/records.hpp"
 #include "modalwatch/simulator.hpp"
 
 namespace modalwatch::test_support {
-
-
-// A group and port of this test process's own, so that other LCM traffic on
-// the machine (a daemon, another test run on the default URL) cannot interfere.
-inline std::string test_url() {
-  return "udpm://239.255.76." + std::to_string(100 + ::getpid() % 100) + ":" + std::to_string(7700 + ::getpid() % 200) +
-         "?ttl=0";
-}
 
 inline const std::string kConfig = test_support::source_file("config/paper-sim.yaml");
 inline constexpr std::int64_t kStart = 1'700'000'000'000'000;  // us
@@ -72,17 +61,5 @@ class LcmLog : public ScratchDir {
     return pairs;
   }
 };
-
-// u, y and r are the CSV's doubles bit for bit; t goes through an integer
-// microsecond utime, so it matches to 1 us (0.15000000000000002 s in the CSV is
-// 150000 us, read back as 0.15).
-inline void expect_same(const Record& a, const Record& b) {
-  ASSERT_EQ(a.size(), b.size());
-  ASSERT_TRUE(b.has_reference());
-  EXPECT_EQ(a.u, b.u);
-  EXPECT_EQ(a.y, b.y);
-  EXPECT_EQ(a.r, b.r);
-  EXPECT_LT((a.t - b.t).cwiseAbs().maxCoeff(), 0.5e-6);
-}
 
 }  // namespace modalwatch::test_support

@@ -4,6 +4,8 @@
 // received here with liblcm's C API.
 #include <lcm/lcm.h>
 
+#include <unistd.h>
+
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -33,7 +35,13 @@ using test_support::kConfig;
 using test_support::kStart;
 using test_support::LcmLog;
 using test_support::run_cli;
-using test_support::test_url;
+
+// A group and port of this test process's own, so that other LCM traffic on
+// the machine (a daemon, another test run on the default URL) cannot interfere.
+std::string test_url() {
+  return "udpm://239.255.76." + std::to_string(100 + ::getpid() % 100) + ":" + std::to_string(7700 + ::getpid() % 200) +
+         "?ttl=0";
+}
 
 TEST_F(LcmLog, FitTrackAndDiagnoseReadLogsExactlyAsTheyReadCsv) {
   const Record csv = csv_record(path("run.csv"));
