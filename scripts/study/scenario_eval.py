@@ -44,26 +44,16 @@ import itertools
 import json
 import math
 import os
-import shutil
 import subprocess
 import sys
 import time
 
 import numpy as np
 
+from scenario_bank import binary_path, default_binary  # the same binary as the bank's
+
 MAX_POINTS = 4000  # samples per record read for the error statistics (evenly spaced)
 QUANTITIES = ("wn", "zeta", "gain")
-
-
-def default_binary():
-    here = os.path.dirname(os.path.abspath(__file__))
-    local = os.path.join(here, "..", "..", "build", "modalwatch")
-    return local if os.path.exists(local) else (shutil.which("modalwatch") or local)
-
-
-def binary_path(name):
-    """A path given with a folder is made absolute (the scenarios run in their own folders)."""
-    return os.path.abspath(name) if os.sep in name else name
 
 
 def run_track(binary, d, retrack):
