@@ -184,22 +184,18 @@ struct RecursiveEstimator::Impl {
   bool restore_sign_flipped_modes();  // true when a mode went back
   int refit_samples() const;
   bool may_refit() const;
-  void buffer_window_sample(const Sample& s) {
-    wt(buffered) = s.t;
-    wu(buffered) = s.u;
-    wy(buffered) = s.y;
-    wr(buffered) = s.r;
+  // Sample s into row i of the window's columns.
+  void store_sample(Eigen::Index i, const Sample& s) {
+    wt(i) = s.t;
+    wu(i) = s.u;
+    wy(i) = s.y;
+    wr(i) = s.r;
     for (int j = 0; j < further_inputs; ++j)
-      wfu[static_cast<std::size_t>(j)](buffered) = s.further_u[static_cast<std::size_t>(j)];
-    ++buffered;
+      wfu[static_cast<std::size_t>(j)](i) = s.further_u[static_cast<std::size_t>(j)];
   }
+  void buffer_window_sample(const Sample& s) { store_sample(buffered++, s); }
   void keep_history(const Sample& s) {
-    wt(ring_head) = s.t;
-    wu(ring_head) = s.u;
-    wy(ring_head) = s.y;
-    wr(ring_head) = s.r;
-    for (int j = 0; j < further_inputs; ++j)
-      wfu[static_cast<std::size_t>(j)](ring_head) = s.further_u[static_cast<std::size_t>(j)];
+    store_sample(ring_head, s);
     if (++ring_head == wt.size()) ring_head = 0;
     if (history < wt.size()) ++history;
   }
