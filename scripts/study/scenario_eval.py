@@ -12,7 +12,8 @@ event,value,baseline,relative,sigma with event raised|cleared), the flags with
 the fault in meta.json.
 
 It prints tables per class (healthy or fault kind; open or closed loop; rich
-or poor excitation):
+or poor excitation; the fault a step or a ramp; the estimator reset after a
+divergence in the record or not, the refit path and the recursive one):
   - tracking error |x_hat - x| / x of wn and zeta over the modes and samples of
     the class (median and p95, each record-mode weighted alike), outside the
     first memory after the warm-up and the window from the start of a change
@@ -126,7 +127,7 @@ def evaluate(d, max_points):
     res = {"id": meta["id"], "class": meta["class"], "loop": meta["loop"], "excitation": meta["excitation_class"],
            "excitation_type": meta["excitation"]["type"], "K": len(meta["truth"]), "memory_s": M,
            "duration_s": meta["duration_s"], "snr_db": meta["snr_db"], "wnT": meta["wnT"],
-           "resets": int(last[col["resets"]]),
+           "shape": fault["shape"] if fault else None, "resets": int(last[col["resets"]]),
            "low_excitation_share": float(np.mean((flags[keep] & 32) != 0)) if keep.any() else 0.0,
            "modes": [], "samples_used": int(keep.sum())}
     for i, m in enumerate(meta["truth"]):
@@ -298,15 +299,24 @@ def main():
 
 
 def print_tables(results):
-    """The tables by class, loop and excitation and over all records; returns them."""
+    """The tables by class, loop, excitation, the fault's shape and the
+    estimator's path (a divergence reset or none) and over all records;
+    returns them."""
     tables = {}
     healthy_h = sum(r["flags"]["monitored_h"] for r in results if "flags" in r and r["class"] == "healthy")
     print(f"{len(results)} records, {healthy_h:.1f} h of monitored healthy sample time\n")
     for title, key, values in (("class", "class", ("healthy", "stiffness", "damping", "gain")),
                                ("loop", "loop", ("open", "closed")),
-                               ("excitation", "excitation", ("rich", "poor"))):
-        groups = [(v, group_figures([r for r in results if r[key] == v])) for v in values
-                  if any(r[key] == v for r in results)]
+                               ("excitation", "excitation", ("rich", "poor")),
+                               ("fault shape", "shape", ("step", "ramp")),
+                               ("path", "path", ("no reset", "reset"))):
+        def value(r):
+            if key == "path":
+                return "reset" if r["resets"] > 0 else "no reset"
+            return r.get(key)
+
+        groups = [(v, group_figures([r for r in results if value(r) == v])) for v in values
+                  if any(value(r) == v for r in results)]
         tables[title] = dict(groups)
         print_table(title, groups)
     tables["all"] = group_figures(results)
