@@ -41,9 +41,7 @@ prints the tables of all parts together.
 """
 import argparse
 import concurrent.futures
-import itertools
 import json
-import math
 import os
 import subprocess
 import sys
@@ -298,6 +296,13 @@ def main():
             json.dump({"scenarios": results, "tables": tables}, f, indent=1)
 
 
+def group_of(r, key):
+    """A record's group in the table of `key`; "path": whether the estimator reset after a divergence."""
+    if key == "path":
+        return "reset" if r["resets"] > 0 else "no reset"
+    return r.get(key)  # None where an older --json lacks the key (the fault's shape)
+
+
 def print_tables(results):
     """The tables by class, loop, excitation, the fault's shape and the
     estimator's path (a divergence reset or none) and over all records;
@@ -310,13 +315,8 @@ def print_tables(results):
                                ("excitation", "excitation", ("rich", "poor")),
                                ("fault shape", "shape", ("step", "ramp")),
                                ("path", "path", ("no reset", "reset"))):
-        def value(r):
-            if key == "path":
-                return "reset" if r["resets"] > 0 else "no reset"
-            return r.get(key)
-
-        groups = [(v, group_figures([r for r in results if value(r) == v])) for v in values
-                  if any(value(r) == v for r in results)]
+        groups = [(v, group_figures([r for r in results if group_of(r, key) == v])) for v in values
+                  if any(group_of(r, key) == v for r in results)]
         tables[title] = dict(groups)
         print_table(title, groups)
     tables["all"] = group_figures(results)
