@@ -315,8 +315,8 @@ def print_tables(results):
                                ("excitation", "excitation", ("rich", "poor")),
                                ("fault shape", "shape", ("step", "ramp")),
                                ("path", "path", ("no reset", "reset"))):
-        groups = [(v, group_figures([r for r in results if group_of(r, key) == v])) for v in values
-                  if any(group_of(r, key) == v for r in results)]
+        members = {v: [r for r in results if group_of(r, key) == v] for v in values}
+        groups = [(v, group_figures(members[v])) for v in values if members[v]]
         tables[title] = dict(groups)
         print_table(title, groups)
     tables["all"] = group_figures(results)
