@@ -160,7 +160,7 @@ TEST(ConfigErrors, EstimatorKeysAndShape) {
   EXPECT_EQ(unknown,
             "test.yaml:34: key 'estimator.forgetting': unknown key for estimator (allowed: block_iterations, "
             "refinements, update_divisor, warmup, fit_on_warmup, warmup_iterations, initial_covariance_relative, "
-            "random_walk, covariance_bound, stabilisation, min_memory, divergence_ratio, change_ratio, "
+            "random_walk, covariance_bound, stabilisation, min_memory, settled_memory, divergence_ratio, change_ratio, "
             "change_threshold, change_hold, "
             "gap_factor, "
             "outlier_sigma, residual_window, "

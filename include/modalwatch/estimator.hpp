@@ -116,6 +116,19 @@ struct EstimatorSettings {
   double min_memory = 6.0;
   // Per submodel (empty: min_memory for every one), as random_walks.
   std::vector<double> min_memories;
+  // The floor outside a change boost, in the same decay times (never below a
+  // submodel's min_memory): min_memory is then the floor only of the
+  // submodels a change boost names, while they re-converge. Six decay times
+  // keep most modes still, but a mode as lightly damped as its input is
+  // sparse (zeta 0.005 on one line of a multisine, the nearest others 45
+  // half-power bandwidths away) can still wind up with its prefilters there,
+  // and a longer min_memory slows every change's tracking. A submodel held
+  // at this floor is not boosted: lifted from it to min_memory, a mode the
+  // change test names beside the changed one wound up instead. Off by
+  // default: the mode it holds still is slower to follow a drift, and on the
+  // bank it traded one record's false alarms for a longer tail of delays
+  // (README.md). 0: min_memory throughout.
+  double settled_memory = 0.0;
   double divergence_ratio = 10.0;      // residual RMS this many times its last good value: reset
   // A change of the plant that the model no longer fits, long before the error
   // diverges: Page's CUSUM (Basseville & Nikiforov 1993, sec. 2.2) for the

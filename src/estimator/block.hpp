@@ -126,6 +126,8 @@ struct Block {
   // update_divisor T / min_memory (s): 1 - lambda may not exceed this times
   // decay_rate() (EstimatorSettings::min_memory); 0: lambda as configured.
   double forget_per_decay = 0.0;
+  // The same at settled_memory: the floor while the block is not adapting.
+  double settled_forget_per_decay = 0.0;
   ThetaVec scale;            // theta' = scale .* theta (physical)
   ThetaVec theta;            // theta-bar, normalised
   ThetaMat P;                // P-bar, normalised

@@ -45,9 +45,9 @@ bool EstimatorSettings::operator==(const EstimatorSettings& o) const {
          initial_covariance_relative == o.initial_covariance_relative && random_walk == o.random_walk &&
          random_walks == o.random_walks && covariance_bound == o.covariance_bound && stabilisation == o.stabilisation &&
          stabilisations == o.stabilisations && min_memory == o.min_memory && min_memories == o.min_memories &&
-         divergence_ratio == o.divergence_ratio && change_ratio == o.change_ratio &&
-         change_threshold == o.change_threshold && change_hold == o.change_hold && gap_factor == o.gap_factor &&
-         outlier_sigma == o.outlier_sigma && residual_window == o.residual_window &&
+         settled_memory == o.settled_memory && divergence_ratio == o.divergence_ratio &&
+         change_ratio == o.change_ratio && change_threshold == o.change_threshold && change_hold == o.change_hold &&
+         gap_factor == o.gap_factor && outlier_sigma == o.outlier_sigma && residual_window == o.residual_window &&
          low_excitation_ratio == o.low_excitation_ratio && low_excitation_window == o.low_excitation_window;
 }
 
@@ -73,6 +73,8 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.random_walk = cfg.random_walks.empty() ? cfg.random_walk : cfg.random_walks[i];
     const double min_memory = cfg.min_memories.empty() ? cfg.min_memory : cfg.min_memories[i];
     b.forget_per_decay = min_memory > 0.0 ? cfg.update_divisor * T / min_memory : 0.0;
+    b.settled_forget_per_decay =
+        min_memory > 0.0 ? cfg.update_divisor * T / std::max(min_memory, cfg.settled_memory) : 0.0;
     b.set_scale();
     b.theta = s.theta().cwiseProduct(Eigen::VectorXd(b.scale));
     // P(t0): given, from the warm-up fit, or relative to the parameter size.
@@ -188,6 +190,7 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
   check_non_negative(settings.random_walk, settings.random_walks, "random walk");
   check_non_negative(settings.stabilisation, settings.stabilisations, "stabilisation");
   check_non_negative(settings.min_memory, settings.min_memories, "min_memory");
+  check_non_negative(settings.settled_memory, {}, "settled_memory");
   if (settings.block_iterations < 1 || settings.refinements < 0 || settings.update_divisor < 1)
     throw std::invalid_argument("estimator: M_l >= 1, M_s >= 0 and the update divisor >= 1");
   if (settings.closed_loop && settings.controller.empty())

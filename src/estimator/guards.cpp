@@ -221,12 +221,14 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
   for (auto& b : blocks) {
     // No shorter than the memory floor (min_memory decay times): faster, the
     // boosted mode winds up with its own prefilters (on the flexible beam's
-    // lightly damped mode a 1 % step overshot to -8 %).
+    // lightly damped mode a 1 % step overshot to -8 %). Nor from the settled
+    // floor (EstimatorSettings::settled_memory).
     double boost = kChangeBoost, forget = 1.0 - b.lambda;
     const double rate = b.decay_rate();
     if (b.forget_per_decay > 0.0 && rate > 0.0) {
       const double floor_forget = b.forget_per_decay * rate;  // 1 - lambda at the floor
       boost = std::clamp(floor_forget / std::min(forget, floor_forget), 1.0, kChangeBoost);
+      if (forget > b.settled_forget_per_decay * rate) boost = 1.0;
       forget = std::min(forget, floor_forget);
     }
     b.named = !noise_changed && boost > 1.0 && score_test(b) >= kShareOfLargest * largest;

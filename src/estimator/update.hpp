@@ -132,11 +132,13 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
   // In place: on a false return the caller goes back to the last good state.
   double* P = b.P.data();  // nt x nt, column-major
   double* theta = b.theta.data();
-  // Forgetting no faster than min_memory decay times of A (EstimatorSettings::min_memory).
+  // Forgetting no faster than settled_memory decay times of A, min_memory while
+  // re-converging after a change boost (EstimatorSettings::min_memory).
   double lambda = b.lambda;
   if (b.forget_per_decay > 0.0) {
     const double rate = b.decay_rate();
-    if (rate > 0.0) lambda = std::max(lambda, 1.0 - b.forget_per_decay * rate);
+    const double per_decay = b.adapting > 0 ? b.forget_per_decay : b.settled_forget_per_decay;
+    if (rate > 0.0) lambda = std::max(lambda, 1.0 - per_decay * rate);
   }
   b.lambda_now = lambda;
   // phi and psi copied once, for the score test's sums and iv_update: stores
