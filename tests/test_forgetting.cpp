@@ -167,7 +167,7 @@ TEST(RecursiveEstimatorForgetting, AResonantModeWithAMemoryUnderTwoDecayTimesSta
 // often is chaotic: 7 to more than 10 resets, with the step kernel of another
 // CPU or another way out of a reset.
 TEST(RecursiveEstimatorForgetting, WithoutTheMemoryFloorTheResonantModeWindsUp) {
-  const ResonantLineRun run = track_resonant_line(0.0, 0.0);
+  const ResonantLineRun run = track_resonant_line(0.0);
   EXPECT_GE(run.resets, 3u);
   EXPECT_GT(run.worst.zeta, 0.3);
   EXPECT_GT(run.worst.gain, 0.3);

@@ -227,8 +227,8 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
     const double rate = b.decay_rate();
     if (b.forget_per_decay > 0.0 && rate > 0.0) {
       const double floor_forget = b.forget_per_decay * rate;  // 1 - lambda at the floor
-      boost = std::clamp(floor_forget / std::min(forget, floor_forget), 1.0, kChangeBoost);
-      if (forget > b.settled_forget_per_decay * rate) boost = 1.0;
+      const bool at_settled_floor = forget > b.settled_forget_per_decay * rate;
+      boost = at_settled_floor ? 1.0 : std::clamp(floor_forget / std::min(forget, floor_forget), 1.0, kChangeBoost);
       forget = std::min(forget, floor_forget);
     }
     b.named = !noise_changed && boost > 1.0 && score_test(b) >= kShareOfLargest * largest;

@@ -133,7 +133,7 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
   double* P = b.P.data();  // nt x nt, column-major
   double* theta = b.theta.data();
   // Forgetting no faster than settled_memory decay times of A, min_memory while
-  // re-converging after a change boost (EstimatorSettings::min_memory).
+  // re-converging after a change boost (EstimatorSettings::settled_memory).
   double lambda = b.lambda;
   if (b.forget_per_decay > 0.0) {
     const double rate = b.decay_rate();
