@@ -123,11 +123,12 @@ struct EstimatorSettings {
   // sparse (zeta 0.005 on one line of a multisine, the nearest others 45
   // half-power bandwidths away) can still wind up with its prefilters there,
   // and a longer min_memory slows every change's tracking. A submodel held
-  // at this floor is not boosted: lifted from it to min_memory, a mode the
-  // change test names beside the changed one wound up instead. Off by
-  // default: the mode it holds still is slower to follow a drift, and on the
-  // bank it traded one record's false alarms for a longer tail of delays
-  // (README.md). 0: min_memory throughout.
+  // at this floor is not boosted (lifted from it to min_memory, a mode the
+  // change test names beside the changed one wound up instead); an alarm that
+  // boosts no submodel releases the ones it names to min_memory for as long as
+  // a boosted one would re-converge. Off by default: the mode it holds still
+  // follows a drift more slowly, and on the bank it traded one record's false
+  // alarms for a longer tail of delays (README.md). 0: min_memory throughout.
   double settled_memory = 0.0;
   double divergence_ratio = 10.0;      // residual RMS this many times its last good value: reset
   // A change of the plant that the model no longer fits, long before the error

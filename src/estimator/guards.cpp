@@ -222,16 +222,26 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
     // No shorter than the memory floor (min_memory decay times): faster, the
     // boosted mode winds up with its own prefilters (on the flexible beam's
     // lightly damped mode a 1 % step overshot to -8 %). Nor from the settled
-    // floor (EstimatorSettings::settled_memory).
+    // floor (EstimatorSettings::settled_memory). An alarm that boosts no block
+    // releases those held there that the error correlates with: their floor
+    // is min_memory for as long as a boosted block would re-converge, with P
+    // as it is, and they are neither held nor saved as good as the boosted
+    // ones are (so released, on a poorly excited closed loop a healthy mode
+    // took a share of its neighbour's stiffness loss: gain flagged at +95 %).
+    // Beside a boosted block they are held as the others.
     double boost = kChangeBoost, forget = 1.0 - b.lambda;
+    bool release = false;
     const double rate = b.decay_rate();
     if (b.forget_per_decay > 0.0 && rate > 0.0) {
       const double floor_forget = b.forget_per_decay * rate;  // 1 - lambda at the floor
       const bool at_settled_floor = forget > b.settled_forget_per_decay * rate;
+      release = at_settled_floor && b.settled_forget_per_decay < b.forget_per_decay;
       boost = at_settled_floor ? 1.0 : std::clamp(floor_forget / std::min(forget, floor_forget), 1.0, kChangeBoost);
       forget = std::min(forget, floor_forget);
     }
-    b.named = !noise_changed && boost > 1.0 && score_test(b) >= kShareOfLargest * largest;
+    const bool scored = !noise_changed && score_test(b) >= kShareOfLargest * largest;
+    b.named = scored && boost > 1.0;
+    b.release_for = scored && release ? static_cast<std::uint64_t>(cfg.change_hold / forget) : 0;
     if (b.named) {
       boosted = true;
       b.P *= boost;
@@ -248,8 +258,13 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
     b.score.setZero();
     b.score_info.setZero();
   }
-  for (auto& b : blocks)
+  for (auto& b : blocks) {
+    if (boosted)  // the releases of earlier alarms end; the boosts' re-convergence does not
+      b.min_floor_until = status.updates + b.adapting;
+    else if (b.release_for > 0)
+      b.min_floor_until = std::max(b.min_floor_until, status.updates + b.release_for);
     if (!b.named && b.adapting == 0) b.held = std::max(b.held, hold);
+  }
   if (boosted) joint.clear();
   rearm = static_cast<std::uint64_t>(kWait / (1.0 - e_alpha));
   if (boosted) ++status.boosts;
@@ -277,7 +292,7 @@ bool RecursiveEstimator::Impl::restore_sign_flipped_modes() {
     if (!(gain * good < 0.0 && std::abs(good) > kSignSigmas * good_std)) continue;
     b.theta = b.good_theta;
     b.P = b.good_P;
-    b.adapting = 0;
+    b.adapting = b.min_floor_until = 0;
     b.drop_lift();
     b.held = std::max(b.held, adapting);
     rediscretise(b);
@@ -289,7 +304,7 @@ bool RecursiveEstimator::Impl::restore_sign_flipped_modes() {
 
 void RecursiveEstimator::Impl::restore_good(const char* reason) {
   for (auto& b : blocks) {
-    b.held = b.adapting = 0;
+    b.held = b.adapting = b.min_floor_until = 0;
     b.drop_lift();
     b.theta = b.good_theta;
     b.P = b.good_P;

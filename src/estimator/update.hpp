@@ -133,11 +133,12 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
   double* P = b.P.data();  // nt x nt, column-major
   double* theta = b.theta.data();
   // Forgetting no faster than settled_memory decay times of A, min_memory while
-  // re-converging after a change boost (EstimatorSettings::settled_memory).
+  // re-converging after a change boost or released from the settled floor
+  // (EstimatorSettings::settled_memory, boost_changed_blocks).
   double lambda = b.lambda;
   if (b.forget_per_decay > 0.0) {
     const double rate = b.decay_rate();
-    const double per_decay = b.adapting > 0 ? b.forget_per_decay : b.settled_forget_per_decay;
+    const double per_decay = status.updates < b.min_floor_until ? b.forget_per_decay : b.settled_forget_per_decay;
     if (rate > 0.0) lambda = std::max(lambda, 1.0 - per_decay * rate);
   }
   b.lambda_now = lambda;
