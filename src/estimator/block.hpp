@@ -173,10 +173,9 @@ struct Block {
   // re-converge (held), or during which it re-converges itself (adapting).
   bool named = false;
   // Until this many updates (EstimatorStatus::updates) its floor is
-  // min_memory, not the settled floor: while it adapts, or when an alarm that
-  // boosted no block released it (boost_changed_blocks, whose scratch
-  // release_for is: the updates the current alarm would release it for).
-  std::uint64_t min_floor_until = 0, release_for = 0;
+  // min_memory, not the settled floor: while it adapts, or after an alarm
+  // that boosted no block released it (boost_changed_blocks).
+  std::uint64_t min_floor_until = 0;
   std::uint64_t held = 0, adapting = 0;
 
   // Decay rate (1/s) of the slowest pole of A when A is of first or second

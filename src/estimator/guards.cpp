@@ -226,9 +226,9 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
     // releases those held there that the error correlates with: their floor
     // is min_memory for as long as a boosted block would re-converge, with P
     // as it is, and they are neither held nor saved as good as the boosted
-    // ones are (so released, on a poorly excited closed loop a healthy mode
-    // took a share of its neighbour's stiffness loss: gain flagged at +95 %).
-    // Beside a boosted block they are held as the others.
+    // ones are (released so, a healthy mode of a poorly excited closed loop
+    // took a share of its neighbour's stiffness loss). Beside a boosted block
+    // they are held as the others.
     double boost = kChangeBoost, forget = 1.0 - b.lambda;
     bool release = false;
     const double rate = b.decay_rate();
@@ -241,7 +241,9 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
     }
     const bool scored = !noise_changed && score_test(b) >= kShareOfLargest * largest;
     b.named = scored && boost > 1.0;
-    b.release_for = scored && release ? static_cast<std::uint64_t>(cfg.change_hold / forget) : 0;
+    if (scored && release)  // kept only if no block is boosted (below)
+      b.min_floor_until =
+          std::max(b.min_floor_until, status.updates + static_cast<std::uint64_t>(cfg.change_hold / forget));
     if (b.named) {
       boosted = true;
       b.P *= boost;
@@ -259,10 +261,7 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
     b.score_info.setZero();
   }
   for (auto& b : blocks) {
-    if (boosted)  // the releases of earlier alarms end; the boosts' re-convergence does not
-      b.min_floor_until = status.updates + b.adapting;
-    else if (b.release_for > 0)
-      b.min_floor_until = std::max(b.min_floor_until, status.updates + b.release_for);
+    if (boosted) b.min_floor_until = status.updates + b.adapting;  // releases end, re-convergence does not
     if (!b.named && b.adapting == 0) b.held = std::max(b.held, hold);
   }
   if (boosted) joint.clear();
