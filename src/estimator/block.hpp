@@ -157,6 +157,10 @@ struct Block {
   // information K nt (1 - lambda) / P_ref_j forgotten over those updates.
   ThetaVec ref_var;
   BlockFilters filters;
+  // phi^T P psi / (lambda + phi^T P psi) of the last update: how much of the
+  // error it took into theta (near 1 at a start or after a boost, about nt over
+  // the memory once settled).
+  double update_gain = 1.0;
   double xu = 0.0, xz = 0.0;  // B/(p^l A) driven by u and by z, at t_k
   ThetaVec good_theta;
   ThetaMat good_P;

@@ -15,8 +15,11 @@
 
 namespace modalwatch {
 
+// At rest, and discretised for the current theta (after an update they may be
+// one update behind it).
 void RecursiveEstimator::Impl::reset_filters() {
   for (auto& b : blocks) {
+    rediscretise(b);
     b.filters.reset();
     b.xu = b.xz = 0.0;
   }

@@ -257,8 +257,17 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
   if (!refine) {
     // M_l = 1, M_s = 0 (the paper's setting): one update per block from
     // theta-bar, P-bar in place, and the block's prefilters re-discretised for
-    // the next sample (this sample is done with them).
-    for (auto& b : blocks) {
+    // the next sample (this sample is done with them). Once the updates take a
+    // small part of the error into theta (update_gain), every other update, the
+    // blocks in turn: A then moves by a small part of its uncertainty over one
+    // update, and the discretisation is the largest part of the per-sample
+    // cost. While they take a large part (a start, a change boost) the prefilter
+    // follows every update: a lagging one closes a delayed loop from theta back
+    // into the regressors, which a lightly damped mode near the Nyquist rate
+    // does not survive. Every reset or restore re-discretises at once.
+    constexpr double kLaggingGain = 0.01;
+    for (std::size_t i = 0; i < blocks.size(); ++i) {
+      Block& b = blocks[i];
       const double y_tilde = y - (xu_sum - b.xu);
       const double* dy = b.filters.take(kY, y_tilde);
       const double* dx = b.filters.take(kX, b.xz);
@@ -272,7 +281,7 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
       const double xu = b.output(du);
       xu_sum += xu - b.xu;
       b.xu = xu;
-      rediscretise(b);
+      if (std::abs(b.update_gain) > kLaggingGain || ((status.updates + i) & 1) == 0) rediscretise(b);
     }
     return flags | finish_update();
   }

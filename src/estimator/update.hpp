@@ -51,9 +51,9 @@ bool project(double* a_part, int n) {
 
 // eqs. (23)-(25) on raw column-major storage (P is nt x nt, leading dimension nt):
 // K = P psi / (lambda + phi^T P psi), theta += K eps with eps = y_f - phi^T theta,
-// P = (P - K phi^T P) / lambda. The IV recursion (eq. 24) does not keep P
-// symmetric; its symmetric part is kept, against round-off that would
-// otherwise make P indefinite over millions of updates:
+// P = (P - K phi^T P) / lambda, and update_gain = phi^T K. The IV recursion
+// (eq. 24) does not keep P symmetric; its symmetric part is kept, against
+// round-off that would otherwise make P indefinite over millions of updates:
 // P = (P - (K w^T + w K^T)/2) / lambda with w = P^T phi = P phi (P symmetric on
 // entry), computed on the upper triangle and mirrored. N > 0 fixes the size at
 // compile time so that the loops unroll (N = 3: a mode, the common case); N = 0
@@ -61,7 +61,7 @@ bool project(double* a_part, int n) {
 // the block's, every store to theta or P could alias them and force reloads.
 template <int N>
 MODALWATCH_HOT bool iv_update(int nt_runtime, double* P, double* theta, const double* phi, const double* psi,
-                              double lambda, double eps) {
+                              double lambda, double eps, double& update_gain) {
   const int nt = N > 0 ? N : nt_runtime;
   double Ppsi[kMaxTheta], w[kMaxTheta];
   for (int i = 0; i < nt; ++i) Ppsi[i] = w[i] = 0.0;
@@ -75,6 +75,7 @@ MODALWATCH_HOT bool iv_update(int nt_runtime, double* P, double* theta, const do
   double denom = lambda;
   for (int i = 0; i < nt; ++i) denom += phi[i] * Ppsi[i];
   if (!std::isfinite(denom) || std::abs(denom) < 1e-300) return false;
+  update_gain = 1.0 - lambda / denom;
   const double inv_lambda = 1.0 / lambda;
   double K_half[kMaxTheta];  // K / 2 (exact): the symmetric part's 1/2 taken once
   for (int i = 0; i < nt; ++i) {
@@ -160,7 +161,7 @@ inline bool RecursiveEstimator::Impl::update_block_n(detail::Block& b, double y_
       for (int i = 0; i <= j; ++i) info[i + j * nt] = rho * info[i + j * nt] + psi[i] * psi[j];
   }
   if (b.held > 0) return true;  // another block re-converges after a change (boost_changed_blocks)
-  if (!iv_update<N>(nt, P, theta, phi, psi, lambda, eps)) return false;
+  if (!iv_update<N>(nt, P, theta, phi, psi, lambda, eps, b.update_gain)) return false;
   // Stabilised forgetting on one block per update and one of its coordinates
   // per round, in turn (the same for every refinement of a sample), with K nt
   // times the information per update (set_reference_variance). P_ref needs
