@@ -49,7 +49,7 @@ struct Discretization {
 Discretization discretize(const Eigen::Ref<const Eigen::VectorXd>& denominator, double T, Hold hold);
 
 // The closed form for N = 2, d_0 != 0, as plain numbers (discretize_second_order
-// below): for callers that re-discretise at every sample (the recursive
+// below): for callers that re-discretise as often as theta moves (the recursive
 // estimator's modes), where Eigen's dynamic-size storage costs more than the
 // arithmetic. discretize() returns exactly these numbers for such a D. gamma1
 // is the FOH term (a ZOH caller ignores it). Unchecked: d_0 != 0, d_2 != 0 and

@@ -26,7 +26,7 @@ enum Channel { kY = 0, kX = 1, kU = 2, kZ = 3 };
 // (ZOH) filters all four signals through 1/A(p) with the same hold, so one
 // discretisation serves them (the signal enters only through the held input,
 // so the filter's matrices are the same for all four): a SecondOrderFilterBank,
-// re-discretised in place at every update (the estimator's inner loop).
+// re-discretised in place as theta moves (the estimator's inner loop).
 // Otherwise four Prefilters (rigid-body submodels, FOH output, other orders).
 struct BlockFilters {
   bool shared = false;

@@ -1,13 +1,13 @@
 #pragma once
 // A mode's four prefilters sharing one discretisation (private to the
-// estimator, which re-discretises them at every update).
+// estimator, which re-discretises them as theta moves).
 #include "modalwatch/prefilter.hpp"
 
 namespace modalwatch::detail {
 
 // Prefilters 1/D(p) of one second-order D = d0 + d1 p + d2 p^2 (d0, d2 != 0)
 // on kSignals held (ZOH) signals, sharing one discretisation: a mode's four
-// prefilters in the recursive estimator, re-discretised at every update. Fixed
+// prefilters in the recursive estimator, re-discretised as theta moves. Fixed
 // size, the discretisation computed in place and never copied. The arithmetic
 // is a Prefilter's per signal, in the same order, but for the top derivative:
 // a product with 1/d2 in place of a division by d2 (equal to round-off).
