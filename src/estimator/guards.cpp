@@ -310,7 +310,6 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
     b.drop_lift();
     b.theta = b.good_theta;
     b.P = b.good_P;
-    rediscretise(b);
   }
   joint.restore_good();
   noise_at_reset = noise_at_reset > 0.0 ? std::min(noise_at_reset, e_var_good) : e_var_good;
@@ -320,7 +319,7 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
   // (after a hundred residuals, as at the start).
   e_var = e_var_good;
   e_count = 1;
-  restart_filters();
+  restart_filters();  // at rest, discretised for the restored theta
   // Give the restored state one residual window before judging it again.
   rearm = static_cast<std::uint64_t>(1.0 / (1.0 - e_alpha));
   if (reason == kResetDiverged && may_refit()) {
