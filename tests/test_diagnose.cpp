@@ -20,6 +20,7 @@
 #include "modalwatch/initial_modes.hpp"
 #include "modalwatch/io/config.hpp"
 #include "modalwatch/io/records.hpp"
+#include "modalwatch/model_order.hpp"
 #include "modalwatch/simulator.hpp"
 
 namespace modalwatch {
@@ -628,6 +629,34 @@ TEST(DiagnoseMeasured, RobotArmNeedsComplexModesAndAFeedthrough) {
       EXPECT_GT(s.a(0), 0.0) << s.name << " is not damped";
     }
   }
+}
+
+// HSM150 servo rig: the speed after two torque steps, from rest (0.05 N m,
+// then 0.065 N m at 10 s). No resonance: the start is the non-resonant
+// structure of least BIC, a lag of one pole, and diagnose adds the Coulomb
+// friction of the motor (the record's steady speeds, 139.0 and 306.5 rad/s,
+// give an affine torque-speed relation with an intercept of about 0.037 N m).
+TEST(DiagnoseMeasured, Hsm150StepStartsFromALagAndFindsCoulombFriction) {
+  SKIP_WITHOUT_SHARED("hsm150_ident_step_pos_0.065_2.csv");
+  const Record full = read_record(kShared + "/hsm150_ident_step_pos_0.065_2.csv");
+  const Record est = full.segment(0, 14000);
+  SrivcOptions fit;
+  fit.best_cycle = true;
+  const NonResonantStart start = choose_non_resonant_start(est, resolving_response(est, false), fit);
+  ASSERT_EQ(start.structure, "a lag of one pole");
+  AdditiveModel initial;
+  initial.submodels = {start.submodel};
+  DiagnoseOptions options;
+  options.max_steps = 1;
+  options.validation_lead_in = 14000;  // the model run through the estimation part
+  const DiagnoseResult r = diagnose(est, full, initial, LoopSpec{}, options);
+  for (const auto& s : r.steps)
+    std::printf("hsm150 step: %-8s est rms %.4g, val rms %.4g rad/s\n", s.effect.c_str(), s.estimation_rms,
+                s.validation_rms);
+  ASSERT_EQ(r.steps.size(), 2u) << r.stop_reason;
+  EXPECT_EQ(r.steps[1].effect, "coulomb");
+  EXPECT_NEAR(param(r.steps[1], "fc"), 0.037, 0.1 * 0.037);
+  EXPECT_LT(r.steps[1].estimation_rms, 0.2 * r.steps[0].estimation_rms);
 }
 
 // F-16 ground vibration test, level 1: the model declares 2 of the modes;

@@ -181,6 +181,25 @@ TEST(NonResonantStart, AFreeMassStartsFromARigidBody) {
   }
 }
 
+// A static gain under a measured white-noise input (read as foh: a held
+// input's half-sample delay is not in y = b0 u): the feedthrough is the
+// closest structure by far, with its gain.
+TEST(NonResonantStart, AStaticGainStartsFromAFeedthrough) {
+  Record r;
+  const Eigen::Index n = 10000;
+  r.t = Eigen::VectorXd::LinSpaced(n, 0.0, 0.01 * static_cast<double>(n - 1));
+  r.u = test_support::white_noise(n, 3);
+  r.y = 2.5 * r.u + 0.05 * test_support::white_noise(n, 4);
+  const std::vector<NonResonantStart> starts = non_resonant_starts(resolving_response(r, false, Hold::foh));
+  ASSERT_FALSE(starts.empty());
+  for (const NonResonantStart& s : starts)
+    std::printf("%s: relative error %.4f\n", s.structure.c_str(), s.relative_error);
+  EXPECT_EQ(starts.front().structure, "a feedthrough b0");
+  EXPECT_TRUE(starts.front().submodel.is_feedthrough());
+  EXPECT_NEAR(starts.front().submodel.b(0), 2.5, 0.05);
+  EXPECT_LT(starts.front().relative_error, 0.05);
+}
+
 TEST(InitialModes, FewerPeaksThanAskedWhenTheDataShowFewer) {
   const std::vector<ModalParameters> truth{{2 * kPi * 5.0, 0.03, 0.06}};
   const auto sim = simulate(plant_of(truth, 40.0), experiment(0.01, 100.0, 2));

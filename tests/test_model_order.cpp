@@ -98,6 +98,49 @@ TEST(ModelOrder, TwoModesInClosedLoop) {
   expect_chosen(s, truth);
 }
 
+// A motor's speed after two torque steps, as on a servo rig: the lag
+// K / (1 + tau p) from rest, a step at t = 0 and another at half time. The
+// steps' energy lies below the first bins of the Welch estimate, so the
+// structure is told by its fit: the lag of one pole, whose fit finds tau and K.
+// Read as a velocity it is the same lag, a rigid body b0 / (p (1 + tau p)) in
+// position.
+TEST(NonResonantStructure, TwoStepsOnAMotorsSpeedChooseALagOfOnePole) {
+  const double T = 0.001, tau = 0.5, K = 2000.0;
+  const Eigen::Index n = 20000;
+  Record r;
+  r.t = Eigen::VectorXd::LinSpaced(n, 0.0, T * static_cast<double>(n - 1));
+  r.u = (r.t.array() < 10.0).select(Eigen::VectorXd::Constant(n, 0.05), 0.065);
+  for (const int z : {0, 1}) {
+    Submodel truth;
+    truth.name = "lag";
+    truth.n = 1;
+    truth.rigid_poles = z;
+    truth.output_derivatives = z;
+    truth.a = Eigen::VectorXd::Constant(1, tau);
+    truth.b = Eigen::VectorXd::Constant(1, K);
+    AdditiveModel plant;
+    plant.submodels = {truth};
+    r.y = simulate_model(plant, r) + 0.5 * test_support::white_noise(n, 11);  // speeds of 100 to 130
+    SrivcOptions options;
+    options.best_cycle = true;
+    std::vector<std::pair<std::string, double>> bic;
+    const NonResonantStart start = choose_non_resonant_start(r, resolving_response(r, false), options, z, &bic);
+    for (const auto& [structure, b] : bic) std::printf("z %d: %s: BIC %.1f\n", z, structure.c_str(), b);
+    ASSERT_EQ(start.structure, "a lag of one pole") << z;
+    EXPECT_EQ(start.submodel.rigid_poles, z);
+    AdditiveModel model;
+    model.submodels = {start.submodel};
+    std::vector<ModeFinding> findings;
+    const FitResult fit = fit_physical(r, model, options, findings);
+    ASSERT_EQ(fit.model.submodels.size(), 1u);
+    const Submodel& s = fit.model.submodels[0];
+    ASSERT_EQ(s.n, 1);
+    std::printf("z %d: tau %.4f s, K %.1f (truth %.1f, %.1f)\n", z, s.a(0), s.b(0), tau, K);
+    EXPECT_NEAR(s.a(0), tau, 0.01 * tau) << z;
+    EXPECT_NEAR(s.b(0), K, 0.01 * K) << z;
+  }
+}
+
 TEST(ModelOrder, AtLeastOneModeIsAsked) {
   const auto sim =
       simulate(test_support::plant_of({mode_at(6.0, 0.03, 1.0)}, 30.0), test_support::open_loop_prbs(kT, 20.0, 1));

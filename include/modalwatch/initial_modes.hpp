@@ -102,20 +102,26 @@ AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOpt
                             const std::vector<std::string>& inputs = {}, int output_derivatives = 0);
 // A record whose response shows no resonance peak (a lag, a stage under
 // position feedback, a step on a rigid body) still has a start: the one of a
-// feedthrough b0 (position sensor only), a rigid body b0/p or b0/p^2, or a lag
-// of two poles b0 / (p^2/wn^2 + 2 zeta/wn p + 1) with zeta >= 0.7 and wn on a
-// grid over the band, whose response (b0 fitted) is closest to H over the
+// feedthrough b0 (position sensor only), a rigid body b0/p or b0/p^2, a lag of
+// one pole measured as b0 / (1 + p/wc) (b0 / (p^z (1 + p/wc)) in position, z
+// the output's derivatives: a motor's speed is a lag), or a lag of two poles
+// b0 / (p^2/wn^2 + 2 zeta/wn p + 1) with zeta >= 0.7, wc and wn on a grid
+// over the band, whose response (b0 fitted) is closest to H over the
 // excited band in relative terms and per decade, sum gamma^2 |H - G|^2 / (|H|^2 f)
 // with the squared coherence gamma^2 discounting the bins noise makes. One input only: with
 // several, or a band of fewer than three bins, `structure` is empty.
 struct NonResonantStart {
   Submodel submodel;
-  std::string structure;                // which of the four, in words; empty: none
+  std::string structure;                // which of the five, in words; empty: none
   double relative_error = 0.0;          // RMS of |H - G| / |H| over the band, so weighted
   std::array<double, 2> band_hz{0, 0};  // the excited band it was fitted over
 };
 NonResonantStart non_resonant_start(const FrequencyResponse& h, const PeakOptions& options = {},
                                     int output_derivatives = 0);
+// The closest of each structure, closest first (the first is non_resonant_start's);
+// empty where non_resonant_start has none.
+std::vector<NonResonantStart> non_resonant_starts(const FrequencyResponse& h, const PeakOptions& options = {},
+                                                  int output_derivatives = 0);
 
 // The same from a record's resolving_response (held input).
 AdditiveModel initial_modes(const Record& data, int count, bool closed_loop, const PeakOptions& options = {},

@@ -13,6 +13,7 @@
 // made moves from order to order.
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "modalwatch/initial_modes.hpp"
@@ -63,5 +64,17 @@ struct OrderSelection {
 // are taken from the record after options.settle_samples. Throws
 // std::invalid_argument when max_modes < 1.
 OrderSelection select_order(const Record& data, const SrivcOptions& options, const OrderOptions& order = {});
+
+// A record whose frequency response shows no resonance peak: each structure of
+// non_resonant_starts (h the record's estimate) fitted with `options` and made
+// physical, and the start whose fit has the least BIC. The estimate alone
+// does not tell the structures apart where it is poor: a step's energy lies
+// below the first bins of a Welch estimate, whose Hann windows over the step
+// make them. `fitted_bic` holds each structure's BIC, closest first as
+// non_resonant_starts orders them (infinite for a fit that failed); the
+// returned start's structure is empty when there is none.
+NonResonantStart choose_non_resonant_start(const Record& data, const FrequencyResponse& h, const SrivcOptions& options,
+                                           int output_derivatives = 0,
+                                           std::vector<std::pair<std::string, double>>* fitted_bic = nullptr);
 
 }  // namespace modalwatch

@@ -178,7 +178,9 @@ def modes_text(step):
     for s in step["submodels"]:
         if s["kind"] == "mode":
             continue
-        if s["rigid_poles"]:
+        if len(s["a"]) == 1 and s["a"][0] > 0:  # a lag of one pole: its corner 1 / (2 pi a1)
+            out.append(("rigid body, " if s["rigid_poles"] else "") + f"lag {1 / (2 * math.pi * s['a'][0]):.4g}")
+        elif s["rigid_poles"]:
             out.append("rigid body")
         elif not s["a"]:
             out.append("feedthrough")

@@ -167,10 +167,9 @@ int fit(const FitArgs& args) {
       std::printf("\n");
     } else {
       const AdditiveModel start =
-          modes
-              ? modes_from_data(data.segment(settle, used), *modes, config.closed_loop, args.data, in_samples,
-                                config.model.inputs.empty() ? inputs : config.model.inputs, output, options.input_hold)
-              : config.model;
+          modes ? modes_from_data(data.segment(settle, used), *modes, options, args.data, in_samples,
+                                  config.model.inputs.empty() ? inputs : config.model.inputs, output)
+                : config.model;
       options.output_hold = output_hold(config, start, T);
       result = fit_physical(data, start, options, findings);
     }

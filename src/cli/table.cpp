@@ -7,6 +7,7 @@
 
 #include "modalwatch/error.hpp"
 #include "modalwatch/initial_modes.hpp"
+#include "modalwatch/model_order.hpp"
 #include "modalwatch/srivc.hpp"
 #include "record_columns.hpp"
 
@@ -20,21 +21,26 @@ void print_physical_findings(const std::vector<ModeFinding>& findings) {
   }
 }
 
-AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name,
-                              bool in_samples, const std::vector<std::string>& inputs, int output_derivatives,
-                              Hold input) {
-  const FrequencyResponse h = resolving_response(data, closed_loop, input);
+AdditiveModel modes_from_data(const Record& data, int count, const SrivcOptions& fit, const std::string& data_name,
+                              bool in_samples, const std::vector<std::string>& inputs, int output_derivatives) {
+  const bool closed_loop = fit.closed_loop;
+  const FrequencyResponse h = resolving_response(data, closed_loop, fit.input_hold);
   AdditiveModel start = initial_modes(h, count, {}, inputs, output_derivatives);
   if (start.submodels.empty()) {
-    const NonResonantStart lag = non_resonant_start(h, {}, output_derivatives);
+    SrivcOptions from_start = fit;
+    from_start.settle_samples = 0;
+    std::vector<std::pair<std::string, double>> bic;
+    const NonResonantStart lag = choose_non_resonant_start(data, h, from_start, output_derivatives, &bic);
     if (lag.structure.empty())
       throw InputError(data_name, "no resonance peak in the frequency response estimate" +
                                       std::string(data.inputs() > 1 ? " (several inputs)" : "") +
                                       ": no mode to start from");
     std::printf(
-        "WARNING: no resonance peak in the frequency response estimate: starting from %s, the closest "
-        "non-resonant response to it over %.4g..%.4g %s (relative RMS error %.2g)\n",
-        lag.structure.c_str(), lag.band_hz[0], lag.band_hz[1], frequency_unit(in_samples), lag.relative_error);
+        "WARNING: no resonance peak in the frequency response estimate over %.4g..%.4g %s: starting from %s "
+        "(relative RMS error to it %.2g), the non-resonant structure whose fit has the least BIC:",
+        lag.band_hz[0], lag.band_hz[1], frequency_unit(in_samples), lag.structure.c_str(), lag.relative_error);
+    for (const auto& [structure, b] : bic) std::printf(" %s %.6g;", structure.c_str(), b);
+    std::printf("\n");
     start.submodels.push_back(lag.submodel);
     return start;
   }

@@ -29,11 +29,12 @@ void print_physical_findings(const std::vector<ModeFinding>& findings);
 // Throws InputError (naming `data`) when they show none. With several inputs
 // in the record each mode is one submodel per input, the model's inputs named
 // `inputs`.
-// `output_derivatives`: what the sensor measures (output_kind below); `input`:
-// how the input behaves between samples, as the fit takes it.
-AdditiveModel modes_from_data(const Record& data, int count, bool closed_loop, const std::string& data_name,
-                              bool in_samples, const std::vector<std::string>& inputs = {}, int output_derivatives = 0,
-                              Hold input = Hold::zoh);
+// `output_derivatives`: what the sensor measures (output_kind below); `fit`:
+// the loop, controller and holds of the fit that follows (its settle_samples
+// ignored: `data` is the part the fit estimates from), which also fits each
+// non-resonant structure when the data show no resonance peak.
+AdditiveModel modes_from_data(const Record& data, int count, const SrivcOptions& fit, const std::string& data_name,
+                              bool in_samples, const std::vector<std::string>& inputs = {}, int output_derivatives = 0);
 
 // What the sensor measures as z (Submodel::output_derivatives): `--output`
 // when given, else model.output. `--output` is for modes started from the data

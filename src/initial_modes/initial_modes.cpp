@@ -312,8 +312,9 @@ AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOpt
   return model;
 }
 
-NonResonantStart non_resonant_start(const FrequencyResponse& h, const PeakOptions& options, int output_derivatives) {
-  NonResonantStart out;
+std::vector<NonResonantStart> non_resonant_starts(const FrequencyResponse& h, const PeakOptions& options,
+                                                  int output_derivatives) {
+  std::vector<NonResonantStart> out;
   Eigen::Index first = -1, last = -1;
   if (h.inputs() != 1 || !excited_band(h, options, first, last)) return out;
   const int z = output_derivatives;
@@ -342,23 +343,48 @@ NonResonantStart non_resonant_start(const FrequencyResponse& h, const PeakOption
       e += weight(k - first) * std::norm(h.response(k) - b0 * g(kTwoPi * h.frequency_hz(k)));
     return total > 0.0 ? e / total : std::numeric_limits<double>::infinity();
   };
-  double best = std::numeric_limits<double>::infinity();
+  // The best of each structure.
   auto consider = [&](double e, Submodel s, std::string what) {
-    if (!(e < best) || !(s.b(0) != 0.0)) return;
-    best = e;
-    out.submodel = std::move(s);
-    out.structure = std::move(what);
+    if (!(e < std::numeric_limits<double>::infinity()) || !(s.b(0) != 0.0)) return;
+    auto same = std::find_if(out.begin(), out.end(), [&](const NonResonantStart& o) { return o.structure == what; });
+    if (same == out.end())
+      same = out.insert(out.end(), NonResonantStart{});
+    else if (!(e < same->relative_error * same->relative_error))
+      return;
+    same->submodel = std::move(s);
+    same->structure = std::move(what);
+    same->relative_error = std::sqrt(e);
+    same->band_hz = {h.frequency_hz(first), h.frequency_hz(last)};
   };
   double b0 = 0.0;
-  if (z == 0) consider(fit([](double) { return C(1.0); }, b0), make_rigid_body("direct", b0, 0), "a feedthrough b0");
+  if (z == 0) {
+    const double e = fit([](double) { return C(1.0); }, b0);  // before b0 is read
+    consider(e, make_rigid_body("direct", b0, 0), "a feedthrough b0");
+  }
   for (const int l : {1, 2}) {
     const double e = fit([&](double w) { return std::pow(C(0.0, w), z - l); }, b0);
     consider(e, make_rigid_body("rigid", b0, l, z), l == 1 ? "a rigid body b0/p" : "a rigid body b0/p^2");
   }
-  // A lag of two real (or critically damped) poles, its corner on a grid
-  // from a decade below the band to a decade above it.
+  // A lag of one pole, or of two real (or critically damped) poles, its
+  // corner on a grid from a decade below the band to a decade above it.
   const double w_lo = 0.1 * kTwoPi * h.frequency_hz(first), w_hi = 10.0 * kTwoPi * h.frequency_hz(last);
   constexpr int kGrid = 121;
+  // The lag of one pole is measured as b0 / (1 + p / wc) whatever the sensor:
+  // a position lag, a motor's speed (b0 / (p (1 + p / wc)) read as velocity), a
+  // mass behind an actuator's lag read as acceleration.
+  for (int i = 0; i < kGrid; ++i) {
+    const double wc = w_lo * std::pow(w_hi / w_lo, static_cast<double>(i) / (kGrid - 1));
+    const double e = fit([&](double w) { return 1.0 / C(1.0, w / wc); }, b0);
+    Submodel lag;
+    lag.name = "lag";
+    lag.n = 1;
+    lag.m = 0;
+    lag.rigid_poles = z;
+    lag.output_derivatives = z;
+    lag.a = Eigen::VectorXd::Constant(1, 1.0 / wc);
+    lag.b = Eigen::VectorXd::Constant(1, b0);
+    consider(e, std::move(lag), "a lag of one pole");
+  }
   for (const double zeta : {0.7, 1.0, 2.0, 5.0})
     for (int i = 0; i < kGrid; ++i) {
       const double wn = w_lo * std::pow(w_hi / w_lo, static_cast<double>(i) / (kGrid - 1));
@@ -366,9 +392,15 @@ NonResonantStart non_resonant_start(const FrequencyResponse& h, const PeakOption
           fit([&](double w) { return std::pow(C(0.0, w), z) / C(1.0 - w * w / (wn * wn), 2.0 * zeta * w / wn); }, b0);
       consider(e, make_mode("mode1", {wn, zeta, b0}, z), "a lag of two poles (zeta >= 0.7)");
     }
-  if (std::isfinite(best)) out.relative_error = std::sqrt(best);
-  out.band_hz = {h.frequency_hz(first), h.frequency_hz(last)};
+  std::stable_sort(out.begin(), out.end(), [](const NonResonantStart& a, const NonResonantStart& b) {
+    return a.relative_error < b.relative_error;
+  });
   return out;
+}
+
+NonResonantStart non_resonant_start(const FrequencyResponse& h, const PeakOptions& options, int output_derivatives) {
+  std::vector<NonResonantStart> starts = non_resonant_starts(h, options, output_derivatives);
+  return starts.empty() ? NonResonantStart{} : std::move(starts.front());
 }
 
 }  // namespace modalwatch

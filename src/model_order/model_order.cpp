@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 namespace modalwatch {
@@ -32,6 +33,14 @@ std::vector<StabilisedMode> stabilise(const std::vector<ModalParameters>& modes,
   return out;
 }
 
+// BIC = N ln(sigma^2) + k ln N; infinite for a failed fit. A shared A(p) is
+// one set of parameters, however many inputs see it.
+double bic_of(const FitResult& fit, double N) {
+  if (!(std::isfinite(fit.noise_variance) && fit.noise_variance > 0.0 && fit.model.beta().allFinite()))
+    return std::numeric_limits<double>::infinity();
+  return N * std::log(fit.noise_variance) + static_cast<double>(free_beta(fit.model).size()) * std::log(N);
+}
+
 }  // namespace
 
 OrderSelection select_order(const Record& data, const SrivcOptions& options, const OrderOptions& order) {
@@ -52,10 +61,7 @@ OrderSelection select_order(const Record& data, const SrivcOptions& options, con
     } catch (const std::invalid_argument&) {
       break;  // too few samples for this many parameters
     }
-    const double N = static_cast<double>(used.size());
-    if (std::isfinite(f.fit.noise_variance) && f.fit.noise_variance > 0.0 && f.fit.model.beta().allFinite())
-      // A shared A(p) is one set of parameters, however many inputs see it.
-      f.bic = N * std::log(f.fit.noise_variance) + static_cast<double>(free_beta(f.fit.model).size()) * std::log(N);
+    f.bic = bic_of(f.fit, static_cast<double>(used.size()));
     f.diagram = stabilise(modes_of(f.fit.model),
                           out.orders.empty() ? std::vector<StabilisedMode>{} : out.orders.back().diagram, order);
     out.orders.push_back(std::move(f));
@@ -70,6 +76,33 @@ OrderSelection select_order(const Record& data, const SrivcOptions& options, con
     if (out.chosen < 0 || o.bic < out.orders[static_cast<std::size_t>(out.chosen)].bic) out.chosen = i;
   }
   return out;
+}
+
+NonResonantStart choose_non_resonant_start(const Record& data, const FrequencyResponse& h, const SrivcOptions& options,
+                                           int output_derivatives,
+                                           std::vector<std::pair<std::string, double>>* fitted_bic) {
+  std::vector<NonResonantStart> starts = non_resonant_starts(h, {}, output_derivatives);
+  const Eigen::Index settle = std::min<Eigen::Index>(options.settle_samples, data.size());
+  const double N = static_cast<double>(data.size() - settle);
+  int chosen = -1;
+  double least = std::numeric_limits<double>::infinity();
+  for (int i = 0; i < static_cast<int>(starts.size()); ++i) {
+    AdditiveModel start;
+    start.submodels = {starts[static_cast<std::size_t>(i)].submodel};
+    double bic = std::numeric_limits<double>::infinity();
+    try {
+      std::vector<ModeFinding> findings;
+      bic = bic_of(fit_physical(data, start, options, findings), N);
+    } catch (const std::invalid_argument&) {
+      // too few samples for its parameters
+    }
+    if (fitted_bic) fitted_bic->emplace_back(starts[static_cast<std::size_t>(i)].structure, bic);
+    if (bic < least) {
+      least = bic;
+      chosen = i;
+    }
+  }
+  return chosen < 0 ? NonResonantStart{} : std::move(starts[static_cast<std::size_t>(chosen)]);
 }
 
 }  // namespace modalwatch
