@@ -91,6 +91,12 @@ struct FitResult {
   int projections = 0;                 // stability projections applied
   int damped_steps = 0;                // iterations shortened by the frequency trust region
   std::string start = "configured";    // which start won: "configured" or "unfactored"
+  // Closed loop: updates whose model, in the loop with the controller,
+  // diverged, and took the measured u as their instruments' input; and
+  // whether the returned model's loop does (its covariance is then the
+  // open-loop one, which the loop's noise biases).
+  int unstable_loop_updates = 0;
+  bool unstable_loop = false;
   std::vector<double> change_history;  // relative change of beta per cycle
   Eigen::VectorXd simulated;           // y_hat: the model's output on the record
   // Identifiability: the condition number of the instruments' correlation

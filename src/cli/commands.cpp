@@ -186,6 +186,11 @@ int fit(const FitArgs& args) {
     std::printf("%s after %d block-coordinate cycles (last change %.2e), %d stability projections\n",
                 result.converged ? "converged" : "NOT converged", result.iterations,
                 result.change_history.empty() ? 0.0 : result.change_history.back(), result.projections);
+    if (result.unstable_loop_updates > 0 || result.unstable_loop)
+      std::printf(
+          "WARNING: the model in the loop with the controller diverged in %d updates%s: their instruments came "
+          "from the measured u, which the loop's noise biases\n",
+          result.unstable_loop_updates, result.unstable_loop ? " and in the fitted model (its +- too)" : "");
     if (result.best_iteration > 0)
       std::printf("returned cycle %d, the one of least output error (the cycles after it raised it)\n",
                   result.best_iteration);
