@@ -91,11 +91,10 @@ struct FitResult {
   int projections = 0;                 // stability projections applied
   int damped_steps = 0;                // iterations shortened by the frequency trust region
   std::string start = "configured";    // which start won: "configured" or "unfactored"
-  // Closed loop: updates whose model, in the loop with the controller,
-  // diverged, and took the measured u as their instruments' input; and
-  // whether the returned model's loop does (its covariance is then the
-  // open-loop one, which the loop's noise biases).
-  int unstable_loop_updates = 0;
+  // Closed loop: the returned model, in the loop with the controller, diverges
+  // on the record (a gain of the wrong sign makes positive feedback), so its
+  // instruments overflow, and the covariance and the identifiability below
+  // are not defined.
   bool unstable_loop = false;
   std::vector<double> change_history;  // relative change of beta per cycle
   Eigen::VectorXd simulated;           // y_hat: the model's output on the record

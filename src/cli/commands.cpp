@@ -74,6 +74,12 @@ namespace {
 // weakest direction when the record leaves some combination undetermined (the
 // +- above then understate it).
 void print_identifiability(const FitResult& result) {
+  if (result.unstable_loop) {
+    std::printf(
+        "WARNING: the fitted model, in the loop with the controller, diverges on the record (positive feedback?):\n"
+        "its instruments overflow, so the +- above and the information condition are not defined\n");
+    return;
+  }
   std::printf("information condition: %.3g\n", result.information_condition);
   if (!(result.information_condition > FitResult::kPoorlyDetermined)) return;
   std::printf(
@@ -186,11 +192,6 @@ int fit(const FitArgs& args) {
     std::printf("%s after %d block-coordinate cycles (last change %.2e), %d stability projections\n",
                 result.converged ? "converged" : "NOT converged", result.iterations,
                 result.change_history.empty() ? 0.0 : result.change_history.back(), result.projections);
-    if (result.unstable_loop_updates > 0 || result.unstable_loop)
-      std::printf(
-          "WARNING: the model in the loop with the controller diverged in %d updates%s: their instruments came "
-          "from the measured u, which the loop's noise biases\n",
-          result.unstable_loop_updates, result.unstable_loop ? " and in the fitted model (its +- too)" : "");
     if (result.best_iteration > 0)
       std::printf("returned cycle %d, the one of least output error (the cycles after it raised it)\n",
                   result.best_iteration);

@@ -421,17 +421,6 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   // Instrument input in closed loop: S_uo r (one input, so every block is one
   // submodel); open loop: each member's own input.
   Eigen::VectorXd z, y_loop;
-  // The model in the loop with the controller: a loop that diverges (the
-  // model unstable under that controller, as a gain of the wrong sign makes
-  // it) gives no instruments, and the update takes the measured u's instead,
-  // biased by the noise the loop feeds back but defined. Diverged: an output
-  // beyond a thousand times the measured one's range (not the loop of the
-  // record, and its instruments' products overflow long before the loop does).
-  const double y_range = y.cwiseAbs().maxCoeff();
-  const auto loop_instruments_defined = [&] {
-    simulate_loop_scaled(model, options.controller, data.r, T, z, y_loop);
-    return z.allFinite() && y_loop.allFinite() && y_loop.cwiseAbs().maxCoeff() <= 1e3 * y_range;
-  };
   // The cycles need not lower the output error every time: with many modes
   // they can pass a good model and wander on (the flexible structure's 467 Hz
   // resonance is held at cycle 10 and lost by cycle 30). With best_cycle a fit
@@ -455,12 +444,11 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
         Eigen::VectorXd y_tilde = y;
         for (std::size_t j = 0; j < K; ++j)
           if (std::find(g.begin(), g.end(), static_cast<int>(j)) == g.end()) y_tilde -= x_hat[j];
-        const bool loop_instrument = options.closed_loop && loop_instruments_defined();
-        if (options.closed_loop && !loop_instrument) ++result.unstable_loop_updates;
-        const Eigen::VectorXd x_hat_z = loop_instrument ? simulate_scaled(lead, z, T) : block_output(g);
+        if (options.closed_loop) simulate_loop_scaled(model, options.controller, data.r, T, z, y_loop);
+        const Eigen::VectorXd x_hat_z = options.closed_loop ? simulate_scaled(lead, z, T) : block_output(g);
         const Signals u = inputs_of(g);
-        const Filtered f =
-            filter_block(lead, y_tilde, u, x_hat_z, loop_instrument ? Signals{&z} : u, T, options.output_hold, in_hold);
+        const Filtered f = filter_block(lead, y_tilde, u, x_hat_z, options.closed_loop ? Signals{&z} : u, T,
+                                        options.output_hold, in_hold);
         Eigen::VectorXd theta = iv_solve(f, first);
         if (!theta.allFinite()) break;  // singular: keep the previous iterate
         if (damp_step(n, block_theta(g), theta, options.max_frequency_step)) ++result.damped_steps;
@@ -524,8 +512,7 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   // with psi the output-error gradient (driven by u) and psi_hat the instrument
   // (driven by z); in open loop both coincide and this is sigma^2 (sum psi psi^T)^{-1}.
   // Then onto beta, where a shared A appears once per member (E below).
-  const bool loop_instrument = options.closed_loop && loop_instruments_defined();
-  result.unstable_loop = options.closed_loop && !loop_instrument;
+  if (options.closed_loop) simulate_loop_scaled(model, options.controller, data.r, T, z, y_loop);
   Eigen::MatrixXd Psi(N, free), PsiHat(N, free);
   Eigen::VectorXd D(free);                              // physical = scaled .* D^{-1}
   Eigen::MatrixXd E = Eigen::MatrixXd::Zero(nb, free);  // beta = E * (blocks' parameters)
@@ -535,9 +522,9 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
     const int n = lead.shape->n, mb = lead.shape->m + 1;
     const int nt = n + static_cast<int>(g.size()) * mb;
     const Signals u = inputs_of(g);
-    const Signals zi = loop_instrument ? Signals{&z} : u;
+    const Signals zi = options.closed_loop ? Signals{&z} : u;
     const Eigen::VectorXd x = block_output(g);
-    const Eigen::VectorXd xz = loop_instrument ? simulate_scaled(lead, z, T) : x;
+    const Eigen::VectorXd xz = options.closed_loop ? simulate_scaled(lead, z, T) : x;
     // The gradient filters are 1/A on the block's output and 1/(p^l A) on the
     // inputs: exactly the regressor/instrument construction with noise-free signals.
     const Filtered grad = filter_block(lead, x, u, x, u, T, options.output_hold, in_hold);
@@ -557,6 +544,8 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   }
   const Eigen::MatrixXd J = PsiHat.bottomRows(used).transpose() * Psi.bottomRows(used);
   const Eigen::MatrixXd S = PsiHat.bottomRows(used).transpose() * PsiHat.bottomRows(used);
+  // Instruments from a diverging loop overflow here, if not before.
+  result.unstable_loop = options.closed_loop && !(J.allFinite() && S.allFinite());
   {
     // Correlation form, so that the parameters' units do not enter the condition.
     const Eigen::VectorXd d = S.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
