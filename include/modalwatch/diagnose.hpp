@@ -71,6 +71,9 @@ struct LoopSpec {
   // The input between samples as the simulation takes it (interpolated only in
   // open loop), for the fits that start it.
   Hold input_hold() const { return interpolate_input && !closed ? Hold::foh : Hold::zoh; }
+  // The additive SRIVC of this loop's linear part (loop, controller, input
+  // hold; the cycle of least output error when it does not converge).
+  SrivcOptions srivc_options() const;
 };
 
 // The model's output on a record (open loop from the measured u, closed loop

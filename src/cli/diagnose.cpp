@@ -145,13 +145,8 @@ int diagnose(const DiagnoseArgs& args) {
     const std::optional<int> modes = args.modes ? args.modes : config.model_modes;
     const bool in_samples = time_in_samples(full, args.columns, config.sample_time);
     const int output = output_kind(config, args.output, modes.has_value());
-    SrivcOptions start_fit;
-    start_fit.closed_loop = loop.closed;
-    start_fit.controller = loop.controller;
-    start_fit.input_hold = loop.input_hold();
-    start_fit.best_cycle = true;
     const AdditiveModel initial =
-        modes ? modes_from_data(est, *modes, start_fit, args.data, in_samples,
+        modes ? modes_from_data(est, *modes, loop.srivc_options(), args.data, in_samples,
                                 config.model.inputs.empty() ? inputs : config.model.inputs, output)
               : config.model;
     options.output_hold = output_hold(config, initial, est.sample_time());

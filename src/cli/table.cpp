@@ -23,8 +23,7 @@ void print_physical_findings(const std::vector<ModeFinding>& findings) {
 
 AdditiveModel modes_from_data(const Record& data, int count, const SrivcOptions& fit, const std::string& data_name,
                               bool in_samples, const std::vector<std::string>& inputs, int output_derivatives) {
-  const bool closed_loop = fit.closed_loop;
-  const FrequencyResponse h = resolving_response(data, closed_loop, fit.input_hold);
+  const FrequencyResponse h = resolving_response(data, fit.closed_loop, fit.input_hold);
   AdditiveModel start = initial_modes(h, count, {}, inputs, output_derivatives);
   if (start.submodels.empty()) {
     SrivcOptions from_start = fit;
@@ -44,7 +43,7 @@ AdditiveModel modes_from_data(const Record& data, int count, const SrivcOptions&
     start.submodels.push_back(lag.submodel);
     return start;
   }
-  const char* estimate = closed_loop ? "S_yr/S_ur" : data.inputs() > 1 ? "|H|, H = S_yu S_uu^-1" : "H1 = S_yu/S_uu";
+  const char* estimate = fit.closed_loop ? "S_yr/S_ur" : data.inputs() > 1 ? "|H|, H = S_yu S_uu^-1" : "H1 = S_yu/S_uu";
   std::printf("initial modes from the data (peaks of %s):", estimate);
   std::size_t found = 0;
   for (const auto& s : start.submodels) {

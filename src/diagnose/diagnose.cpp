@@ -44,6 +44,16 @@
 #include "output_error.hpp"
 
 namespace modalwatch {
+
+SrivcOptions LoopSpec::srivc_options() const {
+  SrivcOptions o;
+  o.closed_loop = closed;
+  o.controller = controller;
+  o.input_hold = input_hold();
+  o.best_cycle = true;
+  return o;
+}
+
 namespace {
 
 using namespace diagnose_detail;
@@ -60,11 +70,7 @@ bool srivc_start(const AdditiveModel& linear, const ModelEffects& e, const Recor
   Record corrected = data;
   if (e.output_offset_on) corrected.y.array() -= e.output_offset;
   if (e.drift_on) corrected.y.array() -= e.drift * (data.t.array() - data.t(0));
-  SrivcOptions so;
-  so.closed_loop = loop.closed;
-  so.input_hold = loop.input_hold();
-  so.best_cycle = true;
-  so.controller = loop.controller;
+  SrivcOptions so = loop.srivc_options();
   so.output_hold = options.output_hold;
   so.max_iterations = 60;
   try {

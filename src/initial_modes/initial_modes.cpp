@@ -345,11 +345,11 @@ std::vector<NonResonantStart> non_resonant_starts(const FrequencyResponse& h, co
   };
   // The best of each structure.
   auto consider = [&](double e, Submodel s, std::string what) {
-    if (!(e < std::numeric_limits<double>::infinity()) || !(s.b(0) != 0.0)) return;
+    if (!std::isfinite(e) || !(s.b(0) != 0.0)) return;
     auto same = std::find_if(out.begin(), out.end(), [&](const NonResonantStart& o) { return o.structure == what; });
     if (same == out.end())
       same = out.insert(out.end(), NonResonantStart{});
-    else if (!(e < same->relative_error * same->relative_error))
+    else if (!(std::sqrt(e) < same->relative_error))
       return;
     same->submodel = std::move(s);
     same->structure = std::move(what);
