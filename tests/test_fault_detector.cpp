@@ -367,6 +367,67 @@ TEST(FaultDetector, AFitsWindowCountsTowardTheHold) {
   EXPECT_FALSE(quiet.q(2, Quantity::zeta).pending);
 }
 
+// The hold asks a deviation to persist. One that stood past the relative
+// threshold on one side while the estimate's std was too wide to call it real
+// (an estimate that follows a change with its covariance boosted) has
+// persisted: once the std narrows, the hold counts from where it began.
+TEST(FaultDetector, ADeviationThatPersistedWhileUncertainCountsTowardTheHold) {
+  const double hold = FaultThresholds{}.hold_time;
+  Stream s(configured());
+  s.run(5.0);
+  s.value[0].wn = 0.9 * kBaseline[0].wn;    // -10 %
+  s.std_dev[0].wn = 0.2 * kBaseline[0].wn;  // 0.5 sigma
+  const double began = s.t();
+  s.run(1.5 * hold);
+  EXPECT_FALSE(s.q(0, Quantity::wn).pending);
+  EXPECT_FALSE(s.detector.any_flag());
+  // Narrow again after more than a hold: raised at the first update.
+  s.std_dev[0].wn = 1e-3 * kBaseline[0].wn;
+  const double narrowed = s.t();
+  ASSERT_EQ(s.step().size(), 1u);
+  EXPECT_TRUE(s.q(0, Quantity::wn).flagged);
+  EXPECT_DOUBLE_EQ(s.log.front().time, narrowed);
+  // After half a hold only: pending since the deviation began, raised when
+  // a hold has passed since then.
+  Stream half(configured());
+  half.run(5.0);
+  half.value[0].wn = 0.9 * kBaseline[0].wn;
+  half.std_dev[0].wn = 0.2 * kBaseline[0].wn;
+  const double half_began = half.t();
+  half.run(0.5 * hold);
+  half.std_dev[0].wn = 1e-3 * kBaseline[0].wn;
+  half.step();
+  const QuantityStatus& wn = half.q(0, Quantity::wn);
+  EXPECT_TRUE(wn.pending);
+  EXPECT_NEAR(wn.since, half_began, 1e-9);
+  const double raised = half.run_until(hold, [&] { return wn.flagged; });
+  EXPECT_NEAR(raised - half_began, hold, 1e-9);
+}
+
+// A deviation that crossed to the other side, or came back inside the
+// relative threshold, has not persisted: the hold counts from the last crossing.
+TEST(FaultDetector, ADeviationThatChangedSidesOrCameBackStartsTheHoldAgain) {
+  const double hold = FaultThresholds{}.hold_time;
+  for (const double back : {1.1, 1.0}) {
+    Stream s(configured());
+    s.run(5.0);
+    s.std_dev[0].wn = 0.2 * kBaseline[0].wn;
+    s.value[0].wn = 0.9 * kBaseline[0].wn;
+    s.run(2.0 * hold);
+    s.value[0].wn = back * kBaseline[0].wn;  // +10 %, or back at the baseline
+    s.step();
+    s.value[0].wn = 1.1 * kBaseline[0].wn;
+    const double crossed = back == 1.0 ? s.t() : s.t() - kPeriod;
+    s.run(0.5 * hold);
+    s.std_dev[0].wn = 1e-3 * kBaseline[0].wn;
+    s.step();
+    const QuantityStatus& wn = s.q(0, Quantity::wn);
+    EXPECT_TRUE(wn.pending) << back;
+    EXPECT_NEAR(wn.since, crossed, 1e-9) << back;
+    EXPECT_FALSE(wn.flagged) << back;
+  }
+}
+
 // ------------------------------------------------------------------ baselines
 
 TEST(FaultDetector, LearnsTheMeanOverTheWindowAndRaisesNothingWhileLearning) {

@@ -10,6 +10,8 @@
 // stationary estimate (errors AR(1) over the estimator's memory tau). Quantity q
 // is past when that holds AND |d_q| / |x0_q| > relative_threshold (the size of
 // change that matters); a flag rises after hold_time past and falls with hysteresis.
+// The hold asks the deviation to persist: where it stood past the relative
+// threshold on one side before the tests called it real, it counts from then.
 // An estimate fitted on a window (a warm-up fit, a refit after a divergence)
 // stands for the whole window: a condition it shows counts as past since the
 // window's start (update()'s evidence_span).
@@ -202,6 +204,7 @@ class FaultDetector {
   std::vector<std::array<double, 2 * kQuantities>> cusum_;    // G+ and G- per quantity
   std::vector<std::array<double, kQuantities>> previous_;     // z_q of the last valid update
   std::vector<std::array<double, kQuantities>> below_since_;  // hold / clear timers
+  std::vector<std::array<double, kQuantities>> beyond_since_;  // past the relative threshold since (signed by side)
   std::vector<Eigen::Matrix3d> diagonal_;                     // the std overload's covariances
   // Invalid updates pause every timer: each mode runs on its own clock, which
   // advances only between consecutive updates that are valid for that mode.

@@ -32,8 +32,10 @@
 //   clear_time: NOT (|z_q| > f sigma_threshold AND |rel_q| > f relative_threshold),
 //   f = clear_fraction; a failed test counts as back.
 // - Timers: a pending rise starts at the first valid update past the thresholds
-//   (evidence_span before it, when that update gives one) and matures at the
-//   first valid update at least hold_time (mode clock) later;
+//   (evidence_span before it, when that update gives one; or where the relative
+//   deviation went past its threshold on the same side and stayed, if earlier:
+//   beyond_since_, on the mode clock, negated for a deviation downwards) and
+//   matures at the first valid update at least hold_time (mode clock) later;
 //   hold_time = 0 raises at once. Leaving the thresholds cancels it. The clear
 //   timer likewise restarts whenever the quantity re-enters the reduced box.
 //   below_since_ holds the start of whichever timer runs (rise when unflagged,
@@ -205,6 +207,7 @@ FaultDetector::FaultDetector(FaultDetectorSettings settings) : settings_(std::mo
   cusum_.assign(n, {});
   previous_.assign(n, {kNaN, kNaN, kNaN});
   below_since_.assign(n, {kNaN, kNaN, kNaN});
+  beyond_since_.assign(n, {kNaN, kNaN, kNaN});
   diagonal_.assign(n, Eigen::Matrix3d::Zero());
   clock_.assign(n, 0.0);
   last_valid_.assign(n, 0);
@@ -234,6 +237,7 @@ void FaultDetector::restore_baseline(std::size_t mode, const ModeBaseline& basel
     throw std::invalid_argument("FaultDetector: restored baseline of mode '" + settings_.mode_names[mode] +
                                 "' (or its covariance) is not finite");
   learning_[mode] = Learning{};
+  beyond_since_[mode] = {kNaN, kNaN, kNaN};
   ModeStatus& m = modes_[mode];
   m.baseline = baseline;
   m.baseline_ready = true;
@@ -388,6 +392,16 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
       const bool in_band = sigma_ok && rel_ok && ds > th.clear_fraction * th.sigma_threshold &&
                            dr > th.clear_fraction * th.relative_threshold;
 
+      // Beyond the relative threshold on one side since (mode clock): positive
+      // for a deviation upwards, negated for one downwards.
+      double& beyond = beyond_since_[i][q];
+      const bool up = d(q) > 0.0;
+      if (!(rel_ok && dr > th.relative_threshold)) {
+        beyond = kNaN;
+      } else if (std::isnan(beyond) || (beyond >= 0.0) != up) {
+        beyond = up ? now : -now;
+      }
+
       double& timer = below_since_[i][q];
       bool changed = false;
       if (!s.flagged) {
@@ -398,9 +412,15 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
           continue;
         }
         if (!s.pending) {
+          // The hold asks the deviation to persist, not its significance: where
+          // the estimate's covariance was wide (it follows a change with its
+          // covariance boosted, or the joint information is rebuilt after one)
+          // and the deviation stood past the relative threshold on this side
+          // all along, the hold counts from then.
+          const double start = std::min(now - span, std::isnan(beyond) ? now : std::abs(beyond));
           s.pending = true;
-          s.since = t - span;
-          timer = now - span;
+          s.since = t - (now - start);
+          timer = start;
         }
         if (now - timer >= th.hold_time - kTimeSlack) {
           s.flagged = true;
