@@ -377,7 +377,6 @@ TEST(FaultDetector, ADeviationThatPersistedWhileUncertainCountsTowardTheHold) {
   s.run(5.0);
   s.value[0].wn = 0.9 * kBaseline[0].wn;    // -10 %
   s.std_dev[0].wn = 0.2 * kBaseline[0].wn;  // 0.5 sigma
-  const double began = s.t();
   s.run(1.5 * hold);
   EXPECT_FALSE(s.q(0, Quantity::wn).pending);
   EXPECT_FALSE(s.detector.any_flag());
