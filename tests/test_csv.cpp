@@ -2,7 +2,6 @@
 // the shared measured records read in place.
 #include <unistd.h>
 
-#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -283,27 +282,15 @@ TEST_F(CsvTest, WriteFailureThrowsAndLeavesNothing) {
 
 // ---------------------------------------------------------------- shared data
 
-#if defined(__SANITIZE_ADDRESS__)
-constexpr bool kSanitized = true;  // ASan slows parsing several-fold
-#else
-constexpr bool kSanitized = false;
-#endif
-
-double seconds_since(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
-
-TEST(CsvShared, SilverboxLoadsFast) {
+// Its read time is a benchmark's figure, not a test's: it depends on the machine's load.
+TEST(CsvShared, SilverboxHasEveryRowAndItsSampleTime) {
   const auto p = modalwatch::test_support::shared_file("silverbox_snls80mv.csv");
   if (!fs::exists(p)) GTEST_SKIP() << "shared data not found: " << p;
-  const auto start = std::chrono::steady_clock::now();
   const auto rec = read_record(p);
-  const double elapsed = seconds_since(start);
   EXPECT_EQ(rec.size(), 131072);
   EXPECT_FALSE(rec.has_reference());
   const double T = 1.0 / 610.3515625;
   EXPECT_NEAR(rec.sample_time(), T, 1e-9 * T);
-  EXPECT_LT(elapsed, kSanitized ? 5.0 : 0.5) << "131072 rows took " << elapsed << " s";
 }
 
 TEST(CsvShared, EmpsTrainHasReference) {
