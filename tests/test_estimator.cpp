@@ -711,9 +711,11 @@ TEST(RecursiveEstimator, ARampThatOutlastsTheRefitWindowIsFittedOnTheWindowAfter
 // window's settling part holds the step, and the window opens with the
 // changed plant's response to the state it had then, which the fit's
 // simulation from rest lacks. The verdict discounts that free response, and a
-// fit is taken within 2.2 memories of the step (measured: wn 0.9999 of its new
+// fit is taken within 2.2 memories of the step (measured: wn 1.0003 of its new
 // value then). Counted as misfit, it kept every window unsettled: no refit was
-// taken, and wn was still 7 % off then.
+// taken, and wn was still 7 % off then. The step comes ten memories after the
+// warm-up: a divergence soon after a fit is not refitted (may_refit), and at
+// five memories the sanitized build's rounding put it on that boundary.
 TEST(RecursiveEstimator, ARefitIsNotHeldBackByTheChangedPlantsFreeResponse) {
   const Config c = parse_config(R"(
 sample_rate_hz: 96.92002036332495
@@ -731,10 +733,10 @@ plant:
       zeta: 0.010203381094209998
       gain: 0.00911592722078811
       trajectory:
-        wn: [[600.0, 2.7910134019302677], [600.0103, 2.60357446980166]]
-        gain: [[600.0, 0.00911592722078811], [600.0103, 0.010475739359451971]]
+        wn: [[1200.0, 2.7910134019302677], [1200.0103, 2.60357446980166]]
+        gain: [[1200.0, 0.00911592722078811], [1200.0103, 0.010475739359451971]]
 simulation:
-  duration: 900
+  duration: 1500
   seed: 1514790310
   input: {type: sum_of_sines, amplitudes: [1.0, 1.0], frequencies_rad_s: [0.4563244188664051, 2.420341170781918]}
 estimator:
@@ -748,7 +750,7 @@ estimator:
   double wn_after_two_memories = NAN;
   for (Eigen::Index k = 0; k < r.size(); ++k) {
     est.step(Sample{r.t(k), r.u(k), r.y(k), 0.0});
-    if (std::isnan(wn_after_two_memories) && r.t(k) >= 600.0 + 2.2 * memory)
+    if (std::isnan(wn_after_two_memories) && r.t(k) >= 1200.0 + 2.2 * memory)
       wn_after_two_memories = est.mode(0).value.wn;
   }
   std::printf("2.2 memories after the step: wn %.5f of its new value; resets %llu\n", wn_after_two_memories / wn_after,
