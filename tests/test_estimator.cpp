@@ -714,8 +714,8 @@ TEST(RecursiveEstimator, ARampThatOutlastsTheRefitWindowIsFittedOnTheWindowAfter
 // fit is taken within 2.2 memories of the step (measured: wn 1.0003 of its new
 // value then). Counted as misfit, it kept every window unsettled: no refit was
 // taken, and wn was still 7 % off then. The step comes ten memories after the
-// warm-up: a divergence soon after a fit is not refitted (may_refit), and at
-// five memories the sanitized build's rounding put it on that boundary.
+// warm-up, clear of the rule that does not refit a divergence soon after a
+// fit: at five memories the sanitized build reset without a refit.
 TEST(RecursiveEstimator, ARefitIsNotHeldBackByTheChangedPlantsFreeResponse) {
   const Config c = parse_config(R"(
 sample_rate_hz: 96.92002036332495
