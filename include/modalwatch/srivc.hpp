@@ -69,6 +69,16 @@ struct SrivcOptions {
   // covariance: a window cut from a running plant, whose model output, started
   // from rest, needs them to catch up (`modalwatch fit --from`).
   Eigen::Index settle_samples = 0;
+  // With settle_samples: the model's state at the fitted part's start is
+  // estimated with it, not taken from its simulation from rest. A window whose
+  // settling part holds a change of the plant (a refit after a divergence)
+  // begins its fitted part with the changed plant's free response from a state
+  // the simulation never had. Each cycle's regressions see the fitted part's
+  // output less the model's free response that best explains its output
+  // error there, and the settling part's output as the model's own from rest,
+  // so that the prefilters enter the fitted part on the model's trajectory,
+  // not on the old plant's (FitResult::simulated stays the one from rest).
+  bool free_initial_state = false;
   // Per submodel (empty: none frozen): a frozen submodel keeps its given
   // parameters, and its simulated output is subtracted from the data as any
   // other's (eq. 15); only the other blocks are estimated. The covariance is
@@ -136,5 +146,16 @@ void simulate_loop(const AdditiveModel& model, const DiscreteTransferFunction& c
                    double T, Eigen::VectorXd& z, Eigen::VectorXd& y);
 
 double fit_percent(const Eigen::VectorXd& y, const Eigen::VectorXd& y_hat);
+
+// The record as `model` started in the state that best explains its output
+// after `settle_samples` sees it (SrivcOptions::free_initial_state): impulses
+// on each input over the settling part, one per state of the submodels on it,
+// whose responses fit the model's output error after it (least squares), and
+// the settling part's output the model's own. A recursion that runs its
+// filters over it ends in that state, where over the record itself it would
+// carry the plant's response to whatever the settling part held. The record
+// unchanged for no settling part or one too short for the states.
+Record started_in_state(const Record& data, const AdditiveModel& model, Eigen::Index settle_samples,
+                        Hold input_hold = Hold::zoh);
 
 }  // namespace modalwatch

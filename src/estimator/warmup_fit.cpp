@@ -183,6 +183,8 @@ void WarmupFit::run() noexcept {
         o.output_hold = cfg.output_hold;
         o.max_iterations = cfg.warmup_iterations;
         o.settle_samples = settle_;
+        // A refit's settling part holds the change that tripped the reset.
+        o.free_initial_state = refit_;
         Eigen::VectorXd y_start;  // simulated once, for the first candidate that gets that far
         const auto usable = [&](const FitResult& f) {
           bool ok = f.model.beta().allFinite() && f.covariance.allFinite() && f.noise_variance > 0.0;
@@ -234,6 +236,14 @@ void WarmupFit::run() noexcept {
           unsettled_ = unsettled_before;
         }
         if (!ok) {
+          fit = fit_srivc(window, initial, o);
+          ok = usable(fit);
+        }
+        if (!ok && o.free_initial_state) {
+          // Where the window leaves directions open (a few sines), the free
+          // state can take the place of what the excitation does not show,
+          // and the fit wanders off: the fit from rest instead.
+          o.free_initial_state = false;
           fit = fit_srivc(window, initial, o);
           ok = usable(fit);
         }
@@ -295,6 +305,7 @@ void WarmupFit::run() noexcept {
             cov.push_back(0.5 * (C0 + C0.transpose()));
           }
           fit_used = true;
+          if (refit_) replay_ = started_in_state(window, model, settle_);
         }
       } catch (const std::exception&) {
         // Fall back to the configured model: reported through warmup_fit_used.
@@ -384,19 +395,27 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
     transient = static_cast<std::uint64_t>(N);
     settling = transient + 1;
   }
-  // Run the filters over the window with theta(t0), without updating (section 4.7).
+  // Run the filters over the window with theta(t0), without updating (section
+  // 4.7); a refit's window as its fit saw it, to start in the fit's state.
+  const Record& as_fitted = fit.replay_;
+  const bool replay_as_fitted = as_fitted.y.size() == N && as_fitted.inputs() == 1 + further_inputs;
   double p = 0.0;
   Sample s;
   s.further_inputs = further_inputs;
   for (int k = 0; k < N; ++k) {
     s.t = wt(k);
     s.u = wu(k);
-    s.y = wy(k);
     s.r = cfg.closed_loop ? wr(k) : 0.0;
     for (int j = 0; j < further_inputs; ++j)
       s.further_u[static_cast<std::size_t>(j)] = wfu[static_cast<std::size_t>(j)](k);
-    advance(s, false);
     p += further_inputs > 0 ? input_power(s) : wu(k) * wu(k);  // as advance() measures it
+    if (replay_as_fitted) {
+      s.u = as_fitted.u(k);
+      for (int j = 0; j < further_inputs; ++j)
+        s.further_u[static_cast<std::size_t>(j)] = as_fitted.further_u[static_cast<std::size_t>(j)](k);
+    }
+    s.y = replay_as_fitted ? as_fitted.y(k) : wy(k);
+    advance(s, false);
   }
   if (noise_before > 0.0) {
     settling = transient = 0;

@@ -360,11 +360,87 @@ FitResult fit_srivc(const Record& data, const AdditiveModel& initial, const Sriv
 
 namespace {
 
+// A free initial state (SrivcOptions::free_initial_state). The model's state
+// at the fitted part's start, as impulses on each input over the settling part
+// (one per state of the submodels on it, spread over it): their amplitudes
+// are the least-squares fit of the model's responses to them to its output
+// error over the fitted part, where a model started at rest lacks the plant's
+// free response from the state it had there.
+struct FreeStart {
+  Eigen::VectorXd forced;        // the model's output from rest on the record's inputs
+  Eigen::MatrixXd basis;         // its responses to the impulses, over the whole record
+  Eigen::VectorXd amplitude;     // of each impulse (empty: no estimate, too few samples)
+  std::vector<Eigen::Index> at;  // each impulse's sample
+  std::vector<int> input;        // and input
+  Eigen::VectorXd free() const { return amplitude.size() ? Eigen::VectorXd(basis * amplitude) : Eigen::VectorXd(); }
+};
+
+FreeStart free_start(const Record& data, const std::vector<ScaledSubmodel>& model, Eigen::Index first, Hold in_hold) {
+  const Eigen::Index N = data.size(), used = N - first;
+  const double T = data.sample_time();
+  FreeStart f;
+  f.forced = Eigen::VectorXd::Zero(N);
+  for (const auto& s : model) f.forced += simulate_scaled(s, data.input(s.shape->input), T, in_hold);
+  std::vector<Eigen::Index> states(static_cast<std::size_t>(data.inputs()), 0);
+  for (const auto& s : model) states[static_cast<std::size_t>(s.shape->input)] += s.shape->n + s.shape->rigid_poles;
+  Eigen::Index columns = 0;
+  for (const Eigen::Index n : states) columns += n;
+  if (columns == 0 || first < columns || used <= 4 * columns) return f;
+  f.basis = Eigen::MatrixXd::Zero(N, columns);
+  Eigen::VectorXd impulse = Eigen::VectorXd::Zero(N);
+  for (int c = 0, col = 0; c < data.inputs(); ++c) {
+    const Eigen::Index n = states[static_cast<std::size_t>(c)];
+    for (Eigen::Index j = 0; j < n; ++j, ++col) {
+      f.at.push_back(first - 1 - j * std::max<Eigen::Index>(1, first / n));
+      f.input.push_back(c);
+      impulse(f.at.back()) = 1.0;
+      for (const auto& s : model)
+        if (s.shape->input == c) f.basis.col(col) += simulate_scaled(s, impulse, T, in_hold);
+      impulse(f.at.back()) = 0.0;
+    }
+  }
+  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(f.basis.bottomRows(used));
+  f.amplitude = qr.solve(data.y.tail(used) - f.forced.tail(used));
+  if (!f.amplitude.allFinite()) f.amplitude.resize(0);
+  return f;
+}
+
+// The output the regressions see with a free initial state: over the fitted
+// part the record's less the model's free response, over the settling part
+// the model's own output from rest, so that the prefilters enter the fitted
+// part on a trajectory the model could have had, not on the plant's before a
+// change. Consistent with the record's inputs from rest, as the fit's
+// simulation is.
+Eigen::VectorXd output_from_rest(const Record& data, const FreeStart& f, Eigen::Index first) {
+  Eigen::VectorXd y = f.forced;
+  const Eigen::Index used = data.size() - first;
+  y.tail(used) = data.y.tail(used);
+  if (f.amplitude.size()) y.tail(used) -= f.free().tail(used);
+  return y;
+}
+
+// The same record as the model started in its estimated state sees it: the
+// impulses added to the inputs, and the settling part's output the model's.
+Record with_free_start(const Record& data, const FreeStart& f, Eigen::Index first) {
+  Record r = data;
+  r.y.head(first) = f.forced.head(first);
+  if (!f.amplitude.size()) return r;
+  r.y.head(first) += f.free().head(first);
+  for (std::size_t k = 0; k < f.at.size(); ++k) {
+    Eigen::VectorXd& u = f.input[k] == 0 ? r.u : r.further_u[static_cast<std::size_t>(f.input[k] - 1)];
+    u(f.at[k]) += f.amplitude(static_cast<Eigen::Index>(k));
+  }
+  return r;
+}
+
 FitResult fit_additive(const Record& data, const AdditiveModel& initial, const SrivcOptions& options) {
   const Eigen::Index N = data.size();
   const double T = data.sample_time();
-  const Eigen::VectorXd& y = data.y;
   const Eigen::Index first = options.settle_samples, used = N - first;  // the samples in eq. (8)
+  const bool free_state = options.free_initial_state && first > 0;
+  // The output the regressions see: the record's, or with a free initial
+  // state its output from rest (output_from_rest), re-made for each cycle's model.
+  Eigen::VectorXd y = data.y;
 
   FitResult result;
   result.model = initial;
@@ -435,6 +511,7 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   std::vector<Eigen::VectorXd> best_theta(K), best_x_hat(K);
   for (int it = 1; it <= options.max_iterations; ++it) {
     const Eigen::VectorXd before = beta_scaled();
+    if (free_state) y = output_from_rest(data, free_start(data, model, first, in_hold), first);
     for (const auto& g : groups) {
       const ScaledSubmodel& lead = model[static_cast<std::size_t>(g.front())];
       const int n = lead.shape->n;
@@ -495,6 +572,7 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
     }
     result.best_iteration = best_iteration;
   }
+  if (free_state) y = output_from_rest(data, free_start(data, model, first, in_hold), first);
   unscale_into(model, result.model);
 
   // Output error, noise variance and fit. The free parameters are the blocks':
@@ -505,8 +583,12 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
   for (const auto& x : x_hat) result.simulated += x;
   const Eigen::VectorXd e = (y - result.simulated).tail(used);
   const int nb = result.model.n_beta();
-  result.noise_variance = e.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, used - free));
-  result.fit_percent = fit_percent(y.tail(used), result.simulated.tail(used));
+  // A free initial state is estimated with the parameters.
+  Eigen::Index estimated = free;
+  if (free_state)
+    for (const auto& s : model) estimated += s.shape->n + s.shape->rigid_poles;
+  result.noise_variance = e.squaredNorm() / static_cast<double>(std::max<Eigen::Index>(1, used - estimated));
+  result.fit_percent = fit_percent(data.y.tail(used), result.simulated.tail(used));
 
   // Covariance (IV sandwich) over the blocks' parameters: J = sum psi_hat psi^T
   // with psi the output-error gradient (driven by u) and psi_hat the instrument
@@ -565,6 +647,11 @@ FitResult fit_additive(const Record& data, const AdditiveModel& initial, const S
 }
 
 }  // namespace
+
+Record started_in_state(const Record& data, const AdditiveModel& model, Eigen::Index settle_samples, Hold input_hold) {
+  if (settle_samples <= 0 || settle_samples >= data.size()) return data;
+  return with_free_start(data, free_start(data, scale_model(model), settle_samples, input_hold), settle_samples);
+}
 
 Hold default_output_hold(const AdditiveModel& start, double sample_time) {
   const double fs = 1.0 / sample_time;
