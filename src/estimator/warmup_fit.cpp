@@ -91,44 +91,24 @@ Eigen::VectorXd simulate_start(const Record& window, const AdditiveModel& start,
   return y_start;
 }
 
-// The output error of `model` over the fitted part (after `settle`) without
-// what a free response of the model (or of its loop) explains: the simulation
-// starts from rest at the window's start, the plant did not, and where the
-// plant changed during the settling part (the change that tripped the reset
-// happens there), the fitted part begins with the changed plant's response to
-// a state the simulation does not have. That response decays with the modes
-// (a third of a memory for a lightly damped one), and is not a misfit of the
-// model. Its span: the responses to impulses on each input (on r in closed
-// loop) spread over the settling part, one per state.
-double misfit_without_free_response(const Record& window, Eigen::Index settle, const AdditiveModel& model,
-                                    const Eigen::VectorXd& y_model, const EstimatorSettings& cfg) {
+// The output error of `model` over the fitted part (after `settle`) started
+// in the state that best explains it (started_in_state), on the measured
+// inputs as the estimator's own residual is: the simulation from rest lacks
+// the plant's state, and where the plant changed during the settling part (the
+// change that tripped the reset happens there), the fitted part begins with
+// the changed plant's response to a state the simulation does not have. That
+// response decays with the modes (a third of a memory for a lightly damped
+// one), and is not a misfit of the model.
+double misfit_in_state(const Record& window, Eigen::Index settle, const AdditiveModel& model) {
   const Eigen::Index n = window.y.size() - settle;
-  const Eigen::VectorXd e = window.y.tail(n) - y_model.tail(n);
-  Eigen::Index states = 0;
-  for (const Submodel& s : model.submodels) states += s.n;
-  if (cfg.closed_loop) states += static_cast<Eigen::Index>(cfg.controller.denominator().size()) - 1;
-  const int channels = cfg.closed_loop ? 1 : window.inputs();
-  const Eigen::Index columns = states * channels;
-  if (states == 0 || settle < states || n <= 4 * columns) return e.squaredNorm();
-  Eigen::MatrixXd basis(n, columns);
-  Record impulse = window;
-  const Eigen::Index spacing = std::max<Eigen::Index>(1, settle / states);
-  for (int c = 0; c < channels; ++c) {
-    for (Eigen::Index j = 0; j < states; ++j) {
-      impulse.u.setZero();
-      for (Eigen::VectorXd& v : impulse.further_u) v.setZero();
-      if (cfg.closed_loop) impulse.r.setZero();
-      Eigen::VectorXd& drive = cfg.closed_loop ? impulse.r : (c == 0 ? impulse.u : impulse.further_u[c - 1]);
-      drive(settle - 1 - j * spacing) = 1.0;
-      basis.col(c * states + j) = simulate_start(impulse, model, cfg).tail(n);
-    }
-  }
-  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(basis);
-  return (e - basis * qr.solve(e)).squaredNorm();
+  const Record started = started_in_state(window, model, settle);
+  return (window.y.tail(n) - simulate_model(model, started).tail(n)).squaredNorm();
 }
 
+// y_start: the restored state's simulation over the window (simulate_start);
+// e_start: its misfit_in_state.
 RefitVerdict refit_verdict(const Record& window, Eigen::Index settle, const AdditiveModel& start,
-                           const Eigen::VectorXd& y_start, double noise_variance, const FitResult& fit,
+                           const Eigen::VectorXd& y_start, double e_start, double noise_variance, const FitResult& fit,
                            const EstimatorSettings& cfg) {
   constexpr auto refused = RefitVerdict::refused;
   if (!keeps_the_modes(start, fit.model, kRefitFrequencyRatio)) return refused;
@@ -139,8 +119,7 @@ RefitVerdict refit_verdict(const Record& window, Eigen::Index settle, const Addi
   const double e_second = (window.y.tail(n - half) - y_start.tail(n - half)).squaredNorm() / (n - half);
   const double settled = 0.25 * cfg.divergence_ratio * cfg.divergence_ratio * noise_variance;
   if (!(e_second > settled && e_second > 0.5 * e_first)) return refused;
-  const double e_start = misfit_without_free_response(window, settle, start, y_start, cfg);
-  const double e_fit = misfit_without_free_response(window, settle, fit.model, fit.simulated, cfg);
+  const double e_fit = misfit_in_state(window, settle, fit.model);
   constexpr double kStillChanging = 1.25;  // the misfit's growth from the first half to the second
   if (!(e_fit < settled * n) || e_second > kStillChanging * e_first) return RefitVerdict::unsettled;
   return e_fit < 0.25 * e_start ? RefitVerdict::accepted : refused;
@@ -185,7 +164,8 @@ void WarmupFit::run() noexcept {
         o.settle_samples = settle_;
         // A refit's settling part holds the change that tripped the reset.
         o.free_initial_state = refit_;
-        Eigen::VectorXd y_start;  // simulated once, for the first candidate that gets that far
+        Eigen::VectorXd y_start;  // the restored state's, once, for the first candidate that gets that far
+        double e_start = 0.0;
         const auto usable = [&](const FitResult& f) {
           bool ok = f.model.beta().allFinite() && f.covariance.allFinite() && f.noise_variance > 0.0;
           for (const auto& s : f.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
@@ -194,8 +174,12 @@ void WarmupFit::run() noexcept {
           // on another's frequency (or on none) describes a different plant,
           // and every estimate and flag of that mode would be another's.
           if (!refit_) return keeps_the_modes(initial, f.model, kWarmupFrequencyRatio);
-          if (y_start.size() == 0) y_start = simulate_start(window, initial, cfg);
-          const RefitVerdict v = refit_verdict(window, settle_, initial, y_start, context_->noise_variance, f, cfg);
+          if (y_start.size() == 0) {
+            y_start = simulate_start(window, initial, cfg);
+            e_start = misfit_in_state(window, settle_, initial);
+          }
+          const RefitVerdict v =
+              refit_verdict(window, settle_, initial, y_start, e_start, context_->noise_variance, f, cfg);
           unsettled_ = unsettled_ || v == RefitVerdict::unsettled;
           return v == RefitVerdict::accepted;
         };
