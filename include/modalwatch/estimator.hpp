@@ -378,7 +378,7 @@ class WarmupFit {
   std::vector<Eigen::MatrixXd> covariance_;
   std::vector<Eigen::VectorXd> bound_variance_;  // diag of the same from one memory of the window
   double sigma2_ = 0.0, y_var_ = 0.0;
-  // A refit's window as its fit saw it (FitResult::as_fitted): replayed, it
+  // A refit's window as its fit saw it (started_in_state): replayed, it
   // starts the filters in the state the fit estimated for the changed plant.
   Record replay_;
   bool fit_used_ = false;

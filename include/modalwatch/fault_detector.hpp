@@ -204,7 +204,8 @@ class FaultDetector {
   std::vector<std::array<double, 2 * kQuantities>> cusum_;    // G+ and G- per quantity
   std::vector<std::array<double, kQuantities>> previous_;     // z_q of the last valid update
   std::vector<std::array<double, kQuantities>> below_since_;  // hold / clear timers
-  std::vector<std::array<double, kQuantities>> beyond_since_;  // past the relative threshold since (signed by side)
+  std::vector<std::array<double, kQuantities>> beyond_since_;  // past the relative threshold since (NaN: not)
+  std::vector<std::array<bool, kQuantities>> beyond_up_;       // ... on the upper side
   std::vector<Eigen::Matrix3d> diagonal_;                     // the std overload's covariances
   // Invalid updates pause every timer: each mode runs on its own clock, which
   // advances only between consecutive updates that are valid for that mode.

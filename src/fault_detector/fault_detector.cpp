@@ -34,7 +34,7 @@
 // - Timers: a pending rise starts at the first valid update past the thresholds
 //   (evidence_span before it, when that update gives one; or where the relative
 //   deviation went past its threshold on the same side and stayed, if earlier:
-//   beyond_since_, on the mode clock, negated for a deviation downwards) and
+//   beyond_since_ on the mode clock, its side beyond_up_) and
 //   matures at the first valid update at least hold_time (mode clock) later;
 //   hold_time = 0 raises at once. Leaving the thresholds cancels it. The clear
 //   timer likewise restarts whenever the quantity re-enters the reduced box.
@@ -208,6 +208,7 @@ FaultDetector::FaultDetector(FaultDetectorSettings settings) : settings_(std::mo
   previous_.assign(n, {kNaN, kNaN, kNaN});
   below_since_.assign(n, {kNaN, kNaN, kNaN});
   beyond_since_.assign(n, {kNaN, kNaN, kNaN});
+  beyond_up_.assign(n, {});
   diagonal_.assign(n, Eigen::Matrix3d::Zero());
   clock_.assign(n, 0.0);
   last_valid_.assign(n, 0);
@@ -392,14 +393,14 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
       const bool in_band = sigma_ok && rel_ok && ds > th.clear_fraction * th.sigma_threshold &&
                            dr > th.clear_fraction * th.relative_threshold;
 
-      // Beyond the relative threshold on one side since (mode clock): positive
-      // for a deviation upwards, negated for one downwards.
+      // Beyond the relative threshold on one side since (mode clock).
       double& beyond = beyond_since_[i][q];
       const bool up = d(q) > 0.0;
       if (!(rel_ok && dr > th.relative_threshold)) {
         beyond = kNaN;
-      } else if (std::isnan(beyond) || (beyond >= 0.0) != up) {
-        beyond = up ? now : -now;
+      } else if (std::isnan(beyond) || beyond_up_[i][q] != up) {
+        beyond = now;
+        beyond_up_[i][q] = up;
       }
 
       double& timer = below_since_[i][q];
@@ -417,7 +418,7 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
           // covariance boosted, or the joint information is rebuilt after one)
           // and the deviation stood past the relative threshold on this side
           // all along, the hold counts from then.
-          const double start = std::min(now - span, std::isnan(beyond) ? now : std::abs(beyond));
+          const double start = std::min(now - span, std::isnan(beyond) ? now : beyond);
           s.pending = true;
           s.since = t - (now - start);
           timer = start;
