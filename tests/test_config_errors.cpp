@@ -157,14 +157,16 @@ TEST(ConfigErrors, EstimatorValues) {
 
 TEST(ConfigErrors, EstimatorKeysAndShape) {
   const auto unknown = parse_error(kBase + kEstimator + "  forgetting: 0.99\n");
-  EXPECT_EQ(unknown,
-            "test.yaml:34: key 'estimator.forgetting': unknown key for estimator (allowed: block_iterations, "
-            "refinements, update_divisor, warmup, fit_on_warmup, warmup_iterations, initial_covariance_relative, "
-            "random_walk, covariance_bound, stabilisation, min_memory, settled_memory, divergence_ratio, change_ratio, "
-            "change_threshold, change_hold, "
-            "gap_factor, "
-            "outlier_sigma, residual_window, "
-            "low_excitation_ratio, low_excitation_window)");
+  EXPECT_EQ(
+      unknown,
+      "test.yaml:34: key 'estimator.forgetting': unknown key for estimator (allowed: block_iterations, "
+      "refinements, update_divisor, warmup, fit_on_warmup, warmup_iterations, initial_covariance_relative, "
+      "random_walk, covariance_bound, stabilisation, min_memory, settled_memory, damping_deadband, divergence_ratio, "
+      "change_ratio, "
+      "change_threshold, change_hold, "
+      "gap_factor, "
+      "outlier_sigma, residual_window, "
+      "low_excitation_ratio, low_excitation_window)");
   EXPECT_EQ(parse_error(kBase + kEstimator + "  warmup: 3\n"),
             "test.yaml:34: key 'estimator.warmup': duplicate key (first at line 19)");
   EXPECT_EQ(parse_error(kBase + "estimator: rsrivc\n"),

@@ -134,12 +134,14 @@ struct ResonantLineRun {
   std::uint64_t resets = 0;
 };
 
-ResonantLineRun track_resonant_line(double min_memory, double settled_memory = EstimatorSettings{}.settled_memory) {
+ResonantLineRun track_resonant_line(double min_memory, double settled_memory = EstimatorSettings{}.settled_memory,
+                                    double damping_deadband = EstimatorSettings{}.damping_deadband) {
   const Config c = parse_config(kResonantLine, "resonant-line");
   const SimulationResult sim = simulate(*c.plant, *c.experiment);
   EstimatorSettings s = c.estimator;
   s.min_memory = min_memory;
   s.settled_memory = settled_memory;
+  s.damping_deadband = damping_deadband;
   s.min_memories.clear();  // the config's per-submodel copies would override it
   RecursiveEstimator est(c.model, s);
   const ModalParameters truth = c.plant->modes[0].modal;
@@ -164,15 +166,27 @@ TEST(RecursiveEstimatorForgetting, AResonantModeWithAMemoryUnderTwoDecayTimesSta
   EXPECT_LT(run.worst.gain, 0.01);
 }
 
-// Without the floor the same record winds zeta and the gain up together (the
-// prefilter's loop) until the output error diverges, again and again. How
-// often is chaotic: 7 to more than 10 resets, with the step kernel of another
-// CPU or another way out of a reset.
-TEST(RecursiveEstimatorForgetting, WithoutTheMemoryFloorTheResonantModeWindsUp) {
-  const ResonantLineRun run = track_resonant_line(0.0);
+// Without the floor, and with prefilters that take every update's damping, the
+// same record winds zeta and the gain up together (the prefilter's loop) until
+// the output error diverges, again and again. How often is chaotic: 7 to more
+// than 10 resets, with the step kernel of another CPU or another way out of a
+// reset.
+TEST(RecursiveEstimatorForgetting, WithoutTheMemoryFloorOrTheDampingDeadbandTheResonantModeWindsUp) {
+  const ResonantLineRun run = track_resonant_line(0.0, 0.0, 0.0);
   EXPECT_GE(run.resets, 3u);
   EXPECT_GT(run.worst.zeta, 0.3);
   EXPECT_GT(run.worst.gain, 0.3);
+}
+
+// The deadband alone opens that loop: without any memory floor (a memory of
+// under two decay times), the prefilters' damping held within three std of the
+// estimate's keeps the mode at the truth.
+TEST(RecursiveEstimatorForgetting, TheDampingDeadbandAloneHoldsTheResonantModeWithoutTheMemoryFloor) {
+  const ResonantLineRun run = track_resonant_line(0.0, 0.0);
+  EXPECT_EQ(run.resets, 0u);
+  EXPECT_LT(run.worst.wn, 1e-3);
+  EXPECT_LT(run.worst.zeta, 0.01);
+  EXPECT_LT(run.worst.gain, 0.01);
 }
 
 // One mode excited at one frequency, the Nyquist frequency (a square wave of
@@ -237,14 +251,14 @@ TEST(RecursiveEstimatorForgetting, WithATenTimesLooserCovarianceBoundTheSameMode
 }
 
 // The floor outside a change boost is settled_memory: min_memory, the shortest
-// memory a boost may give, does not have to keep a mode still. At 3 decay
-// times throughout, the same record winds up (measured: 47 resets); with the
-// settled floor of 9 it stays at the truth.
+// memory a boost may give, does not have to keep a mode still. Without the
+// damping deadband, at 3 decay times throughout, the same record winds up
+// (measured: 47 resets); with the settled floor of 9 it stays at the truth.
 TEST(RecursiveEstimatorForgetting, TheSettledFloorHoldsTheResonantModeWhereMinMemoryAloneWouldNot) {
-  const ResonantLineRun short_floor = track_resonant_line(3.0, 0.0);
+  const ResonantLineRun short_floor = track_resonant_line(3.0, 0.0, 0.0);
   EXPECT_GE(short_floor.resets, 3u);
   EXPECT_GT(short_floor.worst.zeta, 0.3);
-  const ResonantLineRun settled = track_resonant_line(3.0, 9.0);
+  const ResonantLineRun settled = track_resonant_line(3.0, 9.0, 0.0);
   EXPECT_EQ(settled.resets, 0u);
   EXPECT_LT(settled.worst.wn, 1e-3);
   EXPECT_LT(settled.worst.zeta, 0.01);

@@ -130,6 +130,19 @@ struct EstimatorSettings {
   // follows a drift more slowly, and on the bank it traded one record's false
   // alarms for a longer tail of delays (README.md). 0: min_memory throughout.
   double settled_memory = 0.0;
+  // The same loop, where it starts: a mode's prefilters (and its auxiliary
+  // model) take the estimate's damping term a_1 only once the two differ by
+  // more than this many of its standard deviations, and its a_2 (the
+  // frequency) at every update; a_1 follows at once while a change boost
+  // re-converges the submodel and where a random walk says it drifts. A
+  // lightly damped mode on one line of its input leaves a_1 and b_0 open
+  // together (the line fixes the peak height, their ratio), and a prefilter
+  // whose damping follows the estimate along that direction scales the
+  // filtered signals at the line by as much. With the paper's updates
+  // (block_iterations 1, refinements 0; refinements re-filter each sample with
+  // the latest iterate). 0: every update re-discretises the prefilters with
+  // the estimate's A.
+  double damping_deadband = 3.0;
   double divergence_ratio = 10.0;      // residual RMS this many times its last good value: reset
   // A change of the plant that the model no longer fits, long before the error
   // diverges: Page's CUSUM (Basseville & Nikiforov 1993, sec. 2.2) for the

@@ -157,6 +157,9 @@ struct Block {
   // information K nt (1 - lambda) / P_ref_j forgotten over those updates.
   ThetaVec ref_var;
   BlockFilters filters;
+  // The a_1 (damping term) of a mode's prefilters and auxiliary model, which
+  // follows theta's only past a deadband (Impl::follow).
+  double filter_a1 = 0.0;
   // phi^T P psi / (lambda + phi^T P psi) of the last update: how much of the
   // error it took into theta (near 1 at a start or after a boost, about nt over
   // the memory once settled).
@@ -210,9 +213,15 @@ struct Block {
     c.tail(n) = theta.head(n);
     return c;
   }
-  FilterVector denominator() const {
+  // The prefilters' A: theta's, but for a mode's a_1 (filter_a1, Impl::follow).
+  FilterVector filter_a_poly() const {
+    FilterVector c = a_poly();
+    if (n == 2) c(1) = filter_a1;
+    return c;
+  }
+  FilterVector filter_denominator() const {
     FilterVector c = FilterVector::Zero(n + l + 1);
-    c.tail(n + 1) = a_poly();
+    c.tail(n + 1) = filter_a_poly();
     return c;
   }
   // p^z B/(p^l A) w from the filter's derivatives d = [w_f, p w_f, ...].

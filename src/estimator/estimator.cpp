@@ -45,9 +45,10 @@ bool EstimatorSettings::operator==(const EstimatorSettings& o) const {
          initial_covariance_relative == o.initial_covariance_relative && random_walk == o.random_walk &&
          random_walks == o.random_walks && covariance_bound == o.covariance_bound && stabilisation == o.stabilisation &&
          stabilisations == o.stabilisations && min_memory == o.min_memory && min_memories == o.min_memories &&
-         settled_memory == o.settled_memory && divergence_ratio == o.divergence_ratio &&
-         change_ratio == o.change_ratio && change_threshold == o.change_threshold && change_hold == o.change_hold &&
-         gap_factor == o.gap_factor && outlier_sigma == o.outlier_sigma && residual_window == o.residual_window &&
+         settled_memory == o.settled_memory && damping_deadband == o.damping_deadband &&
+         divergence_ratio == o.divergence_ratio && change_ratio == o.change_ratio &&
+         change_threshold == o.change_threshold && change_hold == o.change_hold && gap_factor == o.gap_factor &&
+         outlier_sigma == o.outlier_sigma && residual_window == o.residual_window &&
          low_excitation_ratio == o.low_excitation_ratio && low_excitation_window == o.low_excitation_window;
 }
 
@@ -103,7 +104,8 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.p_bound = cfg.covariance_bound * b.p_bound.cwiseMax(1e-300);
     b.drop_lift();
     set_reference(b, cfg.stabilisations.empty() ? cfg.stabilisation : cfg.stabilisations[i]);
-    b.filters.init(b.a_poly(), b.denominator(), b.ws * T, cfg.output_hold, b.biproper);
+    if (b.n == 2) b.filter_a1 = b.theta(0);
+    b.filters.init(b.filter_a_poly(), b.filter_denominator(), b.ws * T, cfg.output_hold, b.biproper);
     b.phi.resize(b.nt);
     b.psi.resize(b.nt);
     b.score = ThetaVec::Zero(b.nt);
@@ -191,6 +193,7 @@ RecursiveEstimator::RecursiveEstimator(const AdditiveModel& initial, const Estim
   check_non_negative(settings.stabilisation, settings.stabilisations, "stabilisation");
   check_non_negative(settings.min_memory, settings.min_memories, "min_memory");
   check_non_negative(settings.settled_memory, {}, "settled_memory");
+  check_non_negative(settings.damping_deadband, {}, "damping_deadband");
   if (settings.block_iterations < 1 || settings.refinements < 0 || settings.update_divisor < 1)
     throw std::invalid_argument("estimator: M_l >= 1, M_s >= 0 and the update divisor >= 1");
   if (settings.closed_loop && settings.controller.empty())

@@ -151,6 +151,8 @@ struct RecursiveEstimator::Impl {
   void build(const AdditiveModel& model, const std::vector<Eigen::MatrixXd>* fit_covariance, double fit_sigma2,
              double y_var, const std::vector<Eigen::VectorXd>* fit_bound_variance = nullptr);
   MODALWATCH_HOT void rediscretise(detail::Block& b);
+  MODALWATCH_HOT void follow(detail::Block& b);
+  void discretise(detail::Block& b);
   void rediscretise_prefilters(detail::Block& b, double Ts);
   void allocate_window() {
     const Eigen::Index n = (1 + kRefitTransientWindows) * cfg.warmup_samples;
@@ -239,10 +241,30 @@ struct RecursiveEstimator::Impl {
   void finish_warmup(const WarmupFit& fit);
 };
 
+// The prefilters (and the auxiliary model) for the current theta.
 inline void RecursiveEstimator::Impl::rediscretise(detail::Block& b) {
+  if (b.n == 2) b.filter_a1 = b.theta(0);
+  discretise(b);
+}
+
+// The same after an update, with a mode's damping term a_1 held within
+// EstimatorSettings::damping_deadband of its std.
+inline void RecursiveEstimator::Impl::follow(detail::Block& b) {
+  const double k = cfg.damping_deadband;
+  if (b.n == 2 && k > 0.0 && b.adapting == 0 && b.random_walk == 0.0) {
+    const double d = b.theta(0) - b.filter_a1;
+    if (!(d * d > k * k * e_var * b.P(0, 0))) {
+      discretise(b);
+      return;
+    }
+  }
+  rediscretise(b);
+}
+
+inline void RecursiveEstimator::Impl::discretise(detail::Block& b) {
   const double Ts = b.ws * cfg.sample_time;
   if (b.filters.shared) {  // a mode, ZOH: A = 1 + a1 p + a2 p^2 for all four
-    const double a1 = b.theta(0), a2 = b.theta(1);
+    const double a1 = b.filter_a1, a2 = b.theta(1);
     b.filters.mode.set_denominator(1.0, a1, a2, discretize_second_order(1.0, a1, a2, Ts));
     return;
   }

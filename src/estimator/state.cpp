@@ -325,7 +325,9 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
         b.ref_var = st.reference_variance_[i];
         b.stabilisation = Block::Stabilisation::on;
       }
-      b.filters.init(b.a_poly(), b.denominator(), b.ws * next.cfg.sample_time, next.cfg.output_hold, b.biproper);
+      if (b.n == 2) b.filter_a1 = b.theta(0);
+      b.filters.init(b.filter_a_poly(), b.filter_denominator(), b.ws * next.cfg.sample_time, next.cfg.output_hold,
+                     b.biproper);
       if (st.cross_[i].rows() != b.nt || st.cross_[i].cols() != b.nt || !st.cross_[i].allFinite())
         fail("submodel " + std::to_string(i + 1) + ": joint covariance term does not match n_theta or is not finite");
       b.cross = st.cross_[i];

@@ -33,7 +33,7 @@ using namespace detail;
 // rediscretise() a heavier call frame.
 [[gnu::noinline]] void RecursiveEstimator::Impl::rediscretise_prefilters(Block& b, double Ts) {
   Prefilter* f = b.filters.f;
-  const FilterVector a = b.a_poly();
+  const FilterVector a = b.filter_a_poly();
   const Discretization da = discretize(a, Ts, cfg.output_hold);
   f[kY].set_denominator(a, da);
   f[kX].set_denominator(a, da);
@@ -42,7 +42,7 @@ using namespace detail;
     f[kZ].set_denominator(a, da);
     return;
   }
-  const FilterVector den = b.denominator();
+  const FilterVector den = b.filter_denominator();
   const Discretization dd = discretize(den, Ts, Hold::zoh);
   f[kU].set_denominator(den, dd);
   f[kZ].set_denominator(den, dd);
@@ -281,7 +281,7 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
       const double xu = b.output(du);
       xu_sum += xu - b.xu;
       b.xu = xu;
-      if (std::abs(b.update_gain) > kLaggingGain || ((status.updates + i) & 1) == 0) rediscretise(b);
+      if (std::abs(b.update_gain) > kLaggingGain || ((status.updates + i) & 1) == 0) follow(b);
     }
     return flags | finish_update();
   }

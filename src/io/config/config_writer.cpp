@@ -275,6 +275,7 @@ void write_estimator(YamlWriter& w, const EstimatorSettings& e, double sample_ti
   w.number(1, "stabilisation", e.stabilisation);
   w.number(1, "min_memory", e.min_memory);
   w.number(1, "settled_memory", e.settled_memory);
+  w.number(1, "damping_deadband", e.damping_deadband);
   w.number(1, "divergence_ratio", e.divergence_ratio);
   w.number(1, "change_ratio", e.change_ratio);
   w.number(1, "change_threshold", e.change_threshold);

@@ -33,6 +33,7 @@ void parse_estimator(const Map& est, double sample_time, EstimatorSettings& e) {
              "stabilisation",
              "min_memory",
              "settled_memory",
+             "damping_deadband",
              "divergence_ratio",
              "change_ratio",
              "change_threshold",
@@ -65,6 +66,7 @@ void parse_estimator(const Map& est, double sample_time, EstimatorSettings& e) {
   if (const auto v = est.get("stabilisation")) e.stabilisation = v->at_least(0.0);
   if (const auto v = est.get("min_memory")) e.min_memory = v->at_least(0.0);
   if (const auto v = est.get("settled_memory")) e.settled_memory = v->at_least(0.0);
+  if (const auto v = est.get("damping_deadband")) e.damping_deadband = v->at_least(0.0);
   if (const auto v = est.get("divergence_ratio")) e.divergence_ratio = v->above(1.0);
   if (const auto v = est.get("change_ratio")) {
     e.change_ratio = v->number();
