@@ -110,7 +110,8 @@ struct EstimatorSettings {
   // and gain wind up together until the output error diverges. The memory
   // update_divisor / (1 - lambda_i) is therefore held at min_memory or more
   // decay times of the current A_i (lambda_i raised where it is shorter), which
-  // restores the separation of time scales the recursion assumes. First- and
+  // restores the separation of time scales the recursion assumes
+  // (damping_deadband opens that loop where it starts). First- and
   // second-order submodels without rigid poles (the modes); other submodels
   // keep lambda_i. 0: lambda_i as configured.
   double min_memory = 6.0;
