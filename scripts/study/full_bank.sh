@@ -6,7 +6,8 @@
 # and written to OUT/tables.txt. A part already evaluated (OUT/part-<k>.json)
 # is skipped, so an interrupted run goes on where it stopped.
 #   scripts/study/full_bank.sh   OUT=/tmp/full-bank PARTS=40 PART=10 SEED=31 MODALWATCH=build/modalwatch JOBS=2
-# Part k uses seed SEED + k (records <k>/0000...). Needs numpy and scipy.
+# Part k uses seed SEED + k (records <k>/0000...). FAULTS=1 runs only the
+# bank's fault records (scenario_bank.py --skip-healthy). Needs numpy and scipy.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 out="${OUT:-/tmp/full-bank}"
@@ -15,6 +16,8 @@ part="${PART:-10}"
 seed="${SEED:-31}"
 bin="$(realpath "${MODALWATCH:-build/modalwatch}")"
 jobs="${JOBS:-2}"
+skip=()
+[[ "${FAULTS:-0}" == 1 ]] && skip=(--skip-healthy)
 py=/usr/bin/python3
 mkdir -p "$out"
 for ((k = 0; k < parts; ++k)); do
@@ -23,7 +26,7 @@ for ((k = 0; k < parts; ++k)); do
   dir="$out/part-$k"
   rm -rf "$dir"
   "$py" scripts/study/scenario_bank.py generate --out "$dir" --count "$part" --seed $((seed + k)) --scale full \
-    --modalwatch "$bin" >"$out/part-$k.log"
+    "${skip[@]}" --modalwatch "$bin" >"$out/part-$k.log"
   "$py" scripts/study/scenario_eval.py "$dir" --modalwatch "$bin" --jobs "$jobs" --json "$json.tmp" --keep-errors \
     --drop-est >>"$out/part-$k.log"
   mv "$json.tmp" "$json"
