@@ -397,6 +397,7 @@ class WarmupFit {
   Record replay_;
   bool fit_used_ = false;
   bool unsettled_ = false;  // a refit's: the change is real, but the window did not fit to the noise level
+  bool changing_ = false;   // a refit's, used: the plant still changed in the window (a ramp)
 };
 
 class RecursiveEstimator {

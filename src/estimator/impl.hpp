@@ -65,6 +65,7 @@ struct RecursiveEstimator::Impl {
   int window_samples = 0;              // the window being filled is complete at this many samples ...
   int window_settle = 0;               // ... of which the first ones only drive the fit's prefilters
   int refit_retries = 0;               // windows tried again since the divergence
+  int changing_refits = 0;             // refits in a row used while the plant still changed (WarmupFit::changing_)
   std::uint64_t warm_since_sample = 0;  // status.samples when the last (re)fit was applied
   std::vector<detail::Block> blocks;
   detail::JointInformation joint;  // the blocks' instruments together: the covariance reported
@@ -185,6 +186,7 @@ struct RecursiveEstimator::Impl {
   bool boost_changed_blocks();  // true when a block was boosted
   bool restore_sign_flipped_modes();  // true when a mode went back
   int refit_samples() const;
+  void arm_next_window(int N);
   bool may_refit() const;
   // Sample s into row i of the window's columns.
   void store_sample(Eigen::Index i, const Sample& s) {

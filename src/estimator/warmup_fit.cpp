@@ -38,14 +38,19 @@ namespace {
 //   its output error on the fitted part must be below a quarter of that
 //   state's (half its RMS), where a change that tripped the divergence reset
 //   left ten times the noise level or more;
-// - a window the plant still changed in (a ramp) has no single model, and
-//   the fit's compromise lands in whichever directions the excitation leaves
-//   loose. Such a window is `unsettled`, and the next one is fitted instead
-//   (finish_warmup): the restored state's misfit still grows (by more than
-//   a quarter from the first half to the second), or the fit does not
-//   describe the window to the level at which the restored state would
-//   count as settled.
-enum class RefitVerdict { accepted, refused, unsettled };
+// - a window the plant still changed in (a ramp) has no single model: the
+//   restored state's misfit still grows (by more than a quarter from the
+//   first half to the second), or the fit does not describe the window to
+//   the level at which the restored state would count as settled. Where its
+//   fit is still closer than the restored state (as above), it is taken
+//   (`accepted_changing`): its estimates follow the change, and the next
+//   window is fitted from it (finish_warmup), so that the compromise, which
+//   lands in whichever directions the excitation leaves loose, does not
+//   stay. Otherwise the window is `unsettled`, and the next one is fitted
+//   instead. Waiting for a window clear of the ramp held the estimates at
+//   the plant before it for as long as the ramp lasted (four windows on a
+//   ramp of 2.4 memories).
+enum class RefitVerdict { accepted, accepted_changing, refused, unsettled };
 
 // How far a fit's modes may move from its start: a refit's start is the last
 // good state (a third of the stiffness moves wn by 18 %); the warm-up fit's is
@@ -121,8 +126,9 @@ RefitVerdict refit_verdict(const Record& window, Eigen::Index settle, const Addi
   if (!(e_second > settled && e_second > 0.5 * e_first)) return refused;
   const double e_fit = misfit_in_state(window, settle, fit.model);
   constexpr double kStillChanging = 1.25;  // the misfit's growth from the first half to the second
-  if (!(e_fit < settled * n) || e_second > kStillChanging * e_first) return RefitVerdict::unsettled;
-  return e_fit < 0.25 * e_start ? RefitVerdict::accepted : refused;
+  const bool changing = !(e_fit < settled * n) || e_second > kStillChanging * e_first;
+  if (e_fit < 0.25 * e_start) return changing ? RefitVerdict::accepted_changing : RefitVerdict::accepted;
+  return changing ? RefitVerdict::unsettled : refused;
 }
 
 }  // namespace
@@ -166,6 +172,7 @@ void WarmupFit::run() noexcept {
         o.free_initial_state = refit_;
         Eigen::VectorXd y_start;  // the restored state's, once, for the first candidate that gets that far
         double e_start = 0.0;
+        bool last_changing = false;  // the last candidate's verdict: accepted_changing
         const auto usable = [&](const FitResult& f) {
           bool ok = f.model.beta().allFinite() && f.covariance.allFinite() && f.noise_variance > 0.0;
           for (const auto& s : f.model.submodels) ok = ok && (s.n == 0 || s.a(s.n - 1) > 0.0);
@@ -181,7 +188,8 @@ void WarmupFit::run() noexcept {
           const RefitVerdict v =
               refit_verdict(window, settle_, initial, y_start, e_start, context_->noise_variance, f, cfg);
           unsettled_ = unsettled_ || v == RefitVerdict::unsettled;
-          return v == RefitVerdict::accepted;
+          last_changing = v == RefitVerdict::accepted_changing;
+          return v == RefitVerdict::accepted || v == RefitVerdict::accepted_changing;
         };
         // A refit starts from the state that tracked each mode; the unfactored
         // start (which may find the changed plant where that start does not)
@@ -215,6 +223,7 @@ void WarmupFit::run() noexcept {
               best = e;
               fit = std::move(f);
               ok = true;
+              changing_ = last_changing;
             }
           }
           unsettled_ = unsettled_before;
@@ -222,6 +231,7 @@ void WarmupFit::run() noexcept {
         if (!ok) {
           fit = fit_srivc(window, initial, o);
           ok = usable(fit);
+          changing_ = ok && last_changing;
         }
         if (!ok && o.free_initial_state) {
           // Where the window leaves directions open (a few sines), the free
@@ -230,17 +240,20 @@ void WarmupFit::run() noexcept {
           o.free_initial_state = false;
           fit = fit_srivc(window, initial, o);
           ok = usable(fit);
+          changing_ = ok && last_changing;
         }
         if (!ok && refit_ && initial.submodels.size() >= 2) {
           o.unfactored_start = true;
           fit = fit_srivc(window, initial, o);
           ok = usable(fit);
+          changing_ = ok && last_changing;
         } else if (!ok && !refit_ && fit.start == "unfactored") {
           // The unfactored start won on output error but moved the modes: the
           // start from the configured modes alone.
           o.unfactored_start = false;
           fit = fit_srivc(window, initial, o);
           ok = usable(fit);
+          changing_ = ok && last_changing;
         }
         if (ok) {
           // theta(t0), P(t0): the configured model as a prior (relative std rho per
@@ -307,6 +320,17 @@ void WarmupFit::run() noexcept {
   done_ = true;
 }
 
+// The next memory after a window of N samples is the next refit's window;
+// this one's end drives its prefilters.
+void RecursiveEstimator::Impl::arm_next_window(int N) {
+  const Eigen::Index keep = std::min<Eigen::Index>(window_settle, N);
+  for_each_window_array([&](Eigen::VectorXd& w) { std::copy(w.data() + N - keep, w.data() + N, w.data()); });
+  buffered = static_cast<int>(keep);
+  window_settle = static_cast<int>(keep);
+  window_samples = window_settle + refit_samples();
+  refit_armed = true;
+}
+
 // The estimator's part: build from the fit's result, then run the filters over
 // the window without updating (section 4.7). A refit that did not earn its
 // place changes nothing: the restored state goes on waiting for its error to
@@ -315,20 +339,15 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   const int N = buffered;
   const double sigma2 = fit.sigma2_;
   ++status.fits;
+  if (refitting) changing_refits = fit.fit_used_ && fit.changing_ ? changing_refits + 1 : 0;
   if (refitting && !fit.fit_used_) {
     status.warming_up = false;
     refitting = false;
     status.fitted_window = 0.0;
     status.last_reset_reason = kResetDiverged;
     if (fit.unsettled_ && refit_retries < kRefitRetries && settling > 0) {
-      // The next memory is the next window; this one's end drives its prefilters.
       ++refit_retries;
-      const Eigen::Index keep = std::min<Eigen::Index>(window_settle, N);
-      for_each_window_array([&](Eigen::VectorXd& w) { std::copy(w.data() + N - keep, w.data() + N, w.data()); });
-      buffered = static_cast<int>(keep);
-      window_settle = static_cast<int>(keep);
-      window_samples = window_settle + refit_samples();
-      refit_armed = true;
+      arm_next_window(N);
       return;
     }
     window_samples = window_settle = 0;
@@ -407,10 +426,21 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   }
   pow_ref = p / std::max(N, 1);
   status.warming_up = false;
+  warm_since_sample = status.samples;
+  if (refitting && fit.changing_ && changing_refits <= kRefitRetries) {
+    // The plant still changed in the window: its fit is a compromise, closer
+    // to the plant than the restored state but biased where the window leaves
+    // directions loose. The next memory is fitted from it, its updates held
+    // until then, as after an unsettled window.
+    arm_next_window(N);
+    transient = static_cast<std::uint64_t>(refit_samples());
+    settling = transient + 1;
+    refitting = false;
+    return;
+  }
   refitting = false;
   window_samples = window_settle = 0;
   forget_history();
-  warm_since_sample = status.samples;
 }
 
 bool RecursiveEstimator::warmup_fit_pending() const noexcept { return impl_->fit_pending; }
