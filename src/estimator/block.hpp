@@ -160,6 +160,10 @@ struct Block {
   // The a_1 (damping term) of a mode's prefilters and auxiliary model, which
   // follows theta's only past a deadband (Impl::follow).
   double filter_a1 = 0.0;
+  // The prefilters take theta's a_1 as it is (a start, a restore, a boost).
+  void filter_takes_damping() {
+    if (n == 2) filter_a1 = theta(0);
+  }
   // phi^T P psi / (lambda + phi^T P psi) of the last update: how much of the
   // error it took into theta (near 1 at a start or after a boost, about nt over
   // the memory once settled).

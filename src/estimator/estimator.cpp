@@ -104,7 +104,7 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.p_bound = cfg.covariance_bound * b.p_bound.cwiseMax(1e-300);
     b.drop_lift();
     set_reference(b, cfg.stabilisations.empty() ? cfg.stabilisation : cfg.stabilisations[i]);
-    if (b.n == 2) b.filter_a1 = b.theta(0);
+    b.filter_takes_damping();
     b.filters.init(b.filter_a_poly(), b.filter_denominator(), b.ws * T, cfg.output_hold, b.biproper);
     b.phi.resize(b.nt);
     b.psi.resize(b.nt);

@@ -245,7 +245,7 @@ struct RecursiveEstimator::Impl {
 
 // The prefilters (and the auxiliary model) for the current theta.
 inline void RecursiveEstimator::Impl::rediscretise(detail::Block& b) {
-  if (b.n == 2) b.filter_a1 = b.theta(0);
+  b.filter_takes_damping();
   discretise(b);
 }
 

@@ -325,7 +325,7 @@ void RecursiveEstimator::restore(const EstimatorState& st) {
         b.ref_var = st.reference_variance_[i];
         b.stabilisation = Block::Stabilisation::on;
       }
-      if (b.n == 2) b.filter_a1 = b.theta(0);
+      b.filter_takes_damping();
       b.filters.init(b.filter_a_poly(), b.filter_denominator(), b.ws * next.cfg.sample_time, next.cfg.output_hold,
                      b.biproper);
       if (st.cross_[i].rows() != b.nt || st.cross_[i].cols() != b.nt || !st.cross_[i].allFinite())
