@@ -197,6 +197,11 @@ void WarmupFit::run() noexcept {
         if (refit_) o.unfactored_start = false;
         FitResult fit;
         bool ok = false;
+        const auto fit_with = [&](const SrivcOptions& opts) {
+          fit = fit_srivc(window, initial, opts);
+          ok = usable(fit);
+          changing_ = ok && last_changing;
+        };
         if (refit_ && initial.submodels.size() >= 2) {
           // A change of one submodel first (isolation, as a GLR test picks the
           // hypothesis of one changed mode): each submodel fitted alone, the
@@ -229,31 +234,23 @@ void WarmupFit::run() noexcept {
           unsettled_ = unsettled_before;
         }
         if (!ok) {
-          fit = fit_srivc(window, initial, o);
-          ok = usable(fit);
-          changing_ = ok && last_changing;
+          fit_with(o);
         }
         if (!ok && o.free_initial_state) {
           // Where the window leaves directions open (a few sines), the free
           // state can take the place of what the excitation does not show,
           // and the fit wanders off: the fit from rest instead.
           o.free_initial_state = false;
-          fit = fit_srivc(window, initial, o);
-          ok = usable(fit);
-          changing_ = ok && last_changing;
+          fit_with(o);
         }
         if (!ok && refit_ && initial.submodels.size() >= 2) {
           o.unfactored_start = true;
-          fit = fit_srivc(window, initial, o);
-          ok = usable(fit);
-          changing_ = ok && last_changing;
+          fit_with(o);
         } else if (!ok && !refit_ && fit.start == "unfactored") {
           // The unfactored start won on output error but moved the modes: the
           // start from the configured modes alone.
           o.unfactored_start = false;
-          fit = fit_srivc(window, initial, o);
-          ok = usable(fit);
-          changing_ = ok && last_changing;
+          fit_with(o);
         }
         if (ok) {
           // theta(t0), P(t0): the configured model as a prior (relative std rho per
