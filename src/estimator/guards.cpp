@@ -324,15 +324,20 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
   rearm = static_cast<std::uint64_t>(1.0 / (1.0 - e_alpha));
   if (reason == kResetDiverged && may_refit()) {
     // The window starts with the samples before the reset, as far back as the
-    // ring holds and the slowest mode's free response needs to die out: the
-    // fit's filters start from rest, the plant did not, and a tenth of a
-    // lightly damped mode's response left at the fit's start biases it (its
-    // gain by tens of %). The restored state's filters restarted at the reset
-    // and still wait out their own transient.
+    // ring holds beside the fitted part and the slowest mode's free response
+    // needs to die out: the fit's filters start from rest, the plant did not,
+    // and a tenth of a lightly damped mode's response left at the fit's start
+    // biases it (its gain by tens of %). The fit's window is replayed into the
+    // recursion's filters (finish_warmup), so the samples after the reset
+    // need not wait out the restarted filters' transient and then a memory:
+    // the fit comes when both have passed, the later of the two, the
+    // transient still first giving the restored state the chance to settle (a
+    // burst) and a change the time to end (a ramp).
     constexpr double kWindowDecay = 1e-3;
-    const auto wanted = static_cast<Eigen::Index>(transient_samples(kWindowDecay));
-    const auto room = wt.size() - refit_samples() - static_cast<Eigen::Index>(transient);
-    const Eigen::Index before = std::max<Eigen::Index>(0, std::min({history, room, wanted}));
+    const auto fitted = static_cast<Eigen::Index>(refit_samples());
+    const auto settle = std::min(static_cast<Eigen::Index>(transient_samples(kWindowDecay)), wt.size() - fitted);
+    const auto wait = std::min(std::max<Eigen::Index>(0, static_cast<Eigen::Index>(transient) - fitted), settle);
+    const Eigen::Index before = std::max<Eigen::Index>(0, std::min(history, settle - wait));
     const Eigen::Index first = (ring_head - before + wt.size()) % wt.size();
     for_each_window_array([&](Eigen::VectorXd& w) { std::rotate(w.data(), w.data() + first, w.data() + w.size()); });
     refit_armed = true;
@@ -340,7 +345,8 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
     buffered = static_cast<int>(before);
     // Where the ring holds less, the samples after the reset make up the
     // rest, up to the restarted filters' own transient.
-    const Eigen::Index after = std::min(static_cast<Eigen::Index>(transient), wanted - before);
+    const Eigen::Index after =
+        std::max(wait, std::min(static_cast<Eigen::Index>(transient), settle - before));
     window_settle = static_cast<int>(before + after);
     window_samples = refit_samples() + window_settle;
   }
