@@ -344,11 +344,11 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
     refit_retries = 0;
     buffered = static_cast<int>(before);
     // Where the ring holds less, the samples after the reset make up the
-    // rest, up to the restarted filters' own transient.
-    const Eigen::Index after =
-        std::max(wait, std::min(static_cast<Eigen::Index>(transient), settle - before));
+    // rest, up to the restarted filters' own transient (at least `wait`:
+    // before <= settle - wait and wait <= transient).
+    const Eigen::Index after = std::min(static_cast<Eigen::Index>(transient), settle - before);
     window_settle = static_cast<int>(before + after);
-    window_samples = refit_samples() + window_settle;
+    window_samples = static_cast<int>(fitted) + window_settle;
   }
   ++status.resets;
   status.last_reset_reason = reason;
