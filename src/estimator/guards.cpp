@@ -342,6 +342,7 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
     for_each_window_array([&](Eigen::VectorXd& w) { std::rotate(w.data(), w.data() + first, w.data() + w.size()); });
     refit_armed = true;
     refit_retries = 0;
+    quick_refits = soon_after_fit() ? quick_refits + 1 : 0;
     buffered = static_cast<int>(before);
     // Where the ring holds less, the samples after the reset make up the
     // rest, up to the restarted filters' own transient (at least `wait`:
@@ -369,19 +370,29 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
 // otherwise, and where the wait for the error to settle ends sooner, the wait
 // stays. The window is the longest memory of the submodels (the data their
 // recursive estimates rest on), at most the warm-up window. A divergence soon
-// after a (re)fit says that the fit itself did not describe the data (a model
-// that lacks an effect, a fit that did not converge): a refit would repeat
-// it, and the reset and wait stay.
+// after the warm-up fit says that the fit itself did not describe the data (a
+// model that lacks an effect, a fit that did not converge): a refit would
+// repeat it, and the reset and wait stay. Soon after a refit it says more
+// often that the change went on past the refit's window (a ramp longer than
+// the transient and the memory after the reset, whose window the refit took
+// as settled): up to kRefitRetries refits in a row are taken so. Waited out,
+// the estimates stayed at the first window's compromise for the wait's four
+// memories and more, and then converged from it at the memory floor's pace
+// (a flexible mode's 2 s ramp: wn 2 % off 8 memories after the ramp's end).
 int RecursiveEstimator::Impl::refit_samples() const {
   const double lambda = *std::max_element(cfg.forgetting.begin(), cfg.forgetting.end());
   const double memory = lambda < 1.0 ? 1.0 / (1.0 - lambda) : std::numeric_limits<double>::infinity();
   return static_cast<int>(std::min(memory, static_cast<double>(cfg.warmup_samples)));
 }
 
-bool RecursiveEstimator::Impl::may_refit() const {
+bool RecursiveEstimator::Impl::soon_after_fit() const {
   constexpr double kFittedWindows = 4.0;  // as long as a restart may wait to settle
+  return !(static_cast<double>(status.samples - warm_since_sample) > kFittedWindows / (1.0 - e_alpha));
+}
+
+bool RecursiveEstimator::Impl::may_refit() const {
   return refit_context && cfg.fit_on_warmup && !blocks.empty() &&
-         static_cast<double>(status.samples - warm_since_sample) > kFittedWindows / (1.0 - e_alpha) &&
+         (!soon_after_fit() || (last_fit_refit && quick_refits < kRefitRetries)) &&
          transient_samples() + static_cast<std::uint64_t>(refit_samples()) <= static_cast<std::uint64_t>(wt.size());
 }
 

@@ -67,6 +67,8 @@ struct RecursiveEstimator::Impl {
   int refit_retries = 0;               // windows tried again since the divergence
   int changing_refits = 0;             // refits in a row used while the plant still changed (WarmupFit::changing_)
   std::uint64_t warm_since_sample = 0;  // status.samples when the last (re)fit was applied
+  bool last_fit_refit = false;          // that fit was a refit's (may_refit)
+  int quick_refits = 0;                 // refits in a row armed soon after the one before (may_refit)
   std::vector<detail::Block> blocks;
   detail::JointInformation joint;  // the blocks' instruments together: the covariance reported
   // P_i + C_i (joint_information.hpp), bounded as P_i is: what mode() and the
@@ -188,6 +190,7 @@ struct RecursiveEstimator::Impl {
   int refit_samples() const;
   void arm_next_window(int N);
   bool may_refit() const;
+  bool soon_after_fit() const;  // a divergence now says the last (re)fit did not describe the data
   // Sample s into row i of the window's columns.
   void store_sample(Eigen::Index i, const Sample& s) {
     wt(i) = s.t;

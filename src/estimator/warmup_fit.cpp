@@ -424,6 +424,7 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
   pow_ref = p / std::max(N, 1);
   status.warming_up = false;
   warm_since_sample = status.samples;
+  last_fit_refit = refitting;
   if (refitting && fit.changing_ && changing_refits <= kRefitRetries) {
     // The plant still changed in the window: its fit is a compromise, closer
     // to the plant than the restored state but biased where the window leaves
