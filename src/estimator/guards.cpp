@@ -378,7 +378,7 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
 // as settled): up to kRefitRetries refits in a row are taken so. Waited out,
 // the estimates stayed at the first window's compromise for the wait's four
 // memories and more, and then converged from it at the memory floor's pace
-// (a flexible mode's 2 s ramp: wn 2 % off 8 memories after the ramp's end).
+// (a flexible mode's 2 s ramp: wn 1.6 % off 8 memories after the ramp's end).
 int RecursiveEstimator::Impl::refit_samples() const {
   const double lambda = *std::max_element(cfg.forgetting.begin(), cfg.forgetting.end());
   const double memory = lambda < 1.0 ? 1.0 / (1.0 - lambda) : std::numeric_limits<double>::infinity();
