@@ -538,6 +538,33 @@ SteppedBeam stepped_beam(double step, double burst, bool two_sines = false, doub
   return b;
 }
 
+// A fit applied after the stepped beam's change at 10 s: when, the flexible
+// mode's wn over its new value, the suspension mode's gain over its own.
+struct Refit {
+  double t, wn, suspension_gain;
+};
+
+// Runs est over the beam's record and returns its refits after the change.
+std::vector<Refit> refits_after_the_change(RecursiveEstimator& est, const SteppedBeam& beam) {
+  const Record& r = beam.record;
+  const double suspension_gain = beam.plant.modes[0].modal.gain;
+  std::vector<Refit> refits;
+  std::uint64_t fits = 0;
+  for (Eigen::Index k = 0; k < r.size(); ++k) {
+    est.step(Sample{r.t(k), r.u(k), r.y(k), r.r(k)});
+    const EstimatorStatus& st = est.status();
+    if (st.fits > fits && !st.warming_up) {
+      fits = st.fits;
+      if (r.t(k) > 10.0)
+        refits.push_back({r.t(k), est.mode(1).value.wn / beam.wn_after, est.mode(0).value.gain / suspension_gain});
+    }
+  }
+  for (const Refit& f : refits)
+    std::printf("fit %.3f s after the ramp's start: flexible wn %.4f of the new value, suspension gain %.4f\n",
+                f.t - 10.0, f.wn, f.suspension_gain);
+  return refits;
+}
+
 bool refitted(const EstimatorStatus& st) {
   return st.last_reset_reason && std::string_view(st.last_reset_reason).find("refit") != std::string_view::npos;
 }
@@ -686,27 +713,9 @@ TEST(RecursiveEstimator, ARefitLeavesAnUnchangedLightlyDampedModeWhereItWas) {
 // a compromise was taken, and a second window was needed.)
 TEST(RecursiveEstimator, ARampShorterThanTheTransientAfterTheResetIsRefittedOnceOnTheNewPlant) {
   const SteppedBeam beam = stepped_beam(-0.08, 0.0, false, 0.8);
-  const Record& r = beam.record;
   constexpr double kRampEnd = 10.8;  // s
   RecursiveEstimator est(beam.config.model, beam.config.estimator);
-  struct Refit {
-    double t, wn, suspension_gain;
-  };
-  std::vector<Refit> refits;
-  std::uint64_t fits = 0;
-  const double suspension_gain = beam.plant.modes[0].modal.gain;
-  for (Eigen::Index k = 0; k < r.size(); ++k) {
-    est.step(Sample{r.t(k), r.u(k), r.y(k), r.r(k)});
-    const EstimatorStatus& st = est.status();
-    if (st.fits > fits && !st.warming_up) {
-      fits = st.fits;
-      if (r.t(k) > 10.0)
-        refits.push_back({r.t(k), est.mode(1).value.wn / beam.wn_after, est.mode(0).value.gain / suspension_gain});
-    }
-  }
-  for (const Refit& f : refits)
-    std::printf("fit %.3f s after the ramp's start: flexible wn %.4f of the new value, suspension gain %.4f\n",
-                f.t - 10.0, f.wn, f.suspension_gain);
+  const std::vector<Refit> refits = refits_after_the_change(est, beam);
   ASSERT_EQ(refits.size(), 1u) << "resets " << est.status().resets << ": " << est.status().last_reset_reason;
   EXPECT_GT(refits[0].t, kRampEnd);
   EXPECT_LT(refits[0].t, 12.0);
@@ -727,26 +736,8 @@ TEST(RecursiveEstimator, ARampShorterThanTheTransientAfterTheResetIsRefittedOnce
 TEST(RecursiveEstimator, ARampThatGoesOnPastTheRefitIsRefittedAgainOnTheNewPlant) {
   constexpr double kRamp = 2.0;  // s, from 10 s
   const SteppedBeam beam = stepped_beam(-0.08, 0.0, false, kRamp);
-  const Record& r = beam.record;
   RecursiveEstimator est(beam.config.model, beam.config.estimator);
-  struct Refit {
-    double t, wn, suspension_gain;
-  };
-  std::vector<Refit> refits;
-  std::uint64_t fits = 0;
-  const double suspension_gain = beam.plant.modes[0].modal.gain;
-  for (Eigen::Index k = 0; k < r.size(); ++k) {
-    est.step(Sample{r.t(k), r.u(k), r.y(k), r.r(k)});
-    const EstimatorStatus& st = est.status();
-    if (st.fits > fits && !st.warming_up) {
-      fits = st.fits;
-      if (r.t(k) > 10.0)
-        refits.push_back({r.t(k), est.mode(1).value.wn / beam.wn_after, est.mode(0).value.gain / suspension_gain});
-    }
-  }
-  for (const Refit& f : refits)
-    std::printf("fit %.3f s after the ramp's start: flexible wn %.4f of the new value, suspension gain %.4f\n",
-                f.t - 10.0, f.wn, f.suspension_gain);
+  const std::vector<Refit> refits = refits_after_the_change(est, beam);
   ASSERT_EQ(refits.size(), 2u) << "resets " << est.status().resets << ": " << est.status().last_reset_reason;
   EXPECT_LT(refits[0].t, 10.0 + kRamp);
   EXPECT_GT(refits[0].wn, 1.005);
