@@ -153,7 +153,11 @@ struct EstimatorSettings {
   // 2e8 at 18 for a ratio 4, whatever the plant). On the alarm the submodels the error correlates with
   // (their instruments' score test) get their covariance multiplied by
   // kChangeBoost, so that they follow within a tenth of a memory where
-  // forgetting takes one. 0: off.
+  // forgetting takes one. Where they are already at their memory floor
+  // (min_memory) no boost can speed them up: where they explain an order of
+  // magnitude more of the error than white noise would, the memory after the
+  // alarm is fitted beside the recursion, as a refit after a divergence but
+  // with no reset, and taken only where the fit finds a change. 0: off.
   double change_ratio = 4.0;
   double change_threshold = 18.0;
   // After such a boost, the submodels the score test did not name keep their

@@ -322,7 +322,16 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
     else if (!armed)
       m.keep_history(s);
   }
+  // A window beside the recursion takes the sample before the update, so
+  // that a divergence on it hands the window over whole (restore_good).
+  const bool beside = armed && m.shadow_refit;
+  const bool window_full = beside && m.keep_for_refit(s, bad_values);
   flags |= m.advance(sample, !bad_values);
+  if (beside) {
+    if (!window_full || !m.refit_armed || !m.shadow_refit || (flags & kReset)) return flags;
+    m.begin_refit();
+    return flags | fit_window();
+  }
   if (armed && m.refit_armed && !(flags & kReset) && m.keep_for_refit(s, bad_values)) {
     m.begin_refit();
     return flags | fit_window();

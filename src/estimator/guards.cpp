@@ -47,7 +47,7 @@ void RecursiveEstimator::Impl::restart_filters() {
   bridged = 0;
   settling = transient + static_cast<std::uint64_t>(kSettleWindows / (1.0 - e_alpha));
   outlier_run = 0;
-  refit_armed = false;
+  refit_armed = shadow_refit = false;
 }
 
 // In closed loop a gap short against the modes' decay times is bridged
@@ -198,8 +198,15 @@ void RecursiveEstimator::Impl::save_good() {
 // One such alarm alone boosts as any other: it may be a change's onset, which
 // the next alarm, a tenth of a memory on, explains (held back until then, the
 // boost came 0.05 to 0.4 memories later on the bank, and one change was lost).
-bool RecursiveEstimator::Impl::boost_changed_blocks() {
+bool RecursiveEstimator::Impl::boost_changed_blocks(bool& floor_held) {
   constexpr double kChangeBoost = 10.0, kShareOfLargest = 0.5, kWait = 0.1;
+  // A block at its memory floor is refitted beside the recursion (step.cpp)
+  // only where it explains an order of magnitude more of the error than white
+  // noise would: a healthy plant's coloured output error (the paper's, after
+  // gaps) alarms the change test on such blocks every few tenths of a memory,
+  // with scores up to four times that bound, where a change of a lightly
+  // damped mode scores tens of times it.
+  constexpr double kFloorChangeScore = 10.0;
   const auto score_test = [this](const detail::Block& b) {
     const detail::ThetaVec x = b.score_info.selfadjointView<Eigen::Upper>().ldlt().solve(b.score);
     const double t = b.score.dot(x) / (e_var_good * b.nt);
@@ -220,6 +227,7 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
     ++status.noise_changes;
   }
   bool boosted = false;
+  floor_held = false;
   std::uint64_t hold = 0;  // updates the blocks not named keep their estimate
   for (auto& b : blocks) {
     // No shorter than the memory floor (min_memory decay times): faster, the
@@ -244,6 +252,8 @@ bool RecursiveEstimator::Impl::boost_changed_blocks() {
     }
     const bool scored = !noise_changed && score_test(b) >= kShareOfLargest * largest;
     b.named = scored && boost > 1.0;
+    floor_held = floor_held || (scored && !release && boost <= 1.0 &&
+                                score_test(b) * e_var_good > kFloorChangeScore * explained_score(b.nt) * e_short);
     if (scored && release)  // kept only if no block is boosted (below)
       b.min_floor_until =
           std::max(b.min_floor_until, status.updates + static_cast<std::uint64_t>(cfg.change_hold / forget));
@@ -305,6 +315,11 @@ bool RecursiveEstimator::Impl::restore_sign_flipped_modes() {
 }
 
 void RecursiveEstimator::Impl::restore_good(const char* reason) {
+  if (refit_armed && shadow_refit) {
+    // The window beside the recursion holds the ring's samples in order.
+    ring_head = static_cast<Eigen::Index>(buffered) % wt.size();
+    history = std::min<Eigen::Index>(buffered, wt.size());
+  }
   for (auto& b : blocks) {
     b.held = b.adapting = b.min_floor_until = 0;
     b.drop_lift();
@@ -322,37 +337,43 @@ void RecursiveEstimator::Impl::restore_good(const char* reason) {
   restart_filters();  // at rest, discretised for the restored theta
   // Give the restored state one residual window before judging it again.
   rearm = static_cast<std::uint64_t>(1.0 / (1.0 - e_alpha));
-  if (reason == kResetDiverged && may_refit()) {
-    // The window starts with the samples before the reset, as far back as the
-    // ring holds beside the fitted part and the slowest mode's free response
-    // needs to die out: the fit's filters start from rest, the plant did not,
-    // and a tenth of a lightly damped mode's response left at the fit's start
-    // biases it (its gain by tens of %). The fit's window is replayed into the
-    // recursion's filters (finish_warmup), so the samples after the reset
-    // need not wait out the restarted filters' transient and then a memory:
-    // the fit comes when both have passed, the later of the two, the
-    // transient still first giving the restored state the chance to settle (a
-    // burst) and a change the time to end (a ramp).
-    constexpr double kWindowDecay = 1e-3;
-    const auto fitted = static_cast<Eigen::Index>(refit_samples());
-    const auto settle = std::min(static_cast<Eigen::Index>(transient_samples(kWindowDecay)), wt.size() - fitted);
-    const auto wait = std::min(std::max<Eigen::Index>(0, static_cast<Eigen::Index>(transient) - fitted), settle);
-    const Eigen::Index before = std::max<Eigen::Index>(0, std::min(history, settle - wait));
-    const Eigen::Index first = (ring_head - before + wt.size()) % wt.size();
-    for_each_window_array([&](Eigen::VectorXd& w) { std::rotate(w.data(), w.data() + first, w.data() + w.size()); });
-    refit_armed = true;
-    refit_retries = 0;
-    quick_refits = soon_after_fit() ? quick_refits + 1 : 0;
-    buffered = static_cast<int>(before);
-    // Where the ring holds less, the samples after the reset make up the
-    // rest, up to the restarted filters' own transient (at least `wait`:
-    // before <= settle - wait and wait <= transient).
-    const Eigen::Index after = std::min(static_cast<Eigen::Index>(transient), settle - before);
-    window_settle = static_cast<int>(before + after);
-    window_samples = static_cast<int>(fitted) + window_settle;
-  }
+  if (reason == kResetDiverged && may_refit()) arm_refit(reason);
   ++status.resets;
   status.last_reset_reason = reason;
+}
+
+// The refit's window (restore_good, or beside the recursion after a change
+// the memory floor holds: step.cpp).
+void RecursiveEstimator::Impl::arm_refit(const char* reason) {
+  // The window starts with the samples before the reset, as far back as the
+  // ring holds beside the fitted part and the slowest mode's free response
+  // needs to die out: the fit's filters start from rest, the plant did not,
+  // and a tenth of a lightly damped mode's response left at the fit's start
+  // biases it (its gain by tens of %). The fit's window is replayed into the
+  // recursion's filters (finish_warmup), so the samples after the reset
+  // need not wait out the restarted filters' transient and then a memory:
+  // the fit comes when both have passed, the later of the two, the
+  // transient still first giving the restored state the chance to settle (a
+  // burst) and a change the time to end (a ramp).
+  constexpr double kWindowDecay = 1e-3;
+  const auto fitted = static_cast<Eigen::Index>(refit_samples());
+  const auto settle = std::min(static_cast<Eigen::Index>(transient_samples(kWindowDecay)), wt.size() - fitted);
+  const auto wait = std::min(std::max<Eigen::Index>(0, static_cast<Eigen::Index>(transient) - fitted), settle);
+  const Eigen::Index before = std::max<Eigen::Index>(0, std::min(history, settle - wait));
+  const Eigen::Index first = (ring_head - before + wt.size()) % wt.size();
+  for_each_window_array([&](Eigen::VectorXd& w) { std::rotate(w.data(), w.data() + first, w.data() + w.size()); });
+  refit_armed = true;
+  refit_retries = 0;
+  quick_refits = soon_after_fit() ? quick_refits + 1 : 0;
+  buffered = static_cast<int>(before);
+  // Where the ring holds less, the samples after the reset make up the
+  // rest, up to the restarted filters' own transient (at least `wait`:
+  // before <= settle - wait and wait <= transient).
+  const Eigen::Index after = std::min(static_cast<Eigen::Index>(transient), settle - before);
+  window_settle = static_cast<int>(before + after);
+  window_samples = static_cast<int>(fitted) + window_settle;
+  refit_trigger = reason;
+  changing_refits = 0;
 }
 
 // A divergence on a model that has fitted the data for a while is a runaway of
@@ -400,8 +421,8 @@ bool RecursiveEstimator::Impl::may_refit() const {
 // that settles ends the wait as usual; a complete window goes to a refit
 // (true). A missing output or a gap cannot be fitted: the wait goes on as before.
 bool RecursiveEstimator::Impl::keep_for_refit(const Sample& s, bool bad_values) {
-  if (settling == 0 || bad_values) {
-    refit_armed = false;
+  if ((settling == 0 && !shadow_refit) || bad_values) {
+    refit_armed = shadow_refit = false;
     forget_history();
     return false;
   }
@@ -411,7 +432,7 @@ bool RecursiveEstimator::Impl::keep_for_refit(const Sample& s, bool bad_values) 
 
 // The window is complete: fit it from the last good state (theta is that
 // state while settling: no update meanwhile).
-void RecursiveEstimator::Impl::begin_refit() {
+void RecursiveEstimator::Impl::write_refit_start() {
   refit_context->noise_variance = e_var_good;
   AdditiveModel& start = refit_context->initial;
   for (std::size_t i = 0; i < blocks.size(); ++i) {
@@ -420,10 +441,24 @@ void RecursiveEstimator::Impl::begin_refit() {
     for (int j = 0; j < s.n; ++j) s.a(j) = b.good_theta(j) / b.scale(j);
     for (int k = 0; k <= s.m; ++k) s.b(k) = b.good_theta(s.n + k) / b.scale(s.n + k);
   }
+}
+
+void RecursiveEstimator::Impl::begin_refit() {
+  // Beside the recursion the good state goes on being saved: the start is the
+  // one at the alarm (arm_refit), before the change, but in the window after
+  // a compromise.
+  if (!shadow_refit || changing_refits > 0) write_refit_start();
+  const bool change = refit_trigger == kChangeRefit;
+  refit_context->misfit_ratio =
+      change ? kSettledRatio * kSettledRatio : 0.25 * cfg.divergence_ratio * cfg.divergence_ratio;
+  refit_context->closer_ratio = change ? 1.0 / (kSettledRatio * kSettledRatio) : 0.25;
+  refit_context->follow_up = changing_refits > 0;
   refit_armed = false;
   refitting = true;
-  status.warming_up = true;
-  status.last_reset_reason = kResetRefit;
+  // Beside the recursion the estimates stand meanwhile: no warm-up to show.
+  status.warming_up = !shadow_refit;
+  reason_before_refit = status.last_reset_reason;
+  status.last_reset_reason = refit_trigger == kChangeRefit ? kChangeRefit : kResetRefit;
 }
 
 }  // namespace modalwatch

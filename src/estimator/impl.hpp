@@ -29,6 +29,9 @@ inline constexpr char kResetDiverged[] =
 inline constexpr char kResetDegenerate[] = "non-finite or degenerate update (NaN/Inf in theta, P or the gain)";
 inline constexpr char kResetRefit[] =
     "output error diverged (residual RMS above divergence_ratio x its last good value): refit on a new warm-up window";
+inline constexpr char kChangeRefit[] =
+    "output error changed (change test) on submodels at their memory floor: the memory after the alarm refitted "
+    "beside the recursion";
 
 // Settled: the output error's RMS within this factor of its last good value
 // (the state the estimates, and the tests of change and divergence, rest on).
@@ -50,6 +53,16 @@ struct WarmupFit::Context {
   AdditiveModel initial;
   EstimatorSettings cfg;
   double noise_variance = 0.0;  // a refit's: the output-error variance of the last good state
+  // A refit's: the last good state's misfit that says the plant changed, and
+  // the fit's that says it describes the window, times noise_variance; how
+  // much closer to the window than that state the fit must be (refit_verdict).
+  // After a divergence a quarter of its level and a quarter; after a change
+  // the change test found, the settled level and its inverse.
+  double misfit_ratio = 0.0;
+  double closer_ratio = 0.25;
+  // A refit's: the window after one whose plant still changed (a ramp), fitted
+  // from that window's compromise: the change is established.
+  bool follow_up = false;
 };
 
 struct RecursiveEstimator::Impl {
@@ -62,6 +75,9 @@ struct RecursiveEstimator::Impl {
   std::shared_ptr<WarmupFit::Context> refit_context;
   bool refit_armed = false;            // settling after a divergence, the samples buffered for a refit
   bool refitting = false;              // the window is a refit's
+  bool shadow_refit = false;           // ... armed beside the recursion, not after a reset (arm_refit)
+  const char* refit_trigger = kResetDiverged;  // kResetDiverged or kChangeRefit
+  const char* reason_before_refit = "";        // restored where a refit beside the recursion is not taken
   int window_samples = 0;              // the window being filled is complete at this many samples ...
   int window_settle = 0;               // ... of which the first ones only drive the fit's prefilters
   int refit_retries = 0;               // windows tried again since the divergence
@@ -185,7 +201,11 @@ struct RecursiveEstimator::Impl {
   }
   void save_good();
   void restore_good(const char* reason);
-  bool boost_changed_blocks();  // true when a block was boosted
+  // true when a block was boosted; floor_held: a block the error names could
+  // not be (its forgetting already at the memory floor).
+  bool boost_changed_blocks(bool& floor_held);
+  void arm_refit(const char* trigger);
+  void write_refit_start();  // the last good state into refit_context: the refit's start and yardstick
   bool restore_sign_flipped_modes();  // true when a mode went back
   int refit_samples() const;
   void arm_next_window(int N);

@@ -22,7 +22,7 @@ using detail::Block;
 // carries them as an index into this list.
 const std::vector<const char*>& reset_reasons() {
   static const std::vector<const char*> reasons = {kResetNonFiniteModel, kResetUnstableLoop, kResetDiverged,
-                                                   kResetDegenerate, kResetRefit};
+                                                   kResetDegenerate, kResetRefit, kChangeRefit};
   return reasons;
 }
 

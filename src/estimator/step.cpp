@@ -222,7 +222,18 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     return flags | kReset;
   } else if (changed) {
     change_cusum = 0.0;
-    if (boost_changed_blocks()) flags |= kChangeBoost;
+    bool floor_held = false;
+    if (boost_changed_blocks(floor_held)) {
+      flags |= kChangeBoost;
+    } else if (floor_held && !refit_armed && may_refit()) {
+      // The submodels the error names cannot follow faster than their memory
+      // floor (a lightly damped mode, decaying over a good part of a memory):
+      // the memory after the alarm is fitted as after a divergence, while the
+      // recursion goes on. A fit the verdict does not take changes nothing.
+      shadow_refit = true;
+      arm_refit(kChangeRefit);
+      write_refit_start();
+    }
   }
   // 3. Excitation: without input power the update only winds P up. With
   //    several inputs, the power of all of them (input_power()).

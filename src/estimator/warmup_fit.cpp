@@ -37,7 +37,14 @@ namespace {
 // - a fit no closer to the data than the last good state says nothing new:
 //   its output error on the fitted part must be below a quarter of that
 //   state's (half its RMS), where a change that tripped the divergence reset
-//   left ten times the noise level or more;
+//   left ten times the noise level or more. After a change the change test
+//   found where the memory floor allows no boost (a refit beside the
+//   recursion: step.cpp), the misfit is smaller: it must persist at the
+//   settled level (kSettledRatio times the noise RMS), and the fit's RMS be
+//   kSettledRatio times smaller than the last good state's;
+// - the window after a compromise (below) is fitted to leave that
+//   compromise: the change is established, and a fit closer to the window
+//   than the compromise is taken;
 // - a window the plant still changed in (a ramp) has no single model: the
 //   restored state's misfit still grows (by more than a quarter from the
 //   first half to the second), or the fit does not describe the window to
@@ -113,8 +120,8 @@ double misfit_in_state(const Record& window, Eigen::Index settle, const Additive
 // y_start: the restored state's simulation over the window (simulate_start);
 // e_start: its misfit_in_state.
 RefitVerdict refit_verdict(const Record& window, Eigen::Index settle, const AdditiveModel& start,
-                           const Eigen::VectorXd& y_start, double e_start, double noise_variance, const FitResult& fit,
-                           const EstimatorSettings& cfg) {
+                           const Eigen::VectorXd& y_start, double e_start, double noise_variance,
+                           double misfit_ratio, double closer_ratio, bool follow_up, const FitResult& fit) {
   constexpr auto refused = RefitVerdict::refused;
   if (!keeps_the_modes(start, fit.model, kRefitFrequencyRatio)) return refused;
   const Eigen::Index n = window.y.size() - settle;
@@ -122,12 +129,13 @@ RefitVerdict refit_verdict(const Record& window, Eigen::Index settle, const Addi
   const Eigen::Index half = n / 2;
   const double e_first = (window.y.segment(settle, half) - y_start.segment(settle, half)).squaredNorm() / half;
   const double e_second = (window.y.tail(n - half) - y_start.tail(n - half)).squaredNorm() / (n - half);
-  const double settled = 0.25 * cfg.divergence_ratio * cfg.divergence_ratio * noise_variance;
-  if (!(e_second > settled && e_second > 0.5 * e_first)) return refused;
+  const double settled = misfit_ratio * noise_variance;
+  if (!follow_up && !(e_second > settled && e_second > 0.5 * e_first)) return refused;
   const double e_fit = misfit_in_state(window, settle, fit.model);
   constexpr double kStillChanging = 1.25;  // the misfit's growth from the first half to the second
   const bool changing = !(e_fit < settled * n) || e_second > kStillChanging * e_first;
-  if (e_fit < 0.25 * e_start) return changing ? RefitVerdict::accepted_changing : RefitVerdict::accepted;
+  if (e_fit < (follow_up ? 1.0 : closer_ratio) * e_start)
+    return changing ? RefitVerdict::accepted_changing : RefitVerdict::accepted;
   return changing ? RefitVerdict::unsettled : refused;
 }
 
@@ -186,7 +194,8 @@ void WarmupFit::run() noexcept {
             e_start = misfit_in_state(window, settle_, initial);
           }
           const RefitVerdict v =
-              refit_verdict(window, settle_, initial, y_start, e_start, context_->noise_variance, f, cfg);
+              refit_verdict(window, settle_, initial, y_start, e_start, context_->noise_variance,
+                            context_->misfit_ratio, context_->closer_ratio, context_->follow_up, f);
           unsettled_ = unsettled_ || v == RefitVerdict::unsettled;
           last_changing = v == RefitVerdict::accepted_changing;
           return v == RefitVerdict::accepted || v == RefitVerdict::accepted_changing;
@@ -341,16 +350,18 @@ void RecursiveEstimator::Impl::finish_warmup(const WarmupFit& fit) {
     status.warming_up = false;
     refitting = false;
     status.fitted_window = 0.0;
-    status.last_reset_reason = kResetDiverged;
-    if (fit.unsettled_ && refit_retries < kRefitRetries && settling > 0) {
+    status.last_reset_reason = shadow_refit ? reason_before_refit : kResetDiverged;
+    if (fit.unsettled_ && refit_retries < kRefitRetries && (settling > 0 || shadow_refit)) {
       ++refit_retries;
       arm_next_window(N);
       return;
     }
+    shadow_refit = false;
     window_samples = window_settle = 0;
     forget_history();
     return;
   }
+  shadow_refit = false;
   settling = transient = bridged = rearm = 0;
   outlier_run = 0;
   if (fit.fit_used_) {
