@@ -7,7 +7,8 @@
 # is skipped, so an interrupted run goes on where it stopped.
 #   scripts/study/full_bank.sh   OUT=/tmp/full-bank PARTS=40 PART=10 SEED=31 MODALWATCH=build/modalwatch JOBS=2
 # Part k uses seed SEED + k (records <k>/0000...). FAULTS=1 runs only the
-# bank's fault records (scenario_bank.py --skip-healthy). Needs numpy and scipy.
+# bank's fault records (scenario_bank.py --skip-healthy), HEALTHY=1 only its
+# healthy ones (--skip-faults). Needs numpy and scipy.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 out="${OUT:-/tmp/full-bank}"
@@ -18,6 +19,7 @@ bin="$(realpath "${MODALWATCH:-build/modalwatch}")"
 jobs="${JOBS:-2}"
 skip=()
 [[ "${FAULTS:-0}" == 1 ]] && skip=(--skip-healthy)
+[[ "${HEALTHY:-0}" == 1 ]] && skip=(--skip-faults)
 py=/usr/bin/python3
 mkdir -p "$out"
 for ((k = 0; k < parts; ++k)); do

@@ -21,11 +21,12 @@ writes, under DIR/<id>/:
 How to run it
 -------------
     /usr/bin/python3 scripts/study/scenario_bank.py generate --out /tmp/bank \\
-        --count 12 --seed 1 --scale small [--healthy-only|--faults-only|--skip-healthy] \\
+        --count 12 --seed 1 --scale small [--healthy-only|--faults-only|--skip-healthy|--skip-faults] \\
         [--modalwatch build/modalwatch] [--no-simulate]
 (--faults-only draws a bank of fault records; --skip-healthy draws the same
 bank as without it and writes only its fault records, to re-run those of a
-full bank in a fraction of its time.)
+full bank in a fraction of its time; --skip-faults writes only its healthy
+records.)
 then `scripts/study/scenario_eval.py /tmp/bank`. Needs numpy and scipy.
 
 Rules (the same for every record; nothing is tuned per record)
@@ -522,7 +523,7 @@ def generate(args):
     closed = rng.permutation(np.arange(n) % 2 == 1)
     poor = rng.permutation(np.arange(n) % 3 == 2)
     for i in range(n):
-        if args.skip_healthy and healthy[i]:
+        if (args.skip_healthy and healthy[i]) or (args.skip_faults and not healthy[i]):
             continue
         t0 = time.time()
         s = make_scenario(np.random.default_rng([args.seed, i]), i, healthy[i], closed[i], poor[i], args.scale)
@@ -562,6 +563,7 @@ def main():
     only.add_argument("--healthy-only", action="store_true")
     only.add_argument("--faults-only", action="store_true")
     only.add_argument("--skip-healthy", action="store_true", help="the same bank's fault records only")
+    only.add_argument("--skip-faults", action="store_true", help="the same bank's healthy records only")
     g.add_argument("--modalwatch", default=default_binary(), type=binary_path)
     g.add_argument("--no-simulate", action="store_true", help="write config.yaml and meta.json only")
     args = p.parse_args()
