@@ -327,16 +327,10 @@ unsigned RecursiveEstimator::step(const Sample& s) noexcept {
   const bool beside = armed && m.shadow_refit;
   const bool window_full = beside && m.keep_for_refit(s, bad_values);
   flags |= m.advance(sample, !bad_values);
-  if (beside) {
-    if (!window_full || !m.refit_armed || !m.shadow_refit || (flags & kReset)) return flags;
-    m.begin_refit();
-    return flags | fit_window();
-  }
-  if (armed && m.refit_armed && !(flags & kReset) && m.keep_for_refit(s, bad_values)) {
-    m.begin_refit();
-    return flags | fit_window();
-  }
-  return flags;
+  if (!armed || !m.refit_armed || (flags & kReset)) return flags;
+  if (!(beside ? window_full && m.shadow_refit : m.keep_for_refit(s, bad_values))) return flags;
+  m.begin_refit();
+  return flags | fit_window();
 }
 
 // The window is complete: its fit, on another thread when deferred.

@@ -198,7 +198,7 @@ void RecursiveEstimator::Impl::save_good() {
 // One such alarm alone boosts as any other: it may be a change's onset, which
 // the next alarm, a tenth of a memory on, explains (held back until then, the
 // boost came 0.05 to 0.4 memories later on the bank, and one change was lost).
-bool RecursiveEstimator::Impl::boost_changed_blocks(bool& floor_held) {
+RecursiveEstimator::Impl::ChangeAnswer RecursiveEstimator::Impl::boost_changed_blocks() {
   constexpr double kChangeBoost = 10.0, kShareOfLargest = 0.5, kWait = 0.1;
   // A block at its memory floor is refitted beside the recursion (step.cpp)
   // only where it explains an order of magnitude more of the error than white
@@ -212,12 +212,17 @@ bool RecursiveEstimator::Impl::boost_changed_blocks(bool& floor_held) {
     const double t = b.score.dot(x) / (e_var_good * b.nt);
     return std::isfinite(t) ? t : 0.0;
   };
+  // A block's score test t explains more of the recent error than `times`
+  // what white noise would (explained_score()).
+  const auto explains = [this](const detail::Block& b, double t, double times) {
+    return t * e_var_good > times * explained_score(b.nt) * e_short;
+  };
   double largest = 0.0;
   bool explained = false;
   for (const auto& b : blocks) {
     const double t = score_test(b);
     largest = std::max(largest, t);
-    explained = explained || t * e_var_good > explained_score(b.nt) * e_short;
+    explained = explained || explains(b, t, 1.0);
   }
   const bool noise_changed = !explained && unexplained_alarm;  // twice in a row: the noise, not the plant
   unexplained_alarm = !explained && !noise_changed;
@@ -226,8 +231,7 @@ bool RecursiveEstimator::Impl::boost_changed_blocks(bool& floor_held) {
     e_var_good = std::max(e_var, e_short);
     ++status.noise_changes;
   }
-  bool boosted = false;
-  floor_held = false;
+  bool boosted = false, floor_held = false;
   std::uint64_t hold = 0;  // updates the blocks not named keep their estimate
   for (auto& b : blocks) {
     // No shorter than the memory floor (min_memory decay times): faster, the
@@ -250,10 +254,10 @@ bool RecursiveEstimator::Impl::boost_changed_blocks(bool& floor_held) {
       boost = at_settled_floor ? 1.0 : std::clamp(floor_forget / std::min(forget, floor_forget), 1.0, kChangeBoost);
       forget = std::min(forget, floor_forget);
     }
-    const bool scored = !noise_changed && score_test(b) >= kShareOfLargest * largest;
+    const double t = noise_changed ? 0.0 : score_test(b);
+    const bool scored = !noise_changed && t >= kShareOfLargest * largest;
     b.named = scored && boost > 1.0;
-    floor_held = floor_held || (scored && !release && boost <= 1.0 &&
-                                score_test(b) * e_var_good > kFloorChangeScore * explained_score(b.nt) * e_short);
+    floor_held = floor_held || (scored && !release && boost <= 1.0 && explains(b, t, kFloorChangeScore));
     if (scored && release)  // kept only if no block is boosted (below)
       b.min_floor_until =
           std::max(b.min_floor_until, status.updates + static_cast<std::uint64_t>(cfg.change_hold / forget));
@@ -280,7 +284,7 @@ bool RecursiveEstimator::Impl::boost_changed_blocks(bool& floor_held) {
   if (boosted) joint.clear();
   rearm = static_cast<std::uint64_t>(kWait / (1.0 - e_alpha));
   if (boosted) ++status.boosts;
-  return boosted;
+  return boosted ? ChangeAnswer::boosted : floor_held ? ChangeAnswer::floor_held : ChangeAnswer::none;
 }
 
 // A mode's gain does not change sign in a drift or a fault of that mode (a

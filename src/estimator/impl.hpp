@@ -201,9 +201,11 @@ struct RecursiveEstimator::Impl {
   }
   void save_good();
   void restore_good(const char* reason);
-  // true when a block was boosted; floor_held: a block the error names could
-  // not be (its forgetting already at the memory floor).
-  bool boost_changed_blocks(bool& floor_held);
+  // What an alarm of the change test did: boosted a block, or none, where a
+  // block the error names could not be (floor_held: its forgetting already
+  // at the memory floor), or neither.
+  enum class ChangeAnswer { none, boosted, floor_held };
+  ChangeAnswer boost_changed_blocks();
   void arm_refit(const char* trigger);
   void write_refit_start();  // the last good state into refit_context: the refit's start and yardstick
   bool restore_sign_flipped_modes();  // true when a mode went back

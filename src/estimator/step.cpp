@@ -222,10 +222,10 @@ inline unsigned RecursiveEstimator::Impl::advance_body(const Sample& s, bool all
     return flags | kReset;
   } else if (changed) {
     change_cusum = 0.0;
-    bool floor_held = false;
-    if (boost_changed_blocks(floor_held)) {
+    const ChangeAnswer answer = boost_changed_blocks();
+    if (answer == ChangeAnswer::boosted) {
       flags |= kChangeBoost;
-    } else if (floor_held && !refit_armed && may_refit()) {
+    } else if (answer == ChangeAnswer::floor_held && !refit_armed && may_refit()) {
       // The submodels the error names cannot follow faster than their memory
       // floor (a lightly damped mode, decaying over a good part of a memory):
       // the memory after the alarm is fitted as after a divergence, while the
