@@ -189,6 +189,47 @@ estimator:
                           "trade-between-modes.yaml");
 }
 
+// Four modes in open loop under five sines (a scenario-bank record): ten
+// equations for twelve parameters, so each mode's gain trades with its
+// neighbours' along the two directions the input leaves open. Mode 3's gain
+// steps -20 % at 9010.5 s (one memory is 862.1 s).
+inline SimulatedRecord gain_step_under_five_sines() {
+  return simulated_record(R"(
+sample_rate_hz: 24.395306465994125
+model:
+  loop: open
+  submodels:
+    - {name: mode1, kind: mode, wn: 0.3536462464764706, zeta: 0.025742910739594303, gain: 0.14635646071175767, forgetting: 0.9999524534043363}
+    - {name: mode2, kind: mode, wn: 0.582835475690331, zeta: 0.014563192576245818, gain: 0.23767245285195307, forgetting: 0.9999524534043363}
+    - {name: mode3, kind: mode, wn: 1.1267264884513728, zeta: 0.07885690147999683, gain: 0.03821716384704569, forgetting: 0.9999524534043363}
+    - {name: mode4, kind: mode, wn: 2.18689763089985, zeta: 0.2769504818357738, gain: 0.18197527245371306, forgetting: 0.9999524534043363}
+plant:
+  noise_variance: 5.003569495454113e-06
+  modes:
+    - {name: mode1, kind: mode, wn: 0.36440548174026266, zeta: 0.02236553718786838, gain: 0.15828810088975642}
+    - {name: mode2, kind: mode, wn: 0.5695074434993261, zeta: 0.012166192174373647, gain: 0.23329857674867724}
+    - name: mode3
+      kind: mode
+      wn: 1.1003709268058002
+      zeta: 0.07003429195133823
+      gain: 0.037786038927002705
+      trajectory:
+        gain: [[9010.495403615914, 0.037786038927002705], [9010.53639510751, 0.030228831141602165]]
+    - {name: mode4, kind: mode, wn: 2.123799335361546, zeta: 0.25679595666302935, gain: 0.16937315736325861}
+simulation:
+  duration: 17452.91473969704
+  seed: 860172118
+  input:
+    type: sum_of_sines
+    amplitudes: [1.0, 1.0, 1.0, 1.0, 1.0]
+    frequencies_rad_s: [0.10485306532745832, 0.4175490652776713, 0.520950411736867, 1.259970143599581, 1.8716076975779325]
+estimator:
+  warmup: 862.1330512620364
+  fit_on_warmup: true
+)" + bank_faults(862.1330512620364),
+                          "gain-step-under-five-sines.yaml");
+}
+
 // Three modes in closed loop (a scenario-bank record), with the plant's modes
 // and the reference given: the config and the record it simulates.
 inline SimulatedRecord three_mode_loop(const std::string& plant_modes, const std::string& reference,

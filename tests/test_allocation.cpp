@@ -223,8 +223,8 @@ std::vector<Case> two_input_cases() {
 
 INSTANTIATE_TEST_SUITE_P(Estimator, NoAllocationTwoInputs, ::testing::ValuesIn(two_input_cases()), case_name);
 
-// FaultDetector::update(), both overloads, through learning (a restart and a
-// settled window), configured baselines, flags rising and falling on every
+// FaultDetector::update(), both overloads and with a joint covariance,
+// through learning (a restart and a settled window), configured baselines, flags rising and falling on every
 // quantity of every mode: no allocation once constructed (`changes` reserved).
 TEST(FaultDetectorAllocation, UpdateAllocatesNothing) {
   const std::vector<ModalParameters> truth = {{60.0, 0.05, 2.0}, {150.0, 0.03, 0.5}, {400.0, 0.02, 0.1}};
@@ -239,6 +239,7 @@ TEST(FaultDetectorAllocation, UpdateAllocatesNothing) {
   FaultDetector detector(s);
   std::vector<ModalParameters> value = truth, std_dev(truth.size());
   std::vector<Eigen::Matrix3d> cov(truth.size());
+  Eigen::MatrixXd joint = Eigen::MatrixXd::Zero(9, 9);  // the gains correlated across modes
   std::vector<FlagChange> changes;
   changes.reserve(kQuantities * truth.size());
   int raised = 0, fallen = 0;
@@ -254,11 +255,19 @@ TEST(FaultDetectorAllocation, UpdateAllocatesNothing) {
       std_dev[i] = {1e-3 * truth[i].wn, 1e-3 * truth[i].zeta, 1e-3 * truth[i].gain};
       cov[i] = Eigen::Vector3d(std_dev[i].wn, std_dev[i].zeta, std_dev[i].gain).cwiseAbs2().asDiagonal();
     }
+    for (std::size_t i = 0; i < truth.size(); ++i) {
+      const auto at = static_cast<Eigen::Index>(3 * i);
+      joint.block<3, 3>(at, at) = cov[i];
+      for (std::size_t j = 0; j < truth.size(); ++j)
+        if (j != i) joint(at + 2, static_cast<Eigen::Index>(3 * j + 2)) = 0.5e-6 * truth[i].gain * truth[j].gain;
+    }
     changes.clear();
-    if (k % 2 == 0)
+    if (k % 3 == 0)
       detector.update(t, value, cov, k % 97 != 0, changes);
-    else
+    else if (k % 3 == 1)
       detector.update(t, value, std_dev, true, changes);
+    else
+      detector.update(t, value, cov, true, changes, 0.0, nullptr, &joint);
     for (const FlagChange& c : changes) (c.raised ? raised : fallen) += 1;
   }
   const test_support::AllocationCounts counts = AllocationCounter::stop();

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <Eigen/Cholesky>
 
 #include "estimator_support.hpp"
 #include "support.hpp"
@@ -1321,27 +1322,59 @@ void expect_the_change_alone_flagged(const DetectorRun& run, const TheChange& ch
 // On the record whose excitation leaves a trade between the two modes open:
 // what the estimator reports for mode 1 holds that trade (its joint
 // covariance), so mode 1's move along it when mode 2 changes is no fault of
-// mode 1; mode 2's is flagged.
+// mode 1; mode 2's is flagged. The trade is in the covariance of the two
+// modes together: given mode 2's estimate, mode 1's gain is known as well as
+// the block recursion knows it with mode 2 taken as known.
 TEST(RecursiveEstimator, ATradeBetweenModesThatTheExcitationLeavesOpenIsNoFaultOfTheHealthyMode) {
   const SimulatedRecord loop = trade_between_modes();
   constexpr double kPeriod = 0.8612210386668856;  // the bank's publish period
-  double gain_std_joint = 0.0, gain_std_given = 0.0;
+  double gain_std_joint = 0.0, gain_std_given = 0.0, gain_std_conditional = 0.0;
   const DetectorRun run = run_detector(loop.config, loop.record, kPeriod, [&](double t, const RecursiveEstimator& est) {
     if (t < 250.0) {  // before the change: mode 1's gain, relative std
       const double gain1 = est.mode(0).value.gain;
       gain_std_joint = std::sqrt(est.mode_covariance(0)(2, 2)) / gain1;
       gain_std_given = std::sqrt(est.mode_covariance_given_others(0)(2, 2)) / gain1;
+      const Eigen::Matrix3d c12 = est.mode_cross_covariance(0, 1);
+      const Eigen::Matrix3d conditional =
+          est.mode_covariance(0) - c12 * est.mode_covariance(1).ldlt().solve(c12.transpose());
+      gain_std_conditional = std::sqrt(std::max(0.0, conditional(2, 2))) / gain1;
     }
   });
   const double gain1 = run.modes[0].gain;
   std::printf(
-      "mode 1's gain before the change: %.2f %% std jointly, %.2f %% with mode 2 known; mode 1 at the end: "
-      "gain %+.1f %%\n",
-      100.0 * gain_std_joint, 100.0 * gain_std_given, 100.0 * (gain1 / 5.263613953500341e-06 - 1.0));
+      "mode 1's gain before the change: %.2f %% std jointly, %.2f %% with mode 2 known, %.2f %% given mode 2's "
+      "estimate; mode 1 at the end: gain %+.1f %%\n",
+      100.0 * gain_std_joint, 100.0 * gain_std_given, 100.0 * gain_std_conditional,
+      100.0 * (gain1 / 5.263613953500341e-06 - 1.0));
   expect_the_change_alone_flagged(run, {1, Quantity::wn, 255.5, std::numeric_limits<double>::infinity(), std::nullopt});
   // The joint std is the bound's order (3.2 %), not the block's own (0.15 %).
   EXPECT_GT(gain_std_joint, 1.0e-2);
   EXPECT_LT(gain_std_given, 0.4e-2);
+  EXPECT_GT(gain_std_conditional, 0.5 * gain_std_given);
+  EXPECT_LT(gain_std_conditional, 2.0 * gain_std_given);
+}
+
+// The other side of that trade: mode 3's gain steps -20 % under five sines,
+// and its own covariance (its gain std 11 %, of which 1 % the input
+// determines) hides the step. The deviations of all four modes together are
+// explained by a change of mode 3 alone, whose gain given the other modes'
+// estimates is known to about 1 %: flagged on mode 3 within the hold (one
+// memory) and a half, and nothing else flagged.
+TEST(RecursiveEstimator, AGainStepThatItsTradeWithTheOtherModesHidesIsFlaggedOnThatMode) {
+  const SimulatedRecord record = gain_step_under_five_sines();
+  constexpr double kMemory = 862.1330512620364, kStep = 9010.495403615914;
+  constexpr double kPublishPeriod = 43.1230491597405;  // the bank's
+  double gain_std_own = 0.0;
+  const DetectorRun run =
+      run_detector(record.config, record.record, kPublishPeriod, [&](double t, const RecursiveEstimator& est) {
+        if (t < kStep) gain_std_own = std::sqrt(est.mode_covariance(2)(2, 2)) / est.mode(2).value.gain;
+      });
+  const double gain3 = run.modes[2].gain / 0.030228831141602165 - 1.0;
+  std::printf("mode 3's gain std before the step %.1f %%; at the end %+.1f %% from the truth after it\n",
+              100.0 * gain_std_own, 100.0 * gain3);
+  expect_the_change_alone_flagged(run, {2, Quantity::gain, kStep, 1.5 * kMemory, std::nullopt});
+  EXPECT_GT(gain_std_own, 0.05) << "the record's point: on its own, the step is under 4 std";
+  EXPECT_LT(std::abs(gain3), 0.05);
 }
 
 // Where the wait after a reset ends unsettled, the updates resume on a model

@@ -2,11 +2,13 @@
 // flagged after the hold time and nothing else is, noise consistent with the
 // reported standard deviations never is, both thresholds are needed, flags fall
 // with hysteresis, baselines are learned or configured, invalid updates freeze
-// everything, bad settings throw, and update() never grows the caller's vector.
+// everything, modes whose estimates are correlated are tested each given the
+// others, bad settings throw, and update() never grows the caller's vector.
 // The statistics (false-alarm rate, delays, CUSUM, settling) are in
 // test_fault_statistics.cpp.
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <limits>
 #include <optional>
@@ -15,6 +17,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <Eigen/Core>
 
 #include "modalwatch/fault_detector.hpp"
 
@@ -712,6 +715,107 @@ TEST(FaultDetector, EstimatesForTheWrongNumberOfModesThrow) {
 }
 
 // ------------------------------------------------------------------ allocation
+
+// ------------------------------------------------------------------ modes that share a direction
+
+// Two modes of gain 1 whose gain estimates are correlated (rho), relative std
+// `sd` on every quantity; returns the 6 x 6 joint covariance.
+Eigen::MatrixXd two_modes_joint(double sd, double rho) {
+  Eigen::MatrixXd joint = Eigen::MatrixXd::Zero(6, 6);
+  const std::vector<ModalParameters> baseline = {{60.0, 0.05, 1.0}, {150.0, 0.03, 1.0}};
+  for (int i = 0; i < 2; ++i) {
+    joint(3 * i, 3 * i) = std::pow(sd * baseline[i].wn, 2);
+    joint(3 * i + 1, 3 * i + 1) = std::pow(sd * baseline[i].zeta, 2);
+    joint(3 * i + 2, 3 * i + 2) = sd * sd;
+  }
+  joint(2, 5) = joint(5, 2) = rho * sd * sd;
+  return joint;
+}
+
+// Updates at kPeriod for `seconds` with `value` and the joint covariance (or
+// only its diagonal blocks); the flags at the end.
+std::uint64_t run_joint(FaultDetector& d, const std::vector<ModalParameters>& value, const Eigen::MatrixXd& joint,
+                        bool use_joint, double seconds) {
+  std::vector<Eigen::Matrix3d> cov = {joint.block<3, 3>(0, 0), joint.block<3, 3>(3, 3)};
+  std::vector<FlagChange> changes;
+  changes.reserve(6);
+  const long n = std::lround(seconds / kPeriod);
+  for (long k = 0; k < n; ++k)
+    d.update(static_cast<double>(k) * kPeriod, value, cov, true, changes, 0.0, nullptr, use_joint ? &joint : nullptr);
+  return d.flag_bits();
+}
+
+constexpr std::uint64_t kGainBit(int mode) { return std::uint64_t{1} << (3 * mode + 2); }
+
+TEST(FaultDetector, OnlyTheModeWhoseChangeExplainsTheDeviationsIsTestedGivenTheOthers) {
+  // Mode 2's frequency falls 6 % (120 std) and its gain rises 17 %; mode 1's
+  // gain, which trades against mode 2's (rho -0.95, std 3.2 and 3 %), rises
+  // 10.8 % (3.4 std of its own). Mode 2's change explains the deviations, not
+  // mode 1's, so mode 1 keeps its own test and is not flagged. Given mode 2's
+  // deviation, as if mode 2 had not changed, mode 1's would be +28 % at 1 %.
+  const std::vector<ModalParameters> baseline = {{60.0, 0.05, 1.0}, {150.0, 0.03, 1.0}};
+  Eigen::MatrixXd joint = two_modes_joint(0.0005, 0.0);
+  joint(2, 2) = 0.032 * 0.032;
+  joint(5, 5) = 0.03 * 0.03;
+  joint(2, 5) = joint(5, 2) = -0.95 * 0.032 * 0.03;
+  std::vector<ModalParameters> value = baseline;
+  value[1].wn = 0.94 * baseline[1].wn;
+  value[1].gain = 1.17;
+  value[0].gain = 1.108;
+  FaultDetectorSettings st = configured(baseline);
+  st.thresholds[static_cast<int>(Quantity::gain)].relative_threshold = 0.1;
+  FaultDetector given(st);
+  EXPECT_EQ(run_joint(given, value, joint, true, 10.0), (std::uint64_t{1} << 3) | kGainBit(1));  // mode 2's wn and gain
+  EXPECT_NEAR(given.status()[0].quantity[2].deviation_sigma, 0.108 / 0.032, 1e-9);
+  EXPECT_NEAR(given.status()[1].quantity[0].deviation_sigma, -0.06 / 0.0005, 1e-6) << "uncorrelated with mode 1";
+}
+
+TEST(FaultDetector, AChangeTheMarginalStdHidesIsFlaggedGivenTheModesThatShareItsDirection) {
+  // Mode 1's gain falls 17 % with a std of 11 % (1.5 std), because it trades
+  // with mode 2's (rho 0.99) along a direction the data leave open; mode 2's
+  // estimate sits at its baseline, so the trade is not what moved mode 1: given
+  // mode 2, its std is 11 % sqrt(1 - 0.98) = 1.6 %.
+  const std::vector<ModalParameters> baseline = {{60.0, 0.05, 1.0}, {150.0, 0.03, 1.0}};
+  Eigen::MatrixXd joint = two_modes_joint(0.002, 0.0);
+  joint(2, 2) = joint(5, 5) = 0.11 * 0.11;
+  joint(2, 5) = joint(5, 2) = 0.99 * 0.11 * 0.11;
+  std::vector<ModalParameters> value = baseline;
+  value[0].gain = 0.83;
+  FaultDetectorSettings st = configured(baseline);
+  st.thresholds[static_cast<int>(Quantity::gain)].relative_threshold = 0.1;
+  FaultDetector alone(st), given(st);
+  EXPECT_EQ(run_joint(alone, value, joint, false, 10.0), 0u);
+  EXPECT_EQ(run_joint(given, value, joint, true, 10.0), kGainBit(0));
+  EXPECT_NEAR(given.status()[0].quantity[2].deviation_sigma, -0.17 / (0.11 * std::sqrt(1.0 - 0.99 * 0.99)), 1e-6);
+  EXPECT_FALSE(given.status()[1].quantity[2].flagged) << "mode 2's estimate has not moved";
+}
+
+TEST(FaultDetector, ModesThatAreNotCorrelatedAreTestedAsOnTheirOwn) {
+  // A drift of every quantity of mode 1 and noise on mode 2, with a joint
+  // covariance that is block diagonal: every status the same to the last bit.
+  const std::vector<ModalParameters> baseline = {{60.0, 0.05, 1.0}, {150.0, 0.03, 1.0}};
+  const Eigen::MatrixXd joint = two_modes_joint(0.01, 0.0);
+  std::vector<Eigen::Matrix3d> cov = {joint.block<3, 3>(0, 0), joint.block<3, 3>(3, 3)};
+  FaultDetector alone(configured(baseline)), given(configured(baseline));
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> z(0.0, 1.0);
+  std::vector<FlagChange> a, b;
+  for (int k = 0; k < 600; ++k) {
+    const double f = 1.0 - 0.15 * std::min(1.0, k / 300.0);
+    std::vector<ModalParameters> value = {scaled(baseline[0], f), baseline[1]};
+    value[1].wn *= 1.0 + 0.01 * z(rng);
+    alone.update(k * kPeriod, value, cov, true, a);
+    given.update(k * kPeriod, value, cov, true, b, 0.0, nullptr, &joint);
+    for (int i = 0; i < 2; ++i)
+      for (int q = 0; q < kQuantities; ++q) {
+        ASSERT_EQ(alone.status()[i].quantity[q].deviation_sigma, given.status()[i].quantity[q].deviation_sigma);
+        ASSERT_EQ(alone.status()[i].quantity[q].cusum, given.status()[i].quantity[q].cusum);
+      }
+  }
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_GE(a.size(), 3u) << "the drift was flagged";
+  EXPECT_EQ(alone.flag_bits(), given.flag_bits());
+}
 
 TEST(FaultDetector, UpdateStaysWithinTheReservedCapacityEvenWhenEveryFlagChangesAtOnce) {
   FaultDetectorSettings st = configured();

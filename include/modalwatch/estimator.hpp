@@ -453,6 +453,13 @@ class RecursiveEstimator {
   // The same from sigma^2 P_i alone: the other submodels taken as known, as
   // the block-coordinate recursion takes them.
   Eigen::Matrix3d mode_covariance_given_others(int i) const noexcept;
+  // Covariance of submodel i's (wn, zeta, gain) with submodel j's (i != j):
+  // sigma^2 times block (i, j) of the instruments' joint information's inverse,
+  // mapped as mode_covariance() maps its diagonal block. Zero before that
+  // information first holds a memory and after restore() until it is solved
+  // again (every few hundred updates); from a change boost until one memory
+  // after it, the value from before. No allocation.
+  Eigen::Matrix3d mode_cross_covariance(int i, int j) const noexcept;
   // Covariance of theta_i (physical units), sigma^2 (P_i + C_i).
   Eigen::MatrixXd covariance(int i) const;
   double residual_rms() const noexcept;  // output error over the residual window

@@ -15,6 +15,24 @@
 // An estimate fitted on a window (a warm-up fit, a refit after a divergence)
 // stands for the whole window: a condition it shows counts as past since the
 // window's start (update()'s evidence_span).
+// Where modes' estimates are correlated (instruments that share a direction: a
+// setpoint of a few sines, close modes), a mode's own covariance holds what it
+// may trade with the others, and can hide a change of its own. With the joint
+// covariance S of the testing modes' deviations D, a change confined to mode k
+// is estimated (GLR; Basseville & Nikiforov, Detection of Abrupt Changes,
+// ch. 7) as
+//   d_k = (Q_kk)^-1 (Q D)_k = D_k - S_ko S_oo^-1 D_o,  S_k = (Q_kk)^-1,  Q = S^-1,
+// and explains (Q D)_k' d_k of D' S^-1 D. The mode that explains most is
+// named, and its chi-square test takes d_k and S_k: the others' deviations
+// say how much of its own is a trade with them. The others keep their own
+// (they would otherwise take the named mode's real change for their trade
+// partner's), as do the CUSUMs, whose innovations need one series per
+// quantity, and the relative threshold (the size the user asked about), which
+// d_k must pass on the same side. With no change, d_k' S_k^-1 d_k is
+// chi-square with 3 dof as a mode's own T2 is, so naming adds at most the
+// chi-square's share of the false-alarm rate once more per mode (1.5 times
+// the rate stated, before the hold, which the short spells that a change of
+// name makes rarely outlast).
 //
 // A plain class: no I/O, no threads, no allocation in update().
 #include <array>
@@ -104,7 +122,7 @@ struct FaultDetectorSettings {
 // The detector's view of one quantity of one mode.
 struct QuantityStatus {
   bool flagged = false;
-  double deviation_sigma = 0.0;     // (x - x0) / sqrt(S_qq)
+  double deviation_sigma = 0.0;     // (x - x0) / sqrt(S_qq); d_k / sqrt(S_k,qq) while the mode is named
   double deviation_relative = 0.0;  // (x - x0) / |x0|
   double cusum = 0.0;               // the larger one-sided CUSUM, in units of its threshold b
   double since = 0.0;               // time the flag rose (or the condition began, when pending)
@@ -165,10 +183,14 @@ class FaultDetector {
   // the estimate's covariance with the other modes known
   // (RecursiveEstimator::mode_covariance_given_others), which says whether the
   // estimate has settled where the data leave a trade between modes open and
-  // `covariance` (the joint one) stays wide.
+  // `covariance` (the joint one) stays wide. `joint`, when given (3 x 3
+  // blocks, modes x modes; its diagonal blocks are `covariance`), is the
+  // covariance of all modes' (wn, zeta, gain) together, which the tests
+  // condition each mode on the others with (above); without it, or where it
+  // is not positive definite, each mode is tested on its own.
   void update(double t, const std::vector<ModalParameters>& value, const std::vector<Eigen::Matrix3d>& covariance,
               bool valid, std::vector<FlagChange>& changes, double evidence_span = 0.0,
-              const std::vector<Eigen::Matrix3d>* settle_covariance = nullptr);
+              const std::vector<Eigen::Matrix3d>* settle_covariance = nullptr, const Eigen::MatrixXd* joint = nullptr);
   // The same with standard deviations only (a diagonal covariance).
   void update(double t, const std::vector<ModalParameters>& value, const std::vector<ModalParameters>& std_dev,
               bool valid, std::vector<FlagChange>& changes, double evidence_span = 0.0);
@@ -195,6 +217,10 @@ class FaultDetector {
   void learn(std::size_t i, double now, const Eigen::Vector3d& x, const Eigen::Matrix3d& c,
              const Eigen::Matrix3d& settle_c);
   void restart_learning(std::size_t i, LearnHold why);
+  // Of the testing modes that `joint` correlates, the one whose change alone
+  // explains their deviations best (named_), with its deviation and S given
+  // the others.
+  void name_the_changed_mode(const std::vector<ModalParameters>& value, const Eigen::MatrixXd& joint);
 
   FaultDetectorSettings settings_;
   std::vector<double> memory_;  // per mode
@@ -212,6 +238,15 @@ class FaultDetector {
   std::vector<double> clock_;
   std::vector<std::uint8_t> last_valid_;
   double last_t_ = 0.0;
+  // The named mode (-1: none) and its test given the others; the workspace,
+  // sized at construction.
+  std::vector<std::uint8_t> testing_;
+  int named_ = -1;
+  Eigen::Vector3d named_d_ = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d named_S_ = Eigen::Matrix3d::Zero();
+  std::vector<int> index_;  // components (3 mode + q) with a variance, of testing modes
+  Eigen::MatrixXd joint_S_, joint_Q_;
+  Eigen::VectorXd joint_D_, joint_QD_;
 };
 
 class RecursiveEstimator;
@@ -244,6 +279,7 @@ class DetectorInput {
  private:
   std::vector<ModalParameters> value_;
   std::vector<Eigen::Matrix3d> covariance_, settle_covariance_;
+  Eigen::MatrixXd joint_;  // all modes' covariance together (FaultDetector::update)
   double evidence_span_ = 0.0;
   bool warming_up_;     // the estimator's status after the previous step
   std::uint64_t fits_;  // ... and its windows fitted

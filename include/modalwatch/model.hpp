@@ -112,6 +112,9 @@ Eigen::Matrix3d modal_covariance(const Submodel& s, const Eigen::MatrixXd& theta
 // The same from A's coefficients a1, a2 and the covariance of (a1, a2, b0).
 // Fixed size, no allocation (for per-sample callers).
 Eigen::Matrix3d modal_covariance(double a1, double a2, const Eigen::Matrix3d& a1_a2_b0_covariance);
+// J = d(wn, zeta, gain) / d(a1, a2, b0), the map modal_covariance() applies;
+// gain's row alone where a2 <= 0 (no resonance).
+Eigen::Matrix3d modal_jacobian(double a1, double a2);
 // Standard deviations of (wn, zeta, gain): the square roots of modal_covariance's diagonal.
 ModalParameters modal_std(const Submodel& s, const Eigen::MatrixXd& theta_covariance);
 

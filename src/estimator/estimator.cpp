@@ -431,6 +431,25 @@ Eigen::Matrix3d RecursiveEstimator::mode_covariance_given_others(int i) const no
   return modal_covariance_of(b, b.P, m.e_var);
 }
 
+Eigen::Matrix3d RecursiveEstimator::mode_cross_covariance(int i, int j) const noexcept {
+  const Impl& m = *impl_;
+  if (m.blocks.empty() || i == j || !m.joint.solved()) return Eigen::Matrix3d::Zero();
+  const Block& bi = m.blocks[static_cast<std::size_t>(i)];
+  const Block& bj = m.blocks[static_cast<std::size_t>(j)];
+  const int oi = m.joint.offset(static_cast<std::size_t>(i)), oj = m.joint.offset(static_cast<std::size_t>(j));
+  // (a1, a2, b0) inside theta where the block is a mode; b0 alone otherwise.
+  const auto at = [](const Block& b, int r) { return b.n == 2 ? std::array<int, 3>{0, 1, b.n}[r] : b.n; };
+  const auto jacobian = [](const Block& b) {
+    return b.n == 2 ? modal_jacobian(b.theta(0) / b.scale(0), b.theta(1) / b.scale(1)) : modal_jacobian(0.0, 0.0);
+  };
+  Eigen::Matrix3d c;
+  for (int r = 0; r < 3; ++r)
+    for (int k = 0; k < 3; ++k)
+      c(r, k) =
+          m.e_var * m.joint.inverse()(oi + at(bi, r), oj + at(bj, k)) / (bi.scale(at(bi, r)) * bj.scale(at(bj, k)));
+  return jacobian(bi) * c * jacobian(bj).transpose();
+}
+
 Eigen::MatrixXd RecursiveEstimator::covariance(int i) const {
   const Impl& m = *impl_;
   const Block& b = m.blocks.at(i);

@@ -21,6 +21,8 @@ void JointInformation::resize(const std::vector<Block>& blocks) {
   inv_w_good_.resize(n_);
   A_.resize(n_, n_);
   own_.resize(n_, n_);
+  inverse_.setZero(n_, n_);
+  solved_ = false;
   clear();
   save_good();
 }
@@ -78,6 +80,7 @@ bool JointInformation::load(const Saved& s) {
   rng_ = s.rng;
   countdown_ = s.countdown;
   gap_ = s.gap;
+  solved_ = false;  // until the next solve
   return true;
 }
 
@@ -143,11 +146,19 @@ void JointInformation::solve(std::vector<Block>& blocks, double noise_variance) 
   }
   own_ = A_;  // A_ii, before A is factored in place
   if (!inverse_cholesky_factor(A_.data(), n_)) return;  // not positive definite: C_i keep their last values
+  for (int q = 0; q < n_; ++q) {
+    for (int p = 0; p <= q; ++p) {
+      double s = 0.0;
+      for (int k = q; k < n_; ++k) s += A_(k, p) * A_(k, q);
+      inverse_(p, q) = inverse_(q, p) = s;
+    }
+  }
+  solved_ = inverse_.allFinite();
   for (std::size_t i = 0; i < blocks.size(); ++i) {
     Block& b = blocks[i];
     const int o = offset_[i], nt = b.nt;
-    ThetaMat joint_inv(nt, nt), own(nt, nt), own_inv(nt, nt);
-    inverse_block(A_.data(), n_, o, nt, joint_inv);
+    ThetaMat own(nt, nt), own_inv(nt, nt);
+    const ThetaMat joint_inv = inverse_.block(o, o, nt, nt);
     own = own_.block(o, o, nt, nt);
     if (!inverse_cholesky_factor(own.data(), nt)) continue;
     inverse_block(own.data(), nt, 0, nt, own_inv);

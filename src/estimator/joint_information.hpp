@@ -67,6 +67,12 @@ class JointInformation {
   }
   // C_i into Block::cross of every block, once J holds a memory of each.
   void solve(std::vector<Block>& blocks, double noise_variance);
+  // (J + R)^-1 of the last solve (normalised theta, blocks at offset()), whose
+  // block (i, j) is the covariance of theta_i with theta_j over sigma^2;
+  // solved() is false before the first solve and after a load.
+  bool solved() const { return solved_; }
+  const Eigen::MatrixXd& inverse() const { return inverse_; }
+  int offset(std::size_t block) const { return offset_[block]; }
 
   // Returned to with the estimator's last good state.
   void save_good();
@@ -97,8 +103,9 @@ class JointInformation {
   Eigen::MatrixXd S_good_;
   Eigen::VectorXd inv_w_good_;
   std::uint64_t updates_good_ = 0;
-  // The solve's workspace (no allocation once sized).
-  Eigen::MatrixXd A_, own_;
+  // The solve's workspace (no allocation once sized), and its result.
+  Eigen::MatrixXd A_, own_, inverse_;
+  bool solved_ = false;
 };
 
 MODALWATCH_HOT void JointInformation::accumulate(const std::vector<Block>& blocks) {

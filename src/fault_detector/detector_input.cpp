@@ -7,6 +7,8 @@ DetectorInput::DetectorInput(const RecursiveEstimator& estimator)
     : value_(static_cast<std::size_t>(estimator.submodels())),
       covariance_(value_.size(), Eigen::Matrix3d::Zero()),
       settle_covariance_(value_.size(), Eigen::Matrix3d::Zero()),
+      joint_(Eigen::MatrixXd::Zero(3 * static_cast<Eigen::Index>(value_.size()),
+                                   3 * static_cast<Eigen::Index>(value_.size()))),
       warming_up_(estimator.status().warming_up),
       fits_(estimator.status().fits) {}
 
@@ -25,10 +27,19 @@ void DetectorInput::read(const RecursiveEstimator& estimator) {
     covariance_[k] = estimator.mode_covariance(i);
     settle_covariance_[k] = estimator.mode_covariance_given_others(i);
   }
+  for (std::size_t k = 0; k < value_.size(); ++k) {
+    const auto at = static_cast<Eigen::Index>(3 * k);
+    joint_.block<3, 3>(at, at) = covariance_[k];
+    for (std::size_t l = k + 1; l < value_.size(); ++l) {
+      const auto to = static_cast<Eigen::Index>(3 * l);
+      joint_.block<3, 3>(at, to) = estimator.mode_cross_covariance(static_cast<int>(k), static_cast<int>(l));
+      joint_.block<3, 3>(to, at) = joint_.block<3, 3>(at, to).transpose();
+    }
+  }
 }
 
 void DetectorInput::update(FaultDetector& detector, double t, bool valid, std::vector<FlagChange>& changes) {
-  detector.update(t, value_, covariance_, valid, changes, evidence_span_, &settle_covariance_);
+  detector.update(t, value_, covariance_, valid, changes, evidence_span_, &settle_covariance_, &joint_);
   if (valid) evidence_span_ = 0.0;
 }
 

@@ -212,6 +212,13 @@ FaultDetector::FaultDetector(FaultDetectorSettings settings) : settings_(std::mo
   diagonal_.assign(n, Eigen::Matrix3d::Zero());
   clock_.assign(n, 0.0);
   last_valid_.assign(n, 0);
+  testing_.assign(n, 0);
+  const auto components = static_cast<Eigen::Index>(kQuantities * n);
+  index_.assign(static_cast<std::size_t>(components), 0);
+  joint_S_.setZero(components, components);
+  joint_Q_.setZero(components, components);
+  joint_D_.setZero(components);
+  joint_QD_.setZero(components);
   for (std::size_t i = 0; i < n; ++i) {
     const auto& b = settings_.baselines[i];
     if (!b) continue;
@@ -306,6 +313,88 @@ void FaultDetector::learn(std::size_t i, double now, const Eigen::Vector3d& x, c
   m.learn_hold = LearnHold::none;
 }
 
+void FaultDetector::name_the_changed_mode(const std::vector<ModalParameters>& value, const Eigen::MatrixXd& joint) {
+  named_ = -1;
+  const std::size_t n = modes_.size();
+  if (joint.rows() != static_cast<Eigen::Index>(kQuantities * n) || joint.cols() != joint.rows()) return;
+  // The components with a variance (a rigid body's wn and zeta have none), of
+  // modes correlated with another testing mode: one correlated with none keeps
+  // its own deviation exactly, and says nothing about the others'.
+  const auto correlated = [&](std::size_t i) {
+    for (std::size_t j = 0; j < n; ++j)
+      if (j != i && testing_[j] &&
+          !joint.block<3, 3>(static_cast<Eigen::Index>(kQuantities * i), static_cast<Eigen::Index>(kQuantities * j))
+               .isZero(0.0))
+        return true;
+    return false;
+  };
+  int m = 0, modes = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!testing_[i] || !correlated(i)) continue;
+    const Eigen::Matrix3d c0 = modes_[i].baseline.covariance_matrix();
+    const int before = m;
+    for (int q = 0; q < kQuantities; ++q) {
+      const auto at = static_cast<Eigen::Index>(kQuantities * i + static_cast<std::size_t>(q));
+      const double v = joint(at, at) + c0(q, q);
+      if (std::isfinite(v) && v > 0.0) index_[static_cast<std::size_t>(m++)] = static_cast<int>(at);
+    }
+    modes += m > before;
+  }
+  if (modes < 2) return;
+  auto S = joint_S_.topLeftCorner(m, m);
+  auto D = joint_D_.head(m);
+  for (int a = 0; a < m; ++a) {
+    const int ia = index_[static_cast<std::size_t>(a)];
+    const auto mode = static_cast<std::size_t>(ia / kQuantities);
+    const Eigen::Matrix3d c0 = modes_[mode].baseline.covariance_matrix();
+    D(a) = vec(value[mode])(ia % kQuantities) - vec(modes_[mode].baseline.value)(ia % kQuantities);
+    for (int b = 0; b < m; ++b) {
+      const int ib = index_[static_cast<std::size_t>(b)];
+      S(a, b) = joint(ia, ib) + (ib / kQuantities == ia / kQuantities ? c0(ia % kQuantities, ib % kQuantities) : 0.0);
+    }
+  }
+  if (!S.allFinite() || !D.allFinite()) return;
+  Eigen::LLT<Eigen::Ref<Eigen::MatrixXd>> llt(S);  // in place: no allocation
+  if (llt.info() != Eigen::Success) return;
+  auto Q = joint_Q_.topLeftCorner(m, m);
+  Q.setIdentity();
+  llt.solveInPlace(Q);
+  auto QD = joint_QD_.head(m);
+  QD.noalias() = Q.lazyProduct(D);
+  // Per mode k, a change of k alone: its estimate (Q_kk)^-1 (Q D)_k and the
+  // part of D' S^-1 D it explains, (Q D)_k' (Q_kk)^-1 (Q D)_k.
+  double most = 0.0;
+  for (int first = 0; first < m;) {
+    const int mode = index_[static_cast<std::size_t>(first)] / kQuantities;
+    int p = 1;
+    while (first + p < m && index_[static_cast<std::size_t>(first + p)] / kQuantities == mode) ++p;
+    Eigen::Matrix3d qkk = Eigen::Matrix3d::Identity();  // padded to 3 x 3 with the identity
+    qkk.topLeftCorner(p, p) = Q.block(first, first, p, p);
+    const Eigen::LLT<Eigen::Matrix3d> small(qkk);
+    if (small.info() == Eigen::Success) {
+      const Eigen::Matrix3d skk = small.solve(Eigen::Matrix3d::Identity());
+      Eigen::Vector3d qd = Eigen::Vector3d::Zero();
+      qd.head(p) = QD.segment(first, p);
+      const Eigen::Vector3d dk = skk * qd;
+      const double explained = qd.dot(dk);
+      if (explained > most) {
+        most = explained;
+        named_ = mode;
+        const auto k = static_cast<std::size_t>(mode);
+        named_d_ = vec(value[k]) - vec(modes_[k].baseline.value);
+        named_S_ = joint.block<3, 3>(kQuantities * mode, kQuantities * mode) + modes_[k].baseline.covariance_matrix();
+        for (int a = 0; a < p; ++a) {
+          const int qa = index_[static_cast<std::size_t>(first + a)] % kQuantities;
+          named_d_(qa) = dk(a);
+          for (int b = 0; b < p; ++b)
+            named_S_(qa, index_[static_cast<std::size_t>(first + b)] % kQuantities) = skk(a, b);
+        }
+      }
+    }
+    first += p;
+  }
+}
+
 void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
                            const std::vector<ModalParameters>& std_dev, bool valid, std::vector<FlagChange>& changes,
                            double evidence_span) {
@@ -320,14 +409,18 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
 }
 
 void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
-                           const std::vector<Eigen::Matrix3d>& covariance, bool valid,
-                           std::vector<FlagChange>& changes, double evidence_span,
-                           const std::vector<Eigen::Matrix3d>* settle_covariance) {
+                           const std::vector<Eigen::Matrix3d>& covariance, bool valid, std::vector<FlagChange>& changes,
+                           double evidence_span, const std::vector<Eigen::Matrix3d>* settle_covariance,
+                           const Eigen::MatrixXd* joint) {
   const std::size_t n = modes_.size();
   if (value.size() != n || covariance.size() != n || (settle_covariance && settle_covariance->size() != n))
     throw std::invalid_argument("FaultDetector::update: estimates for a different number of modes");
   const bool t_ok = std::isfinite(t);
   const double span = std::isfinite(evidence_span) && evidence_span > 0.0 ? evidence_span : 0.0;
+  for (std::size_t i = 0; i < n; ++i)
+    testing_[i] = valid && t_ok && finite(value[i]) && modes_[i].state != BaselineState::learning;
+  named_ = -1;
+  if (joint) name_the_changed_mode(value, *joint);
 
   for (std::size_t i = 0; i < n; ++i) {
     const bool mode_valid = valid && t_ok && finite(value[i]);
@@ -350,9 +443,13 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
     }
 
     const Eigen::Vector3d x0 = vec(m.baseline.value);
-    const Eigen::Vector3d d = x - x0;
+    const Eigen::Vector3d own = x - x0;  // the estimate's own deviation: the relative tests'
     const Eigen::Matrix3d c0 = m.baseline.covariance_matrix();
-    const Eigen::Matrix3d S = c + c0;
+    // The mode a change of which explains the modes' deviations best is
+    // tested given the others (name_the_changed_mode).
+    const bool named = named_ == static_cast<int>(i);
+    const Eigen::Vector3d d = named ? named_d_ : own;
+    const Eigen::Matrix3d S = named ? named_S_ : Eigen::Matrix3d(c + c0);
     // The AR(1) coefficient and CUSUM reference over this update's interval.
     const double rho = std::exp(-dt / memory_[i]);
     const double h = thresholds_[i].chi_square, b = thresholds_[i].cusum;
@@ -369,11 +466,11 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
       const bool sigma_ok = std::isfinite(S(q, q)) && S(q, q) > 0.0;
       const bool rel_ok = x0(q) != 0.0;
       s.deviation_sigma = sigma_ok ? d(q) / std::sqrt(S(q, q)) : 0.0;
-      s.deviation_relative = rel_ok ? d(q) / std::abs(x0(q)) : 0.0;
+      s.deviation_relative = rel_ok ? own(q) / std::abs(x0(q)) : 0.0;
       double& z_prev = previous_[i][q];
       if (std::isfinite(c(q, q)) && c(q, q) > 0.0) {
         const double band = kBaselineBand * std::sqrt(std::max(0.0, c0(q, q)));
-        const double shrunk = std::copysign(std::max(0.0, std::abs(d(q)) - band), d(q));
+        const double shrunk = std::copysign(std::max(0.0, std::abs(own(q)) - band), own(q));
         const double z = shrunk / std::sqrt(c(q, q));
         if (dt > 0.0 && std::isfinite(z_prev)) {
           const double e = (z - rho * z_prev) / std::sqrt(1.0 - rho * rho);
@@ -385,17 +482,18 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
         z_prev = kNaN;
       }
       s.cusum = std::max(g[2 * q], g[2 * q + 1]) / b;
-      const bool cusum_real = (g[2 * q] > b && d(q) > 0.0) || (g[2 * q + 1] > b && d(q) < 0.0);
+      const bool cusum_real = (g[2 * q] > b && own(q) > 0.0) || (g[2 * q + 1] > b && own(q) < 0.0);
 
       const double ds = std::abs(s.deviation_sigma), dr = std::abs(s.deviation_relative);
       const bool real = (chi_real && sigma_ok && ds > th.sigma_threshold) || cusum_real;
-      const bool past = real && rel_ok && dr > th.relative_threshold;
-      const bool in_band = sigma_ok && rel_ok && ds > th.clear_fraction * th.sigma_threshold &&
+      const bool same_side = (d(q) > 0.0) == (own(q) > 0.0);
+      const bool past = real && same_side && rel_ok && dr > th.relative_threshold;
+      const bool in_band = sigma_ok && rel_ok && same_side && ds > th.clear_fraction * th.sigma_threshold &&
                            dr > th.clear_fraction * th.relative_threshold;
 
       // Beyond the relative threshold on one side since (mode clock).
       double& beyond = beyond_since_[i][q];
-      const bool up = d(q) > 0.0;
+      const bool up = own(q) > 0.0;
       if (!(rel_ok && dr > th.relative_threshold)) {
         beyond = kNaN;
       } else if (std::isnan(beyond) || beyond_up_[i][q] != up) {

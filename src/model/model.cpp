@@ -127,19 +127,19 @@ ModalParameters modal_parameters(const Submodel& s) {
   return p;
 }
 
-Eigen::Matrix3d modal_covariance(double a1, double a2, const Eigen::Matrix3d& c) {
-  if (!(a2 > 0.0)) {
-    Eigen::Matrix3d out = Eigen::Matrix3d::Zero();
-    out(2, 2) = c(2, 2);
-    return out;
-  }
-  // Jacobian of (wn, zeta, gain) w.r.t. (a1, a2, b0).
-  const double a2_32 = a2 * std::sqrt(a2);
+Eigen::Matrix3d modal_jacobian(double a1, double a2) {
   Eigen::Matrix3d j = Eigen::Matrix3d::Zero();
+  j(2, 2) = 1.0;
+  if (!(a2 > 0.0)) return j;
+  const double a2_32 = a2 * std::sqrt(a2);
   j(0, 1) = -0.5 / a2_32;
   j(1, 0) = 0.5 / std::sqrt(a2);
   j(1, 1) = -0.25 * a1 / a2_32;
-  j(2, 2) = 1.0;
+  return j;
+}
+
+Eigen::Matrix3d modal_covariance(double a1, double a2, const Eigen::Matrix3d& c) {
+  const Eigen::Matrix3d j = modal_jacobian(a1, a2);
   const Eigen::Matrix3d out = j * c * j.transpose();
   return 0.5 * (out + out.transpose());  // exactly symmetric, as a covariance
 }
