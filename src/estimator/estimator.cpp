@@ -402,17 +402,30 @@ ModeEstimate RecursiveEstimator::mode(int i) const noexcept {
 
 namespace {
 
+// (a1, a2, b0) inside theta where the block is a mode; b0 alone otherwise.
+int modal_index(const Block& b, int r) { return b.n == 2 ? std::array<int, 3>{0, 1, b.n}[r] : b.n; }
+
+Eigen::Matrix3d jacobian_of(const Block& b) {
+  return b.n == 2 ? modal_jacobian(b.theta(0) / b.scale(0), b.theta(1) / b.scale(1)) : modal_jacobian(0.0, 0.0);
+}
+
+// J_i (e_var C) J_j^T: the covariance of block i's (wn, zeta, gain) with block
+// j's, C(r, k) the normalised covariance of theta_i(r) with theta_j(k).
+template <class Entry>
+Eigen::Matrix3d modal_block(const Block& bi, const Block& bj, double e_var, Entry C) {
+  Eigen::Matrix3d c;
+  for (int r = 0; r < 3; ++r)
+    for (int k = 0; k < 3; ++k) {
+      const int a = modal_index(bi, r), b = modal_index(bj, k);
+      c(r, k) = e_var * C(a, b) / (bi.scale(a) * bj.scale(b));
+    }
+  return jacobian_of(bi) * c * jacobian_of(bj).transpose();
+}
+
 // modal_covariance() of e_var P (normalised) for block b.
 Eigen::Matrix3d modal_covariance_of(const Block& b, const ThetaMat& P, double e_var) {
-  Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
-  if (b.n != 2) {
-    c(2, 2) = e_var * P(b.n, b.n) / (b.scale(b.n) * b.scale(b.n));
-    return c;
-  }
-  const std::array<int, 3> at = {0, 1, b.n};  // a1, a2, b0 inside theta
-  for (int r = 0; r < 3; ++r)
-    for (int k = 0; k < 3; ++k) c(r, k) = e_var * P(at[r], at[k]) / (b.scale(at[r]) * b.scale(at[k]));
-  return modal_covariance(b.theta(0) / b.scale(0), b.theta(1) / b.scale(1), c);
+  const Eigen::Matrix3d out = modal_block(b, b, e_var, [&](int r, int k) { return P(r, k); });
+  return 0.5 * (out + out.transpose());  // exactly symmetric, as a covariance
 }
 
 }  // namespace
@@ -437,17 +450,7 @@ Eigen::Matrix3d RecursiveEstimator::mode_cross_covariance(int i, int j) const no
   const Block& bi = m.blocks[static_cast<std::size_t>(i)];
   const Block& bj = m.blocks[static_cast<std::size_t>(j)];
   const int oi = m.joint.offset(static_cast<std::size_t>(i)), oj = m.joint.offset(static_cast<std::size_t>(j));
-  // (a1, a2, b0) inside theta where the block is a mode; b0 alone otherwise.
-  const auto at = [](const Block& b, int r) { return b.n == 2 ? std::array<int, 3>{0, 1, b.n}[r] : b.n; };
-  const auto jacobian = [](const Block& b) {
-    return b.n == 2 ? modal_jacobian(b.theta(0) / b.scale(0), b.theta(1) / b.scale(1)) : modal_jacobian(0.0, 0.0);
-  };
-  Eigen::Matrix3d c;
-  for (int r = 0; r < 3; ++r)
-    for (int k = 0; k < 3; ++k)
-      c(r, k) =
-          m.e_var * m.joint.inverse()(oi + at(bi, r), oj + at(bj, k)) / (bi.scale(at(bi, r)) * bj.scale(at(bj, k)));
-  return jacobian(bi) * c * jacobian(bj).transpose();
+  return modal_block(bi, bj, m.e_var, [&](int r, int k) { return m.joint.inverse()(oi + r, oj + k); });
 }
 
 Eigen::MatrixXd RecursiveEstimator::covariance(int i) const {
