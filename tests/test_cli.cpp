@@ -218,6 +218,41 @@ TEST_F(CliThreeModes, DiagnoseWithModesOnlyStartsFromTheData) {
   expect_three_modes(model.model);
 }
 
+// A positioning axis under position feedback (a rigid body with viscous
+// friction, b0 / (p (1 + a1 p)), and a PID law): the loop's own resonance is
+// the only peak of S_yr/S_ur. Fitted as a mode it makes the loop diverge
+// (a mode of negative gain, fit -111 %); `fit --modes 1` says so and starts
+// again from the non-resonant structure of least BIC, the rigid body with its
+// lag, which comes back at the truth.
+TEST_F(Cli, FitOfOneModeOverAClosedLoopPeakThatIsNoResonanceReturnsTheRigidBodyBehindIt) {
+  const std::string body = "      kind: transfer_function\n      rigid_poles: 1\n      a: [0.467]\n      b: [0.1727]\n";
+  std::ofstream(path("axis.yaml")) << "sample_rate_hz: 1000\n"
+                                      "model:\n  loop: closed\n  modes: 1\n"
+                                      "controller:\n  numerator: [160720.8, 0, -121725]\n  denominator: [1, 0, 0]\n"
+                                      "plant:\n  snr_db: 60\n  modes:\n    - name: body\n"
+                                   << body
+                                   << "simulation:\n  duration: 25\n  seed: 3\n  reference:\n"
+                                      "    type: sum_of_sines\n    amplitudes: [0.1, 0.02]\n"
+                                      "    frequencies_hz: [0.1, 1.0]\n";
+  const Outcome sim = run("simulate --config " + path("axis.yaml") + " --out " + path("d.csv"));
+  ASSERT_EQ(sim.code, 0) << sim.output;
+  const Outcome fit =
+      run("fit --config " + path("axis.yaml") + " --data " + path("d.csv") + " --modes 1 --out " + path("fitted.yaml"));
+  ASSERT_EQ(fit.code, 0) << fit.output;
+  EXPECT_TRUE(contains(fit.output,
+                       "fitted as a mode, makes the loop with the controller diverge: starting again from "
+                       "a rigid body with a lag"))
+      << fit.output;
+  EXPECT_FALSE(contains(fit.output, "diverges on the record")) << fit.output;
+  const Config fitted = load_config(path("fitted.yaml"));
+  ASSERT_EQ(fitted.model.submodels.size(), 1u);
+  const Submodel& s = fitted.model.submodels.front();
+  EXPECT_EQ(s.rigid_poles, 1);
+  ASSERT_EQ(s.n, 1);
+  EXPECT_NEAR(s.a(0), 0.467, 0.01 * 0.467);
+  EXPECT_NEAR(s.b(0), 0.1727, 0.01 * 0.1727);
+}
+
 // A mode at 0.33 fs: its sampled output is far from held. With no
 // output_hold configured, a starting mode above a tenth of the sampling rate
 // makes `fit` assume foh, the cycles converge, and both modes come out within

@@ -104,7 +104,8 @@ AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOpt
 // position feedback, a step on a rigid body) still has a start: the one of a
 // feedthrough b0 (position sensor only), a rigid body b0/p or b0/p^2, a lag of
 // one pole measured as b0 / (1 + p/wc) (b0 / (p^z (1 + p/wc)) in position, z
-// the output's derivatives: a motor's speed is a lag), or a lag of two poles
+// the output's derivatives: a motor's speed is a lag), a rigid body behind a
+// lag b0 / (p (1 + p/wc)) (a positioning axis with viscous friction), or a lag of two poles
 // b0 / (p^2/wn^2 + 2 zeta/wn p + 1) with zeta >= 0.7, wc and wn on a grid
 // over the band, whose response (b0 fitted) is closest to H over the
 // excited band in relative terms and per decade, sum gamma^2 |H - G|^2 / (|H|^2 f)
@@ -112,7 +113,7 @@ AdditiveModel initial_modes(const FrequencyResponse& h, int count, const PeakOpt
 // several, or a band of fewer than three bins, `structure` is empty.
 struct NonResonantStart {
   Submodel submodel;
-  std::string structure;                // which of the five, in words; empty: none
+  std::string structure;                // which of the six, in words; empty: none
   double relative_error = 0.0;          // RMS of |H - G| / |H| over the band, so weighted
   std::array<double, 2> band_hz{0, 0};  // the excited band it was fitted over
 };

@@ -60,6 +60,13 @@ struct OrderSelection {
   int chosen = -1;
 };
 
+// A fit's Bayesian information criterion over N samples, N ln(sigma^2) +
+// k ln N with sigma^2 its output error's variance and k its free parameters
+// (a shared A(p) counts once); infinite for a failed fit and for one that
+// makes the loop with the controller diverge (its output error then says
+// nothing about the plant).
+double bic_of(const FitResult& fit, double N);
+
 // The fits use `options` (loop, controller, hold, settle_samples); the peaks
 // are taken from the record after options.settle_samples. Throws
 // std::invalid_argument when max_modes < 1.

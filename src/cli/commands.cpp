@@ -172,12 +172,16 @@ int fit(const FitArgs& args) {
       findings = std::move(chosen.findings);
       std::printf("\n");
     } else {
-      const AdditiveModel start =
-          modes ? modes_from_data(data.segment(settle, used), *modes, options, args.data, in_samples,
-                                  config.model.inputs.empty() ? inputs : config.model.inputs, output)
-                : config.model;
+      AdditiveModel start = modes ? modes_from_data(data.segment(settle, used), *modes, options, args.data, in_samples,
+                                                    config.model.inputs.empty() ? inputs : config.model.inputs, output)
+                                  : config.model;
       options.output_hold = output_hold(config, start, T);
       result = fit_physical(data, start, options, findings);
+      if (modes == 1 && non_resonant_instead(data, result, options, in_samples, output, start)) {
+        findings.clear();
+        options.output_hold = output_hold(config, start, T);
+        result = fit_physical(data, start, options, findings);
+      }
     }
 
     char rate[48] = "";

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numbers>
 
 #include "modalwatch/error.hpp"
@@ -57,6 +58,33 @@ AdditiveModel modes_from_data(const Record& data, int count, const SrivcOptions&
     std::printf("WARNING: %d modes asked, the data show %zu resonance peaks above the noise: fitting %zu\n", count,
                 found, found);
   return start;
+}
+
+bool non_resonant_instead(const Record& data, const FitResult& peak, const SrivcOptions& fit, bool in_samples,
+                          int output_derivatives, AdditiveModel& start) {
+  if (start.submodels.size() != 1 || data.inputs() != 1 || !start.submodels.front().is_mode()) return false;
+  if (!peak.unstable_loop && peak.projections == 0) return false;
+  const Eigen::Index settle = std::min<Eigen::Index>(fit.settle_samples, data.size());
+  const Record used = data.segment(settle, data.size() - settle);
+  const FrequencyResponse h = resolving_response(used, fit.closed_loop, fit.input_hold);
+  std::vector<std::pair<std::string, double>> bic;
+  const NonResonantStart structure = choose_non_resonant_start(data, h, fit, output_derivatives, &bic);
+  const double peak_bic =
+      peak.unstable_loop ? std::numeric_limits<double>::infinity() : bic_of(peak, static_cast<double>(used.size()));
+  double least = std::numeric_limits<double>::infinity();
+  for (const auto& b : bic) least = std::min(least, b.second);
+  if (structure.structure.empty() || !(least < peak_bic)) return false;
+  const ModalParameters p = modal_parameters(start.submodels.front());
+  std::printf(
+      "WARNING: the peak of the frequency response estimate at %.5g %s (zeta %.3g), fitted as a mode, %s: "
+      "starting again from %s, the non-resonant structure whose fit has the least BIC (the mode's %.6g):",
+      p.hz(), frequency_unit(in_samples), p.zeta,
+      peak.unstable_loop ? "makes the loop with the controller diverge" : "needed a stability projection",
+      structure.structure.c_str(), peak_bic);
+  for (const auto& [name, b] : bic) std::printf(" %s %.6g;", name.c_str(), b);
+  std::printf("\n");
+  start.submodels = {structure.submodel};
+  return true;
 }
 
 int output_kind(const Config& config, const std::optional<std::string>& option, bool from_data) {

@@ -36,6 +36,18 @@ void print_physical_findings(const std::vector<ModeFinding>& findings);
 AdditiveModel modes_from_data(const Record& data, int count, const SrivcOptions& fit, const std::string& data_name,
                               bool in_samples, const std::vector<std::string>& inputs = {}, int output_derivatives = 0);
 
+// `fit` with one mode from the data on one input: the estimate's peak need
+// not be a resonance (a closed loop's own peak over a rigid body with
+// friction). When the peak's mode, fitted (`peak`), makes the loop diverge,
+// `start` becomes the non-resonant structure of least BIC, fitted with `fit`
+// on `data` (after fit.settle_samples); when the mode needed a stability
+// projection, that structure only if its BIC is less than the mode's. Prints
+// a warning with the BICs and returns true when `start` changed. `diagnose`
+// keeps the peak: its output-error refinement takes the mode where the data
+// say (an overdamped pair for a rigid body with viscous friction).
+bool non_resonant_instead(const Record& data, const FitResult& peak, const SrivcOptions& fit, bool in_samples,
+                          int output_derivatives, AdditiveModel& start);
+
 // What the sensor measures as z (Submodel::output_derivatives): `--output`
 // when given, else model.output. `--output` is for modes started from the data
 // (`from_data`); configured submodels keep model.output, and an `--output`

@@ -385,6 +385,22 @@ std::vector<NonResonantStart> non_resonant_starts(const FrequencyResponse& h, co
     lag.b = Eigen::VectorXd::Constant(1, b0);
     consider(e, std::move(lag), "a lag of one pole");
   }
+  // A rigid body behind a lag: a positioning axis, a mass with viscous
+  // friction, b0 / (p (1 + p / wc)) in position (read as velocity it is the
+  // lag of one pole above).
+  for (int i = 0; i < kGrid && z != 1; ++i) {
+    const double wc = w_lo * std::pow(w_hi / w_lo, static_cast<double>(i) / (kGrid - 1));
+    const double e = fit([&](double w) { return std::pow(C(0.0, w), z - 1) / C(1.0, w / wc); }, b0);
+    Submodel body;
+    body.name = "rigid";
+    body.n = 1;
+    body.m = 0;
+    body.rigid_poles = 1;
+    body.output_derivatives = z;
+    body.a = Eigen::VectorXd::Constant(1, 1.0 / wc);
+    body.b = Eigen::VectorXd::Constant(1, b0);
+    consider(e, std::move(body), "a rigid body with a lag b0/(p (1 + p/wc))");
+  }
   for (const double zeta : {0.7, 1.0, 2.0, 5.0})
     for (int i = 0; i < kGrid; ++i) {
       const double wn = w_lo * std::pow(w_hi / w_lo, static_cast<double>(i) / (kGrid - 1));

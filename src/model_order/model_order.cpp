@@ -33,15 +33,14 @@ std::vector<StabilisedMode> stabilise(const std::vector<ModalParameters>& modes,
   return out;
 }
 
-// BIC = N ln(sigma^2) + k ln N; infinite for a failed fit. A shared A(p) is
-// one set of parameters, however many inputs see it.
+}  // namespace
+
 double bic_of(const FitResult& fit, double N) {
-  if (!(std::isfinite(fit.noise_variance) && fit.noise_variance > 0.0 && fit.model.beta().allFinite()))
+  if (fit.unstable_loop ||
+      !(std::isfinite(fit.noise_variance) && fit.noise_variance > 0.0 && fit.model.beta().allFinite()))
     return std::numeric_limits<double>::infinity();
   return N * std::log(fit.noise_variance) + static_cast<double>(free_beta(fit.model).size()) * std::log(N);
 }
-
-}  // namespace
 
 OrderSelection select_order(const Record& data, const SrivcOptions& options, const OrderOptions& order) {
   if (order.max_modes < 1) throw std::invalid_argument("select_order: max_modes must be at least 1");
