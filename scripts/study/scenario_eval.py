@@ -12,8 +12,10 @@ event,value,baseline,relative,sigma with event raised|cleared), the flags with
 the fault in meta.json.
 
 It prints tables per class (healthy or fault kind; open or closed loop; rich
-or poor excitation; the fault a step or a ramp; the estimator reset after a
-divergence in the record or not, the refit path and the recursive one):
+or poor excitation; the fault a step or a ramp; one memory of the excitation
+determining every parameter (the bank's Fisher information full rank) or
+leaving a direction open; the estimator reset after a divergence in the
+record or not, the refit path and the recursive one):
   - tracking error |x_hat - x| / x of wn and zeta over the modes and samples of
     the class (median and p95, each record-mode weighted alike), outside the
     first memory after the warm-up and the window from the start of a change
@@ -128,6 +130,15 @@ def evaluate(d, max_points):
            "shape": fault["shape"] if fault else None, "resets": int(last[col["resets"]]),
            "low_excitation_share": float(np.mean((flags[keep] & 32) != 0)) if keep.any() else 0.0,
            "modes": [], "samples_used": int(keep.sum())}
+    # Whether one memory of the excitation determines every parameter (the
+    # Fisher information of scenario_bank.py full rank) or leaves a direction
+    # open, and the faulted quantity's share of the weakest direction then.
+    crb = meta["cramer_rao_one_memory"]
+    res["fisher_rank"], res["parameters"] = crb["fisher_rank"], crb["parameters"]
+    res["information"] = "full rank" if crb["fisher_rank"] >= crb["parameters"] else "open direction"
+    if fault and res["information"] == "open direction":
+        q = {"stiffness": "wn", "damping": "zeta", "gain": "gain"}[fault["kind"]]
+        res["fault_in_open_direction"] = abs(crb["weakest_direction"].get(f"{fault['mode']}_{q}", 0.0))
     for i, m in enumerate(meta["truth"]):
         name = m["name"]
         crb = meta["cramer_rao_one_memory"]["modes"][i]
@@ -312,8 +323,8 @@ def group_of(r, key):
 
 
 def print_tables(results):
-    """The tables by class, loop, excitation, the fault's shape and the
-    estimator's path (a divergence reset or none) and over all records;
+    """The tables by class, loop, excitation, the fault's shape, the
+    information, the estimator's path (a divergence reset or none) and over all records;
     returns them."""
     tables = {}
     healthy_h = sum(r["flags"]["monitored_h"] for r in results if "flags" in r and r["class"] == "healthy")
@@ -322,6 +333,7 @@ def print_tables(results):
                                ("loop", "loop", ("open", "closed")),
                                ("excitation", "excitation", ("rich", "poor")),
                                ("fault shape", "shape", ("step", "ramp")),
+                               ("information", "information", ("full rank", "open direction")),
                                ("path", "path", ("no reset", "reset"))):
         members = {v: [r for r in results if group_of(r, key) == v] for v in values}
         groups = [(v, group_figures(members[v])) for v in values if members[v]]
