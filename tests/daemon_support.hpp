@@ -191,7 +191,10 @@ inline void publish_paced(lcm_t* lcm, const Config& c, Daemon& d, const Record& 
                                         k.samples_duplicate + k.samples_out_of_order;
           return published < handled + backlog;
         },
-        10.0);
+        // The daemon holds input while a warm-up fit or a refit runs on its
+        // fitter thread: under a sanitizer such a fit takes tens of seconds,
+        // and sending on after a shorter wait overflows the backlog.
+        120.0);
   });
 }
 
