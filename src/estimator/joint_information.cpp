@@ -115,7 +115,8 @@ bool inverse_cholesky_factor(double* a, int n) {
 }
 
 // The diagonal block (o, o) of size nt of A^-1 = M^T M, M from inverse_cholesky_factor().
-void inverse_block(const double* M, int n, int o, int nt, ThetaMat& out) {
+template <class Out>
+void inverse_block(const double* M, int n, int o, int nt, Out& out) {
   for (int q = 0; q < nt; ++q)
     for (int p = 0; p <= q; ++p) {
       double s = 0.0;
@@ -146,13 +147,7 @@ void JointInformation::solve(std::vector<Block>& blocks, double noise_variance) 
   }
   own_ = A_;  // A_ii, before A is factored in place
   if (!inverse_cholesky_factor(A_.data(), n_)) return;  // not positive definite: C_i keep their last values
-  for (int q = 0; q < n_; ++q) {
-    for (int p = 0; p <= q; ++p) {
-      double s = 0.0;
-      for (int k = q; k < n_; ++k) s += A_(k, p) * A_(k, q);
-      inverse_(p, q) = inverse_(q, p) = s;
-    }
-  }
+  inverse_block(A_.data(), n_, 0, n_, inverse_);
   solved_ = inverse_.allFinite();
   for (std::size_t i = 0; i < blocks.size(); ++i) {
     Block& b = blocks[i];

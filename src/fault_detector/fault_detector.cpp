@@ -314,7 +314,6 @@ void FaultDetector::learn(std::size_t i, double now, const Eigen::Vector3d& x, c
 }
 
 void FaultDetector::name_the_changed_mode(const std::vector<ModalParameters>& value, const Eigen::MatrixXd& joint) {
-  named_ = -1;
   const std::size_t n = modes_.size();
   if (joint.rows() != static_cast<Eigen::Index>(kQuantities * n) || joint.cols() != joint.rows()) return;
   // The components with a variance (a rigid body's wn and zeta have none), of

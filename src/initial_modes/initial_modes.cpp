@@ -1,6 +1,7 @@
 #include "modalwatch/initial_modes.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <complex>
 #include <limits>
@@ -369,37 +370,28 @@ std::vector<NonResonantStart> non_resonant_starts(const FrequencyResponse& h, co
   // corner on a grid from a decade below the band to a decade above it.
   const double w_lo = 0.1 * kTwoPi * h.frequency_hz(first), w_hi = 10.0 * kTwoPi * h.frequency_hz(last);
   constexpr int kGrid = 121;
-  // The lag of one pole is measured as b0 / (1 + p / wc) whatever the sensor:
-  // a position lag, a motor's speed (b0 / (p (1 + p / wc)) read as velocity), a
-  // mass behind an actuator's lag read as acceleration.
-  for (int i = 0; i < kGrid; ++i) {
-    const double wc = w_lo * std::pow(w_hi / w_lo, static_cast<double>(i) / (kGrid - 1));
-    const double e = fit([&](double w) { return 1.0 / C(1.0, w / wc); }, b0);
-    Submodel lag;
-    lag.name = "lag";
-    lag.n = 1;
-    lag.m = 0;
-    lag.rigid_poles = z;
-    lag.output_derivatives = z;
-    lag.a = Eigen::VectorXd::Constant(1, 1.0 / wc);
-    lag.b = Eigen::VectorXd::Constant(1, b0);
-    consider(e, std::move(lag), "a lag of one pole");
-  }
-  // A rigid body behind a lag: a positioning axis, a mass with viscous
-  // friction, b0 / (p (1 + p / wc)) in position (read as velocity it is the
-  // lag of one pole above).
-  for (int i = 0; i < kGrid && z != 1; ++i) {
-    const double wc = w_lo * std::pow(w_hi / w_lo, static_cast<double>(i) / (kGrid - 1));
-    const double e = fit([&](double w) { return std::pow(C(0.0, w), z - 1) / C(1.0, w / wc); }, b0);
-    Submodel body;
-    body.name = "rigid";
-    body.n = 1;
-    body.m = 0;
-    body.rigid_poles = 1;
-    body.output_derivatives = z;
-    body.a = Eigen::VectorXd::Constant(1, 1.0 / wc);
-    body.b = Eigen::VectorXd::Constant(1, b0);
-    consider(e, std::move(body), "a rigid body with a lag b0/(p (1 + p/wc))");
+  // The lag of one pole is measured as b0 / (1 + p / wc) whatever the sensor
+  // (l = z rigid poles): a position lag, a motor's speed (b0 / (p (1 + p / wc))
+  // read as velocity), a mass behind an actuator's lag read as acceleration.
+  // A rigid body behind a lag (l = 1): a positioning axis, a mass with viscous
+  // friction, b0 / (p (1 + p / wc)) in position (read as velocity it is the lag).
+  const std::array<int, 2> rigid_poles = {z, 1};
+  for (std::size_t j = 0; j < (z == 1 ? 1u : 2u); ++j) {
+    const int l = rigid_poles[j];
+    for (int i = 0; i < kGrid; ++i) {
+      const double wc = w_lo * std::pow(w_hi / w_lo, static_cast<double>(i) / (kGrid - 1));
+      const double e =
+          fit([&](double w) { return (l == z ? C(1.0) : std::pow(C(0.0, w), z - l)) / C(1.0, w / wc); }, b0);
+      Submodel lag;
+      lag.name = l == z ? "lag" : "rigid";
+      lag.n = 1;
+      lag.m = 0;
+      lag.rigid_poles = l;
+      lag.output_derivatives = z;
+      lag.a = Eigen::VectorXd::Constant(1, 1.0 / wc);
+      lag.b = Eigen::VectorXd::Constant(1, b0);
+      consider(e, std::move(lag), l == z ? "a lag of one pole" : "a rigid body with a lag b0/(p (1 + p/wc))");
+    }
   }
   for (const double zeta : {0.7, 1.0, 2.0, 5.0})
     for (int i = 0; i < kGrid; ++i) {
