@@ -230,6 +230,46 @@ estimator:
                           "gain-step-under-five-sines.yaml");
 }
 
+// Four modes in open loop under five sines (a scenario-bank record): the
+// sines leave a direction open that is mostly mode 3's gain, and that gain
+// ramps down 20 % over 0.4 memory from 10.1 memories on.
+inline SimulatedRecord gain_ramp_under_five_sines() {
+  return simulated_record(R"(
+sample_rate_hz: 248.4670909135273
+model:
+  loop: open
+  submodels:
+    - {name: mode1, kind: mode, wn: 3.5100796631992752, zeta: 0.05417604666676147, gain: 0.23565118672513644, forgetting: 0.9999537636397263}
+    - {name: mode2, kind: mode, wn: 12.757255213813725, zeta: 0.01556940842336978, gain: 0.04250260703261878, forgetting: 0.9999537636397263}
+    - {name: mode3, kind: mode, wn: 49.44488340369456, zeta: 0.016609987008587068, gain: 0.028489247500074033, forgetting: 0.9999537636397263}
+    - {name: mode4, kind: mode, wn: 165.60707225291972, zeta: 0.02175200329876431, gain: 0.15041467876753273, forgetting: 0.9999537636397263}
+plant:
+  noise_variance: 0.0010224117360996955
+  modes:
+    - {name: mode1, kind: mode, wn: 3.609151755927194, zeta: 0.05930966482096563, gain: 0.2509322028223534}
+    - {name: mode2, kind: mode, wn: 12.465012627891973, zeta: 0.01664660524251047, gain: 0.04536601493676572}
+    - name: mode3
+      kind: mode
+      wn: 49.017644014011964
+      zeta: 0.016860985494747602
+      gain: 0.03021157074128417
+      trajectory:
+        gain: [[880.754066587869, 0.03021157074128417], [915.5002464816771, 0.024169256593027336]]
+    - {name: mode4, kind: mode, wn: 165.93662250559504, zeta: 0.025781524557185857, gain: 0.1613497415117912}
+simulation:
+  duration: 1627.3368566969766
+  seed: 1736750151
+  input:
+    type: sum_of_sines
+    amplitudes: [1.0, 1.0, 1.0, 1.0, 1.0]
+    frequencies_rad_s: [0.9026266094042004, 3.893875118976135, 13.255261208326372, 51.250642895989486, 149.92849537783445]
+estimator:
+  warmup: 87.04573277886158
+  fit_on_warmup: true
+)" + bank_faults(87.04573277886158),
+                          "gain-ramp-under-five-sines.yaml");
+}
+
 // Three modes in closed loop (a scenario-bank record), with the plant's modes
 // and the reference given: the config and the record it simulates.
 inline SimulatedRecord three_mode_loop(const std::string& plant_modes, const std::string& reference,

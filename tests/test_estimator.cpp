@@ -1377,6 +1377,43 @@ TEST(RecursiveEstimator, AGainStepThatItsTradeWithTheOtherModesHidesIsFlaggedOnT
   EXPECT_LT(std::abs(gain3), 0.05);
 }
 
+// Mode 3's gain ramps down 20 % where the five sines leave a direction open
+// that is mostly that gain: its reported std, the uncertainty about where the
+// plant lies along that direction, is over 10 %, and a baseline learned with
+// it hid the change. Along that direction the estimate does not move unless
+// the plant does: its sampling covariance, which the detector tests against,
+// is a fraction of the reported one and no smaller than the estimate's own
+// scatter while nothing changes. The ramp is flagged on mode 3 within the hold
+// (one memory) and a half of the crossing of the threshold, nothing else.
+TEST(RecursiveEstimator, AGainRampAlongADirectionTheExcitationLeavesOpenIsFlaggedAgainstTheEstimatesOwnScatter) {
+  const SimulatedRecord record = gain_ramp_under_five_sines();
+  constexpr double kMemory = 87.04573277886158, kRampStart = 880.754066587869, kRampEnd = 915.5002464816771;
+  constexpr double kCrossing = 0.5 * (kRampStart + kRampEnd);  // the truth 10 % off
+  constexpr double kPublishPeriod = 4.3506767677986575;        // the bank's
+  double reported = 0.0, sampling = 0.0, sum = 0.0, sum2 = 0.0;
+  int n = 0;
+  const DetectorRun run =
+      run_detector(record.config, record.record, kPublishPeriod, [&](double t, const RecursiveEstimator& est) {
+        if (t < 5.0 * kMemory || t >= kRampStart) return;  // from after the baseline's window to the ramp
+        const double gain = est.mode(2).value.gain;
+        reported = std::max(reported, std::sqrt(est.mode_covariance(2)(2, 2)) / gain);
+        sampling = std::max(sampling, std::sqrt(est.mode_sampling_covariance(2)(2, 2)) / gain);
+        sum += gain;
+        sum2 += gain * gain;
+        ++n;
+      });
+  ASSERT_GT(n, 50);
+  const double mean = sum / n, scatter = std::sqrt(std::max(0.0, sum2 / n - mean * mean)) / mean;
+  std::printf(
+      "mode 3's gain before the ramp: std reported %.2f %%, sampling %.2f %%, scatter of the estimate %.2f %%\n",
+      100.0 * reported, 100.0 * sampling, 100.0 * scatter);
+  EXPECT_GT(reported, 0.2 / 4.0) << "the record's point: against its reported std a 20 % change is under 4 std";
+  EXPECT_LT(sampling, 0.2 / 4.0) << "against the sampling std it is over 4";
+  EXPECT_GT(sampling, scatter);
+  expect_the_change_alone_flagged(run, {2, Quantity::gain, kCrossing, 1.5 * kMemory, std::nullopt});
+  EXPECT_NEAR(run.modes[2].gain / 0.024169256593027336, 1.0, 0.05);
+}
+
 // Where the wait after a reset ends unsettled, the updates resume on a model
 // that does not describe the data, and the noise estimate grows with its
 // error: the estimates are re-converging, no measurement of the plant, and

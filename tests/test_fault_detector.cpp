@@ -790,6 +790,38 @@ TEST(FaultDetector, AChangeTheMarginalStdHidesIsFlaggedGivenTheModesThatShareIts
   EXPECT_FALSE(given.status()[1].quantity[2].flagged) << "mode 2's estimate has not moved";
 }
 
+TEST(FaultDetector, TheNamedModeIsTestedAgainstItsSamplingFluctuationAndItsNeighboursAreNot) {
+  // The two gains trade (rho -0.9, std 11 % each: what the data leave open),
+  // but the estimates themselves scatter by 2 % (their sampling covariance).
+  // Mode 2's gain falls 20 % and mode 1's rises 12 %, along the trade. Mode 2
+  // is named; given mode 1 its change is -9 % at 4.8 % (1.9 std), and against
+  // the trade neither is past 4 std. Against its own scatter mode 2's change
+  // is 10 std: flagged. Mode 1's would be 6, but a change of mode 2 moves it
+  // along the trade, so it keeps its test against the trade: not flagged.
+  const std::vector<ModalParameters> baseline = {{60.0, 0.05, 1.0}, {150.0, 0.03, 1.0}};
+  const Eigen::MatrixXd joint = two_modes_joint(0.11, -0.9);
+  const Eigen::MatrixXd scatter = two_modes_joint(0.02, 0.0);
+  const std::vector<Eigen::Matrix3d> cov = {joint.block<3, 3>(0, 0), joint.block<3, 3>(3, 3)};
+  const std::vector<Eigen::Matrix3d> sampling = {scatter.block<3, 3>(0, 0), scatter.block<3, 3>(3, 3)};
+  std::vector<ModalParameters> value = baseline;
+  value[0].gain = 1.12;
+  value[1].gain = 0.8;
+  FaultDetectorSettings st = configured(baseline);
+  st.thresholds[static_cast<int>(Quantity::gain)].relative_threshold = 0.1;
+  FaultDetector without(st), with(st);
+  std::vector<FlagChange> changes;
+  changes.reserve(6);
+  for (long k = 0; k < std::lround(10.0 / kPeriod); ++k) {
+    const double t = static_cast<double>(k) * kPeriod;
+    without.update(t, value, cov, true, changes, 0.0, nullptr, &joint);
+    with.update(t, value, cov, true, changes, 0.0, nullptr, &joint, &sampling);
+  }
+  EXPECT_EQ(without.flag_bits(), 0u);
+  EXPECT_EQ(with.flag_bits(), kGainBit(1));
+  EXPECT_NEAR(with.status()[1].quantity[2].deviation_sigma, -0.2 / 0.02, 1e-9);
+  EXPECT_NEAR(with.status()[0].quantity[2].deviation_sigma, 0.12 / 0.11, 1e-9);
+}
+
 TEST(FaultDetector, ModesThatAreNotCorrelatedAreTestedAsOnTheirOwn) {
   // A drift of every quantity of mode 1 and noise on mode 2, with a joint
   // covariance that is block diagonal: every status the same to the last bit.

@@ -33,6 +33,17 @@
 // chi-square's share of the false-alarm rate once more per mode (1.5 times
 // the rate stated, before the hold, which the short spells that a change of
 // name makes rarely outlast).
+// C holds the uncertainty about where the plant lies, also along directions
+// the data leave open; along those the estimate does not move unless the
+// plant does, so a change there can sit at a few std of C (a baseline learned
+// with C adds its own). Given each estimate's sampling covariance F (its own
+// fluctuation, RecursiveEstimator::mode_sampling_covariance), the named mode
+// is also tested on its own deviation: T2 = d' (F + F0)^-1 d > h with |d_q| >
+// sigma_threshold sqrt((F + F0)_qq), F0 = F over the learning window's
+// independent samples for a learned baseline, C0 for a configured one. Only
+// the named mode: a change of it moves the others along their trades with it,
+// which F leaves out. A third chi-square per mode with no change: at most
+// twice the stated rate, before the hold.
 //
 // A plain class: no I/O, no threads, no allocation in update().
 #include <array>
@@ -122,7 +133,9 @@ struct FaultDetectorSettings {
 // The detector's view of one quantity of one mode.
 struct QuantityStatus {
   bool flagged = false;
-  double deviation_sigma = 0.0;     // (x - x0) / sqrt(S_qq); d_k / sqrt(S_k,qq) while the mode is named
+  // (x - x0) / sqrt(S_qq); while the mode is named, d_k / sqrt(S_k,qq) or, where
+  // larger, (x - x0) / sqrt((F + F0)_qq)
+  double deviation_sigma = 0.0;
   double deviation_relative = 0.0;  // (x - x0) / |x0|
   double cusum = 0.0;               // the larger one-sided CUSUM, in units of its threshold b
   double since = 0.0;               // time the flag rose (or the condition began, when pending)
@@ -188,9 +201,17 @@ class FaultDetector {
   // covariance of all modes' (wn, zeta, gain) together, which the tests
   // condition each mode on the others with (above); without it, or where it
   // is not positive definite, each mode is tested on its own.
+  // `sampling_covariance`, when given, is the covariance of each estimate's own
+  // sampling fluctuation (RecursiveEstimator::mode_sampling_covariance): the
+  // named mode is also tested on its own deviation against it (with a learned
+  // baseline's share, the same over the window's independent samples), which
+  // sees a change along a direction the data leave open, where `covariance`
+  // holds the uncertainty about the plant. The other modes are not: a change
+  // of the named mode moves them along the trades `covariance` holds.
   void update(double t, const std::vector<ModalParameters>& value, const std::vector<Eigen::Matrix3d>& covariance,
               bool valid, std::vector<FlagChange>& changes, double evidence_span = 0.0,
-              const std::vector<Eigen::Matrix3d>* settle_covariance = nullptr, const Eigen::MatrixXd* joint = nullptr);
+              const std::vector<Eigen::Matrix3d>* settle_covariance = nullptr, const Eigen::MatrixXd* joint = nullptr,
+              const std::vector<Eigen::Matrix3d>* sampling_covariance = nullptr);
   // The same with standard deviations only (a diagonal covariance).
   void update(double t, const std::vector<ModalParameters>& value, const std::vector<ModalParameters>& std_dev,
               bool valid, std::vector<FlagChange>& changes, double evidence_span = 0.0);
@@ -278,7 +299,7 @@ class DetectorInput {
 
  private:
   std::vector<ModalParameters> value_;
-  std::vector<Eigen::Matrix3d> covariance_, settle_covariance_;
+  std::vector<Eigen::Matrix3d> covariance_, settle_covariance_, sampling_covariance_;
   Eigen::MatrixXd joint_;  // all modes' covariance together (FaultDetector::update)
   double evidence_span_ = 0.0;
   bool warming_up_;     // the estimator's status after the previous step

@@ -453,6 +453,25 @@ Eigen::Matrix3d RecursiveEstimator::mode_cross_covariance(int i, int j) const no
   return modal_block(bi, bj, m.e_var, [&](int r, int k) { return m.joint.inverse()(oi + r, oj + k); });
 }
 
+Eigen::Matrix3d RecursiveEstimator::mode_sampling_covariance(int i) const noexcept {
+  const Impl& m = *impl_;
+  if (m.blocks.empty() || !m.joint.current()) return mode_covariance(i);
+  const Block& b = m.blocks[static_cast<std::size_t>(i)];
+  const int o = m.joint.offset(static_cast<std::size_t>(i));
+  const Eigen::Matrix3d c =
+      modal_block(b, b, m.e_var, [&](int r, int k) { return m.joint.fluctuation()(o + r, o + k); });
+  return 0.5 * (c + c.transpose());
+}
+
+Eigen::Matrix3d RecursiveEstimator::mode_cross_sampling_covariance(int i, int j) const noexcept {
+  const Impl& m = *impl_;
+  if (m.blocks.empty() || i == j || !m.joint.current()) return mode_cross_covariance(i, j);
+  const Block& bi = m.blocks[static_cast<std::size_t>(i)];
+  const Block& bj = m.blocks[static_cast<std::size_t>(j)];
+  const int oi = m.joint.offset(static_cast<std::size_t>(i)), oj = m.joint.offset(static_cast<std::size_t>(j));
+  return modal_block(bi, bj, m.e_var, [&](int r, int k) { return m.joint.fluctuation()(oi + r, oj + k); });
+}
+
 Eigen::MatrixXd RecursiveEstimator::covariance(int i) const {
   const Impl& m = *impl_;
   const Block& b = m.blocks.at(i);

@@ -22,7 +22,9 @@ void JointInformation::resize(const std::vector<Block>& blocks) {
   A_.resize(n_, n_);
   own_.resize(n_, n_);
   inverse_.setZero(n_, n_);
-  solved_ = false;
+  fluctuation_.setZero(n_, n_);
+  prior_.setZero(n_);
+  solved_ = current_ = false;
   clear();
   save_good();
 }
@@ -32,6 +34,7 @@ void JointInformation::clear() {
   inv_w_.setOnes();
   updates_ = solved_at_ = 0;
   countdown_ = gap_ = 1;
+  current_ = false;
 }
 
 void JointInformation::rescale_weights() {
@@ -50,6 +53,7 @@ void JointInformation::restore_good() {
   S_ = S_good_;
   inv_w_ = inv_w_good_;
   updates_ = solved_at_ = updates_good_;
+  current_ = false;
 }
 
 JointInformation::Saved JointInformation::saved() const {
@@ -80,7 +84,7 @@ bool JointInformation::load(const Saved& s) {
   rng_ = s.rng;
   countdown_ = s.countdown;
   gap_ = s.gap;
-  solved_ = false;  // until the next solve
+  solved_ = current_ = false;  // until the next solve
   return true;
 }
 
@@ -143,12 +147,29 @@ void JointInformation::solve(std::vector<Block>& blocks, double noise_variance) 
       const double prior = b.stabilisation_ratio * b.theta_ref(j);
       double info = prior != 0.0 && noise_variance > 0.0 ? noise_variance / (prior * prior) : 1.0 / b.p_limit(j);
       A_(offset_[i] + j, offset_[i] + j) += info;
+      prior_(offset_[i] + j) = info;
     }
   }
   own_ = A_;  // A_ii, before A is factored in place
   if (!inverse_cholesky_factor(A_.data(), n_)) return;  // not positive definite: C_i keep their last values
   inverse_block(A_.data(), n_, 0, n_, inverse_);
   solved_ = inverse_.allFinite();
+  // (J + R)^-1 J (J + R)^-1 as two products (A_, factored, is free now), not
+  // as (J + R)^-1 minus R's share: along an open direction the two terms
+  // nearly cancel.
+  for (int q = 0; q < n_; ++q)
+    for (int r = 0; r < n_; ++r) {
+      double sum = 0.0;
+      for (int k = 0; k < n_; ++k) sum += inverse_(r, k) * (own_(k, q) - (k == q ? prior_(q) : 0.0));
+      A_(r, q) = sum;
+    }
+  for (int q = 0; q < n_; ++q)
+    for (int r = q; r < n_; ++r) {
+      double sum = 0.0;
+      for (int k = 0; k < n_; ++k) sum += A_(r, k) * inverse_(k, q);
+      fluctuation_(r, q) = fluctuation_(q, r) = sum;
+    }
+  current_ = solved_ && fluctuation_.allFinite();
   for (std::size_t i = 0; i < blocks.size(); ++i) {
     Block& b = blocks[i];
     const int o = offset_[i], nt = b.nt;

@@ -72,6 +72,14 @@ class JointInformation {
   // solved() is false before the first solve and after a load.
   bool solved() const { return solved_; }
   const Eigen::MatrixXd& inverse() const { return inverse_; }
+  // (J + R)^-1 J (J + R)^-1 of the last solve (normalised, over sigma^2): the
+  // covariance of the estimate's own sampling fluctuation. It leaves out R's
+  // share of inverse(), the uncertainty about where the plant lies along
+  // directions the data leave open, along which the estimate does not move.
+  // current() is true from a solve until J is emptied or returned to the last
+  // good state: only then do the blocks' P_i stand where J says.
+  const Eigen::MatrixXd& fluctuation() const { return fluctuation_; }
+  bool current() const { return current_; }
   int offset(std::size_t block) const { return offset_[block]; }
 
   // Returned to with the estimator's last good state.
@@ -104,8 +112,9 @@ class JointInformation {
   Eigen::VectorXd inv_w_good_;
   std::uint64_t updates_good_ = 0;
   // The solve's workspace (no allocation once sized), and its result.
-  Eigen::MatrixXd A_, own_, inverse_;
-  bool solved_ = false;
+  Eigen::MatrixXd A_, own_, inverse_, fluctuation_;
+  Eigen::VectorXd prior_;  // R's diagonal
+  bool solved_ = false, current_ = false;
 };
 
 MODALWATCH_HOT void JointInformation::accumulate(const std::vector<Block>& blocks) {

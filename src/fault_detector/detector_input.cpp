@@ -7,6 +7,7 @@ DetectorInput::DetectorInput(const RecursiveEstimator& estimator)
     : value_(static_cast<std::size_t>(estimator.submodels())),
       covariance_(value_.size(), Eigen::Matrix3d::Zero()),
       settle_covariance_(value_.size(), Eigen::Matrix3d::Zero()),
+      sampling_covariance_(value_.size(), Eigen::Matrix3d::Zero()),
       joint_(Eigen::MatrixXd::Zero(3 * static_cast<Eigen::Index>(value_.size()),
                                    3 * static_cast<Eigen::Index>(value_.size()))),
       warming_up_(estimator.status().warming_up),
@@ -26,6 +27,7 @@ void DetectorInput::read(const RecursiveEstimator& estimator) {
     value_[k] = estimator.mode(i).value;
     covariance_[k] = estimator.mode_covariance(i);
     settle_covariance_[k] = estimator.mode_covariance_given_others(i);
+    sampling_covariance_[k] = estimator.mode_sampling_covariance(i);
   }
   for (std::size_t k = 0; k < value_.size(); ++k) {
     const auto at = static_cast<Eigen::Index>(3 * k);
@@ -39,7 +41,8 @@ void DetectorInput::read(const RecursiveEstimator& estimator) {
 }
 
 void DetectorInput::update(FaultDetector& detector, double t, bool valid, std::vector<FlagChange>& changes) {
-  detector.update(t, value_, covariance_, valid, changes, evidence_span_, &settle_covariance_, &joint_);
+  detector.update(t, value_, covariance_, valid, changes, evidence_span_, &settle_covariance_, &joint_,
+                  &sampling_covariance_);
   if (valid) evidence_span_ = 0.0;
 }
 

@@ -410,9 +410,10 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
 void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
                            const std::vector<Eigen::Matrix3d>& covariance, bool valid, std::vector<FlagChange>& changes,
                            double evidence_span, const std::vector<Eigen::Matrix3d>* settle_covariance,
-                           const Eigen::MatrixXd* joint) {
+                           const Eigen::MatrixXd* joint, const std::vector<Eigen::Matrix3d>* sampling_covariance) {
   const std::size_t n = modes_.size();
-  if (value.size() != n || covariance.size() != n || (settle_covariance && settle_covariance->size() != n))
+  if (value.size() != n || covariance.size() != n || (settle_covariance && settle_covariance->size() != n) ||
+      (sampling_covariance && sampling_covariance->size() != n))
     throw std::invalid_argument("FaultDetector::update: estimates for a different number of modes");
   const bool t_ok = std::isfinite(t);
   const double span = std::isfinite(evidence_span) && evidence_span > 0.0 ? evidence_span : 0.0;
@@ -456,6 +457,24 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
     const Eigen::LLT<Eigen::Matrix3d> llt(S);
     m.chi_square = S.allFinite() && llt.info() == Eigen::Success ? d.dot(llt.solve(d)) : 0.0;
     const bool chi_real = m.chi_square > h;
+    // The named mode's own deviation against the estimate's sampling
+    // fluctuation and the baseline's share of it: a learned baseline averages
+    // window / (2 memory) independent samples of it, a configured one keeps
+    // its own covariance.
+    Eigen::Matrix3d S_sampling = Eigen::Matrix3d::Zero();
+    bool sampling_valid = false, sampling_real = false;
+    if (named && sampling_covariance) {
+      const Eigen::Matrix3d& f = (*sampling_covariance)[i];
+      const double samples = std::max(1.0, settings_.learn_window / (2.0 * memory_[i]));
+      S_sampling = f + (m.baseline.learned ? Eigen::Matrix3d(f / samples) : c0);
+      const Eigen::LLT<Eigen::Matrix3d> sampling_llt(S_sampling);
+      sampling_valid = S_sampling.allFinite() && sampling_llt.info() == Eigen::Success;
+      if (sampling_valid) {
+        const double chi = own.dot(sampling_llt.solve(own));
+        sampling_real = chi > h;
+        m.chi_square = std::max(m.chi_square, chi);
+      }
+    }
 
     for (int q = 0; q < kQuantities; ++q) {
       const FaultThresholds& th = settings_.thresholds[q];
@@ -465,6 +484,8 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
       const bool sigma_ok = std::isfinite(S(q, q)) && S(q, q) > 0.0;
       const bool rel_ok = x0(q) != 0.0;
       s.deviation_sigma = sigma_ok ? d(q) / std::sqrt(S(q, q)) : 0.0;
+      const bool sampling_ok = sampling_valid && S_sampling(q, q) > 0.0;
+      const double sampling_sigma = sampling_ok ? own(q) / std::sqrt(S_sampling(q, q)) : 0.0;
       s.deviation_relative = rel_ok ? own(q) / std::abs(x0(q)) : 0.0;
       double& z_prev = previous_[i][q];
       if (std::isfinite(c(q, q)) && c(q, q) > 0.0) {
@@ -484,11 +505,15 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
       const bool cusum_real = (g[2 * q] > b && own(q) > 0.0) || (g[2 * q + 1] > b && own(q) < 0.0);
 
       const double ds = std::abs(s.deviation_sigma), dr = std::abs(s.deviation_relative);
+      const double dss = std::abs(sampling_sigma);
       const bool real = (chi_real && sigma_ok && ds > th.sigma_threshold) || cusum_real;
       const bool same_side = (d(q) > 0.0) == (own(q) > 0.0);
-      const bool past = real && same_side && rel_ok && dr > th.relative_threshold;
-      const bool in_band = sigma_ok && rel_ok && same_side && ds > th.clear_fraction * th.sigma_threshold &&
-                           dr > th.clear_fraction * th.relative_threshold;
+      const bool sampling_past = sampling_real && dss > th.sigma_threshold;
+      const bool past = ((real && same_side) || sampling_past) && rel_ok && dr > th.relative_threshold;
+      const bool in_band = rel_ok && dr > th.clear_fraction * th.relative_threshold &&
+                           ((sigma_ok && same_side && ds > th.clear_fraction * th.sigma_threshold) ||
+                            dss > th.clear_fraction * th.sigma_threshold);
+      if (dss > ds) s.deviation_sigma = sampling_sigma;  // the test that sees the change better
 
       // Beyond the relative threshold on one side since (mode clock).
       double& beyond = beyond_since_[i][q];
