@@ -461,16 +461,14 @@ class RecursiveEstimator {
   // after it, the value from before. No allocation.
   Eigen::Matrix3d mode_cross_covariance(int i, int j) const noexcept;
   // What a test for a change of the estimate needs: the covariance of its own
-  // sampling fluctuation, sigma^2 (J + R)^-1 J (J + R)^-1 (block (i, i), and
-  // (i, j) for the second), mapped as mode_covariance() maps its block. It
-  // leaves out the prior R's share of mode_covariance(), the uncertainty about
-  // where the plant lies along a direction the data leave open: along it the
-  // estimate does not move, so what moves it there is a change of the plant.
-  // Equal to mode_covariance() and mode_cross_covariance() (the fallback)
+  // sampling fluctuation, sigma^2 ((J + R)^-1 J (J + R)^-1)_ii, mapped as
+  // mode_covariance() maps its block. It leaves out the prior R's share of
+  // mode_covariance(), the uncertainty about where the plant lies along a
+  // direction the data leave open: along it the estimate does not move, so
+  // what moves it there is a change of the plant. Equal to mode_covariance()
   // with one submodel, and from a change boost or a restore until the joint
   // information holds a memory again and is solved. No allocation.
   Eigen::Matrix3d mode_sampling_covariance(int i) const noexcept;
-  Eigen::Matrix3d mode_cross_sampling_covariance(int i, int j) const noexcept;
   // Covariance of theta_i (physical units), sigma^2 (P_i + C_i).
   Eigen::MatrixXd covariance(int i) const;
   double residual_rms() const noexcept;  // output error over the residual window

@@ -174,6 +174,9 @@ struct Block {
   ThetaVec phi, psi;
   // What not knowing the other blocks adds to P (normalised): JointInformation's C_i.
   ThetaMat cross;
+  // The estimate's sampling covariance (normalised, over sigma^2): block (i, i)
+  // of JointInformation's (J + R)^-1 J (J + R)^-1, while JointInformation::current().
+  ThetaMat sampling;
   // The output error's correlation with this block's instrument over e_short's
   // window, and the instrument's own (upper triangle): the score test's sums,
   // which blocks a change of the output error belongs to (boost_changed_blocks).

@@ -111,6 +111,7 @@ void RecursiveEstimator::Impl::build(const AdditiveModel& model, const std::vect
     b.score = ThetaVec::Zero(b.nt);
     b.score_info = ThetaMat::Zero(b.nt, b.nt);
     b.cross = ThetaMat::Zero(b.nt, b.nt);
+    b.sampling = ThetaMat::Zero(b.nt, b.nt);
     blocks.push_back(std::move(b));
   }
   snapshot.resize(blocks.size());
@@ -457,19 +458,7 @@ Eigen::Matrix3d RecursiveEstimator::mode_sampling_covariance(int i) const noexce
   const Impl& m = *impl_;
   if (m.blocks.empty() || !m.joint.current()) return mode_covariance(i);
   const Block& b = m.blocks[static_cast<std::size_t>(i)];
-  const int o = m.joint.offset(static_cast<std::size_t>(i));
-  const Eigen::Matrix3d c =
-      modal_block(b, b, m.e_var, [&](int r, int k) { return m.joint.fluctuation()(o + r, o + k); });
-  return 0.5 * (c + c.transpose());
-}
-
-Eigen::Matrix3d RecursiveEstimator::mode_cross_sampling_covariance(int i, int j) const noexcept {
-  const Impl& m = *impl_;
-  if (m.blocks.empty() || i == j || !m.joint.current()) return mode_cross_covariance(i, j);
-  const Block& bi = m.blocks[static_cast<std::size_t>(i)];
-  const Block& bj = m.blocks[static_cast<std::size_t>(j)];
-  const int oi = m.joint.offset(static_cast<std::size_t>(i)), oj = m.joint.offset(static_cast<std::size_t>(j));
-  return modal_block(bi, bj, m.e_var, [&](int r, int k) { return m.joint.fluctuation()(oi + r, oj + k); });
+  return modal_covariance_of(b, b.sampling, m.e_var);
 }
 
 Eigen::MatrixXd RecursiveEstimator::covariance(int i) const {

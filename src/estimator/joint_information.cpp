@@ -22,7 +22,6 @@ void JointInformation::resize(const std::vector<Block>& blocks) {
   A_.resize(n_, n_);
   own_.resize(n_, n_);
   inverse_.setZero(n_, n_);
-  fluctuation_.setZero(n_, n_);
   prior_.setZero(n_);
   solved_ = current_ = false;
   clear();
@@ -154,27 +153,22 @@ void JointInformation::solve(std::vector<Block>& blocks, double noise_variance) 
   if (!inverse_cholesky_factor(A_.data(), n_)) return;  // not positive definite: C_i keep their last values
   inverse_block(A_.data(), n_, 0, n_, inverse_);
   solved_ = inverse_.allFinite();
-  // (J + R)^-1 J (J + R)^-1 as two products (A_, factored, is free now), not
-  // as (J + R)^-1 minus R's share: along an open direction the two terms
-  // nearly cancel.
-  for (int q = 0; q < n_; ++q)
-    for (int r = 0; r < n_; ++r) {
-      double sum = 0.0;
-      for (int k = 0; k < n_; ++k) sum += inverse_(r, k) * (own_(k, q) - (k == q ? prior_(q) : 0.0));
-      A_(r, q) = sum;
-    }
-  for (int q = 0; q < n_; ++q)
-    for (int r = q; r < n_; ++r) {
-      double sum = 0.0;
-      for (int k = 0; k < n_; ++k) sum += A_(r, k) * inverse_(k, q);
-      fluctuation_(r, q) = fluctuation_(q, r) = sum;
-    }
-  current_ = solved_ && fluctuation_.allFinite();
+  bool current = solved_;
   for (std::size_t i = 0; i < blocks.size(); ++i) {
     Block& b = blocks[i];
     const int o = offset_[i], nt = b.nt;
     ThetaMat own(nt, nt), own_inv(nt, nt);
     const ThetaMat joint_inv = inverse_.block(o, o, nt, nt);
+    // ((J + R)^-1 J (J + R)^-1)_ii, R diagonal.
+    ThetaMat f(nt, nt);
+    for (int q = 0; q < nt; ++q)
+      for (int r = 0; r <= q; ++r) {
+        double prior_part = 0.0;
+        for (int k = 0; k < n_; ++k) prior_part += inverse_(o + r, k) * prior_(k) * inverse_(k, o + q);
+        f(r, q) = f(q, r) = joint_inv(r, q) - prior_part;
+      }
+    b.sampling = f;
+    current = current && f.allFinite();
     own = own_.block(o, o, nt, nt);
     if (!inverse_cholesky_factor(own.data(), nt)) continue;
     inverse_block(own.data(), nt, 0, nt, own_inv);
@@ -185,6 +179,7 @@ void JointInformation::solve(std::vector<Block>& blocks, double noise_variance) 
     else
       b.cross.setZero();
   }
+  current_ = current;
 }
 
 }  // namespace modalwatch::detail

@@ -17,7 +17,9 @@
 // forgetting lets an estimate wander there), what not knowing the others adds
 // to block i's covariance is the Schur complement's difference
 //   C_i = ((J + R)^-1)_ii - ((J + R)_ii)^-1,
-// positive semi-definite. The estimator reports sigma^2 (P_i + C_i). P_i
+// positive semi-definite. The estimator reports sigma^2 (P_i + C_i). A test
+// for a change takes the estimate's sampling covariance instead, without R's
+// share: ((J + R)^-1 J (J + R)^-1)_ii = ((J + R)^-1 - (J + R)^-1 R (J + R)^-1)_ii. P_i
 // itself never takes C_i: the recursion must stay block-coordinate, or each
 // block answers for its neighbours' share too and the two run apart along the
 // shared direction (warmup_fit.cpp).
@@ -72,13 +74,9 @@ class JointInformation {
   // solved() is false before the first solve and after a load.
   bool solved() const { return solved_; }
   const Eigen::MatrixXd& inverse() const { return inverse_; }
-  // (J + R)^-1 J (J + R)^-1 of the last solve (normalised, over sigma^2): the
-  // covariance of the estimate's own sampling fluctuation. It leaves out R's
-  // share of inverse(), the uncertainty about where the plant lies along
-  // directions the data leave open, along which the estimate does not move.
-  // current() is true from a solve until J is emptied or returned to the last
-  // good state: only then do the blocks' P_i stand where J says.
-  const Eigen::MatrixXd& fluctuation() const { return fluctuation_; }
+  // True from a solve until J is emptied or returned to the last good state:
+  // only then do the blocks' P_i stand where J says, and Block::sampling hold
+  // the estimate's sampling covariance.
   bool current() const { return current_; }
   int offset(std::size_t block) const { return offset_[block]; }
 
@@ -112,7 +110,7 @@ class JointInformation {
   Eigen::VectorXd inv_w_good_;
   std::uint64_t updates_good_ = 0;
   // The solve's workspace (no allocation once sized), and its result.
-  Eigen::MatrixXd A_, own_, inverse_, fluctuation_;
+  Eigen::MatrixXd A_, own_, inverse_;
   Eigen::VectorXd prior_;  // R's diagonal
   bool solved_ = false, current_ = false;
 };
