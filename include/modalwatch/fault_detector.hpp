@@ -46,6 +46,7 @@
 // twice the stated rate, before the hold.
 //
 // A plain class: no I/O, no threads, no allocation in update().
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <optional>
@@ -238,6 +239,9 @@ class FaultDetector {
   void learn(std::size_t i, double now, const Eigen::Vector3d& x, const Eigen::Matrix3d& c,
              const Eigen::Matrix3d& settle_c);
   void restart_learning(std::size_t i, LearnHold why);
+  // Independent samples of mode i's estimate over `span` (mode clock): the
+  // integral of its AR(1) correlation exp(-|t|/tau) is 2 tau. At least one.
+  double independent_samples(std::size_t i, double span) const { return std::max(1.0, span / (2.0 * memory_[i])); }
   // Of the testing modes that `joint` correlates, the one whose change alone
   // explains their deviations best (named_), with its deviation and S given
   // the others.

@@ -292,7 +292,7 @@ void FaultDetector::learn(std::size_t i, double now, const Eigen::Vector3d& x, c
   if (l.count_first > 0 && l.count > l.count_first) {
     const Eigen::Vector3d first = l.sum_first / static_cast<double>(l.count_first);
     const Eigen::Vector3d second = (l.sum - l.sum_first) / static_cast<double>(l.count - l.count_first);
-    const double half_samples = std::max(1.0, 0.5 * window / (2.0 * memory_[i]));
+    const double half_samples = independent_samples(i, 0.5 * window);
     for (int q = 0; q < kQuantities; ++q) {
       const double change = std::abs(second(q) - first(q));
       const double noise = kChangeSigmas * std::sqrt(2.0 * mean_covariance(q, q) / half_samples);
@@ -303,7 +303,7 @@ void FaultDetector::learn(std::size_t i, double now, const Eigen::Vector3d& x, c
       }
     }
   }
-  const double samples = std::max(1.0, window / (2.0 * memory_[i]));
+  const double samples = independent_samples(i, window);
   m.baseline.value = params(mean);
   set_covariance(m.baseline, mean_covariance / samples);
   m.baseline.learned = true;
@@ -465,7 +465,7 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
     bool sampling_valid = false, sampling_real = false;
     if (named && sampling_covariance) {
       const Eigen::Matrix3d& f = (*sampling_covariance)[i];
-      const double samples = std::max(1.0, settings_.learn_window / (2.0 * memory_[i]));
+      const double samples = independent_samples(i, settings_.learn_window);
       S_sampling = f + (m.baseline.learned ? Eigen::Matrix3d(f / samples) : c0);
       const Eigen::LLT<Eigen::Matrix3d> sampling_llt(S_sampling);
       sampling_valid = S_sampling.allFinite() && sampling_llt.info() == Eigen::Success;
