@@ -822,6 +822,37 @@ TEST(FaultDetector, TheNamedModeIsTestedAgainstItsSamplingFluctuationAndItsNeigh
   EXPECT_NEAR(with.status()[0].quantity[2].deviation_sigma, 0.12 / 0.11, 1e-9);
 }
 
+TEST(FaultDetector, ANeighbourMovingAlongItsTradeWithTheNamedModeIsNotReadAhead) {
+  // Mode 2's gain falls 20 % and the estimate follows with its memory's lag;
+  // mode 1's gain, which trades with mode 2's (rho -0.9, std 1 % each), follows
+  // the trade toward +12 % and stops at +8.9 % (the estimator holds it while
+  // mode 2 re-converges), under the 10 % threshold. Read ahead, its climb
+  // points past 10 % for longer than the hold: alone, mode 1 is flagged. Beside
+  // the named mode 2 it keeps its own deviation: only mode 2 is flagged.
+  const std::vector<ModalParameters> baseline = {{60.0, 0.05, 1.0}, {150.0, 0.03, 1.0}};
+  const Eigen::MatrixXd joint = two_modes_joint(0.01, -0.9);
+  const std::vector<Eigen::Matrix3d> cov = {joint.block<3, 3>(0, 0), joint.block<3, 3>(3, 3)};
+  FaultDetectorSettings st = configured(baseline);
+  st.thresholds[static_cast<int>(Quantity::gain)].relative_threshold = 0.1;
+  FaultDetector alone(st), given(st);
+  std::vector<FlagChange> changes;
+  changes.reserve(6);
+  double largest = 0.0;
+  for (long k = 0; k < std::lround(20.0 / kPeriod); ++k) {
+    const double t = static_cast<double>(k) * kPeriod, since = std::max(0.0, t - 2.0);
+    const double lag = 1.0 - std::exp(-since / kDefaultMemoryTime);
+    std::vector<ModalParameters> value = baseline;
+    value[0].gain = 1.0 + std::min(0.089, 0.12 * lag);
+    value[1].gain = 1.0 - 0.2 * lag;
+    largest = std::max(largest, value[0].gain - 1.0);
+    alone.update(t, value, cov, true, changes);
+    given.update(t, value, cov, true, changes, 0.0, nullptr, &joint);
+  }
+  EXPECT_NEAR(largest, 0.089, 1e-12);
+  EXPECT_EQ(alone.flag_bits(), kGainBit(0) | kGainBit(1));
+  EXPECT_EQ(given.flag_bits(), kGainBit(1));
+}
+
 TEST(FaultDetector, ModesThatAreNotCorrelatedAreTestedAsOnTheirOwn) {
   // A drift of every quantity of mode 1 and noise on mode 2, with a joint
   // covariance that is block diagonal: every status the same to the last bit.

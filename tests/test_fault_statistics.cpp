@@ -5,7 +5,9 @@
 // defaults; steps and ramps are flagged within a stated delay; a slow drift the
 // chi-square misses is caught by the CUSUM; a settling estimate does not become
 // the baseline; a baseline's own uncertainty widens the test.
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <random>
 #include <vector>
@@ -241,6 +243,74 @@ TEST(FaultStatistics, ARampIsFlaggedBeforeTheTruthIsTwiceTheThresholdOffPlusTheH
   EXPECT_GT(t_flag - t0, th.relative_threshold / rate * 0.8) << "not while the change is still well inside 5 %";
   ASSERT_EQ(r.log.size(), 1u);
   EXPECT_EQ(r.log[0].quantity, Quantity::wn);
+}
+
+// Where the estimate's std is small beside the relative threshold (0.1 %
+// against 5 %), the threshold decides, and the estimate crosses it with its
+// memory's lag behind the truth, 0.6 memory or more. The relative test reads
+// the estimate with that lag undone down to a fifth of a memory: over steps
+// and ramps (over 1 and 5 memories, the bank's range) of twice the threshold,
+// the flag comes within the hold and 0.3 memory of the truth's crossing in
+// the median and 0.5 memory at most.
+TEST(FaultStatistics, WhereTheRelativeThresholdDecidesTheFlagFollowsTheTruthNotTheEstimatesLag) {
+  const FaultThresholds th;
+  const double twice = 2.0 * th.relative_threshold;
+  std::vector<double> beyond_hold;  // memories
+  for (Quantity q : {Quantity::wn, Quantity::gain})
+    for (const double ramp : {0.0, 1.0, 5.0})  // memories
+      for (std::uint64_t seed : {31u, 32u, 33u}) {
+        const double sign = q == Quantity::wn ? -1.0 : 1.0;
+        Feed r(configured({kTruth[0]}), {Estimates(kTruth[0], covariance(kTruth[0], 0.001), seed)});
+        for (int j = 0; j < 600; ++j) r.step(kTruth);
+        ASSERT_TRUE(r.log.empty());
+        const double t0 = r.t(), span = ramp * kMemory;
+        // The truth crosses the threshold halfway along the ramp.
+        const double t_cross = t0 + 0.5 * span;
+        double t_flag = NAN, t_estimate = NAN;
+        for (int j = 0; j < 1200 && std::isnan(t_flag); ++j) {
+          const double now = r.t();
+          const double share = span > 0.0 ? std::clamp((now - t0) / span, 0.0, 1.0) : 1.0;
+          r.step({with(kTruth[0], q, 1.0 + sign * twice * share)});
+          if (std::isnan(t_estimate) && std::abs(r.q(0, q).deviation_relative) > th.relative_threshold)
+            t_estimate = now;
+          if (r.q(0, q).flagged) t_flag = now;
+        }
+        const char* name = q == Quantity::wn ? "wn" : "gain";
+        ASSERT_FALSE(std::isnan(t_flag)) << name << " " << ramp;
+        beyond_hold.push_back((t_flag - th.hold_time - t_cross) / kMemory);
+        std::printf(
+            "  %s, ramp over %g memories, seed %d: flagged %.2f memory after the truth crossed and the"
+            " hold, the estimate crossed %.2f after the truth\n",
+            name, ramp, static_cast<int>(seed), beyond_hold.back(), (t_estimate - t_cross) / kMemory);
+        EXPECT_LE(beyond_hold.back(), 0.5 + 1e-9) << name << " " << ramp << " " << seed;
+        EXPECT_GE(t_estimate - t_cross, 0.6 * kMemory) << name << " " << ramp << " " << seed;
+        ASSERT_EQ(r.log.size(), 1u);
+        EXPECT_EQ(r.log[0].quantity, q);
+      }
+  std::sort(beyond_hold.begin(), beyond_hold.end());
+  const double median = 0.5 * (beyond_hold[beyond_hold.size() / 2 - 1] + beyond_hold[beyond_hold.size() / 2]);
+  std::printf("  median %.2f memory after the truth crossed and the hold\n", median);
+  EXPECT_LE(median, 0.3);
+}
+
+// The lag undone, nothing overshoots: a step of 0.8 times the threshold in any
+// quantity stays unflagged, over 20 streams of two minutes each.
+TEST(FaultStatistics, AStepUnderTheRelativeThresholdIsNotFlaggedWithTheLagUndone) {
+  const FaultThresholds th;
+  for (Quantity q : {Quantity::wn, Quantity::zeta, Quantity::gain})
+    for (std::uint64_t seed = 40; seed < 60; ++seed) {
+      const double sign = seed % 2 == 0 ? 1.0 : -1.0;
+      Feed r(configured({kTruth[0]}), {Estimates(kTruth[0], covariance(kTruth[0], 0.002), seed)});
+      for (int j = 0; j < 600; ++j) r.step(kTruth);
+      const ModalParameters changed = with(kTruth[0], q, 1.0 + sign * 0.8 * th.relative_threshold);
+      double largest = 0.0;
+      for (int j = 0; j < 1200; ++j) {
+        r.step({changed});
+        largest = std::max(largest, std::abs(r.q(0, q).deviation_relative));
+      }
+      EXPECT_TRUE(r.log.empty()) << "quantity " << static_cast<int>(q) << ", seed " << seed;
+      EXPECT_GT(largest, 0.75 * th.relative_threshold) << "the estimate did follow the step";
+    }
 }
 
 TEST(FaultStatistics, ASlowDriftTheChiSquareMissesIsCaughtByTheCusum) {

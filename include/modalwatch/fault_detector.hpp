@@ -8,8 +8,18 @@
 // T2 > h and |d_q| > sigma_threshold sqrt(S_qq), or G_q > b on d_q's side, say the
 // change is real; h and b follow from the mean time between false alarms for a
 // stationary estimate (errors AR(1) over the estimator's memory tau). Quantity q
-// is past when that holds AND |d_q| / |x0_q| > relative_threshold (the size of
+// is past when that holds AND |r_q| / |x0_q| > relative_threshold (the size of
 // change that matters); a flag rises after hold_time past and falls with hysteresis.
+// The estimate follows a change of the plant with the first-order lag of its
+// forgetting (eq. 13), time constant tau: compared with the threshold as it is,
+// a change passes it a memory after the truth. The relative test reads
+//   r = x~ - x0 where it lies further out on d's side (else d),
+//   x~ = (1 + tau p) / (1 + tau p / 5) x,
+// the lag undone and a fifth of it put back: a step or a ramp passes the
+// threshold 0.14 to 0.2 tau after the truth instead of 0.7 to 1 tau, at
+// sqrt(5) times the estimate's scatter (the sigma tests stay on d). Not for
+// a mode whose estimate trades with the named mode's (below): a change of
+// that mode moves it along the trade, and it stops short.
 // The hold asks the deviation to persist: where it stood past the relative
 // threshold on one side before the tests called it real, it counts from then.
 // An estimate fitted on a window (a warm-up fit, a refit after a divergence)
@@ -137,7 +147,7 @@ struct QuantityStatus {
   // (x - x0) / sqrt(S_qq); while the mode is named, d_k / sqrt(S_k,qq) or, where
   // larger, (x - x0) / sqrt((F + F0)_qq)
   double deviation_sigma = 0.0;
-  double deviation_relative = 0.0;  // (x - x0) / |x0|
+  double deviation_relative = 0.0;  // (x - x0) / |x0| (the relative test takes r_q / |x0_q|, above)
   double cusum = 0.0;               // the larger one-sided CUSUM, in units of its threshold b
   double since = 0.0;               // time the flag rose (or the condition began, when pending)
   bool pending = false;             // past the thresholds, hold time not yet elapsed
@@ -254,6 +264,7 @@ class FaultDetector {
   std::vector<Learning> learning_;
   std::vector<std::array<double, 2 * kQuantities>> cusum_;    // G+ and G- per quantity
   std::vector<std::array<double, kQuantities>> previous_;     // z_q of the last valid update
+  std::vector<Eigen::Vector3d> trend_;                        // x low-passed over memory / kLeadRatio
   std::vector<std::array<double, kQuantities>> below_since_;  // hold / clear timers
   std::vector<std::array<double, kQuantities>> beyond_since_;  // past the relative threshold since (NaN: not)
   std::vector<std::array<bool, kQuantities>> beyond_up_;       // ... on the upper side

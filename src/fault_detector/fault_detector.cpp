@@ -68,6 +68,10 @@ constexpr double kChiShare = 0.5;
 constexpr double kCusumShare = 0.5 / (2 * kQuantities);
 constexpr double kBaselineBand = 3.0;  // std of the baseline the CUSUMs ignore
 constexpr double kChangeSigmas = 3.0;  // a half-window change within this many std is noise
+// The relative tests read the estimate as one of a memory this many times
+// shorter would give it (the header): a ramp's lag 0.2 memory instead of
+// one, at sqrt(5) times the estimate's own scatter.
+constexpr double kLeadRatio = 5.0;
 
 const char* quantity_name(int q) {
   static constexpr const char* names[kQuantities] = {"wn", "zeta", "gain"};
@@ -206,6 +210,7 @@ FaultDetector::FaultDetector(FaultDetectorSettings settings) : settings_(std::mo
   learning_.assign(n, Learning{});
   cusum_.assign(n, {});
   previous_.assign(n, {kNaN, kNaN, kNaN});
+  trend_.assign(n, Eigen::Vector3d::Constant(kNaN));
   below_since_.assign(n, {kNaN, kNaN, kNaN});
   beyond_since_.assign(n, {kNaN, kNaN, kNaN});
   beyond_up_.assign(n, {});
@@ -427,6 +432,7 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
     if (!mode_valid) {
       last_valid_[i] = 0;                 // the interval up to the next valid update does not count
       previous_[i] = {kNaN, kNaN, kNaN};  // nor does the innovation across it
+      trend_[i].setConstant(kNaN);        // nor the slope
       continue;
     }
     const double dt = last_valid_[i] && t > last_t_ ? t - last_t_ : 0.0;
@@ -436,6 +442,16 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
     ModeStatus& m = modes_[i];
     const Eigen::Vector3d x = vec(value[i]);
     const Eigen::Matrix3d& c = covariance[i];
+    // (1 + tau p) / (1 + tau p / r) x = x + (r - 1) (x - trend), trend = x
+    // through 1 / (1 + tau p / r): the estimate with its memory's lag undone
+    // and a lag of tau / r put back. An estimate fitted on a window, or the
+    // first after an invalid spell, has no lag to undo.
+    Eigen::Vector3d& trend = trend_[i];
+    if (dt > 0.0 && span == 0.0 && trend.allFinite())
+      trend += -std::expm1(-dt * kLeadRatio / memory_[i]) * (x - trend);
+    else
+      trend = x;
+    const Eigen::Vector3d x_lead = x + (kLeadRatio - 1.0) * (x - trend);
 
     if (m.state == BaselineState::learning) {
       learn(i, now, x, c, settle_covariance ? (*settle_covariance)[i] : c);
@@ -443,11 +459,24 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
     }
 
     const Eigen::Vector3d x0 = vec(m.baseline.value);
-    const Eigen::Vector3d own = x - x0;  // the estimate's own deviation: the relative tests'
+    const Eigen::Vector3d own = x - x0;  // the estimate's own deviation
     const Eigen::Matrix3d c0 = m.baseline.covariance_matrix();
     // The mode a change of which explains the modes' deviations best is
     // tested given the others (name_the_changed_mode).
     const bool named = named_ == static_cast<int>(i);
+    // The relative tests': the lag-free deviation where it says more on the
+    // same side, else the estimate's own (a lead that points back says nothing
+    // about where the plant is, only that the estimate is moving). Not for a
+    // mode whose estimate trades with the named one's: it moves along that
+    // trade while the named mode's change settles, and stops short.
+    Eigen::Vector3d tested = own;
+    const bool trades_with_named =
+        named_ >= 0 && !named && joint &&
+        !joint->block<3, 3>(kQuantities * static_cast<Eigen::Index>(i), kQuantities * Eigen::Index{named_}).isZero(0.0);
+    for (int q = 0; q < kQuantities && !trades_with_named; ++q) {
+      const double lead = x_lead(q) - x0(q);
+      if (lead * own(q) > 0.0 && std::abs(lead) > std::abs(own(q))) tested(q) = lead;
+    }
     const Eigen::Vector3d d = named ? named_d_ : own;
     const Eigen::Matrix3d S = named ? named_S_ : Eigen::Matrix3d(c + c0);
     // The AR(1) coefficient and CUSUM reference over this update's interval.
@@ -487,6 +516,7 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
       const bool sampling_ok = sampling_valid && S_sampling(q, q) > 0.0;
       const double sampling_sigma = sampling_ok ? own(q) / std::sqrt(S_sampling(q, q)) : 0.0;
       s.deviation_relative = rel_ok ? own(q) / std::abs(x0(q)) : 0.0;
+      const double tested_relative = rel_ok ? tested(q) / std::abs(x0(q)) : 0.0;
       double& z_prev = previous_[i][q];
       if (std::isfinite(c(q, q)) && c(q, q) > 0.0) {
         const double band = kBaselineBand * std::sqrt(std::max(0.0, c0(q, q)));
@@ -504,7 +534,7 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
       s.cusum = std::max(g[2 * q], g[2 * q + 1]) / b;
       const bool cusum_real = (g[2 * q] > b && own(q) > 0.0) || (g[2 * q + 1] > b && own(q) < 0.0);
 
-      const double ds = std::abs(s.deviation_sigma), dr = std::abs(s.deviation_relative);
+      const double ds = std::abs(s.deviation_sigma), dr = std::abs(tested_relative);
       const double dss = std::abs(sampling_sigma);
       const bool real = (chi_real && sigma_ok && ds > th.sigma_threshold) || cusum_real;
       const bool same_side = (d(q) > 0.0) == (own(q) > 0.0);
