@@ -363,6 +363,15 @@ TEST(FaultDetector, AFitsWindowCountsTowardTheHold) {
   EXPECT_DOUBLE_EQ(zeta.since, t_fit - 0.5 * hold);
   const double raised = part.run_until(hold, [&] { return zeta.flagged; });
   EXPECT_NEAR(raised - t_fit, 0.5 * hold, 1e-9);
+  // A condition already pending when the fit comes: the window counts all the same.
+  Stream pending(configured());
+  pending.run(5.0);
+  pending.value[2].zeta = 1.5 * kBaseline[2].zeta;
+  pending.run(0.2 * hold);
+  ASSERT_TRUE(pending.q(2, Quantity::zeta).pending);
+  const double t_refit = pending.t();
+  ASSERT_EQ(pending.step(true, hold).size(), 1u);
+  EXPECT_DOUBLE_EQ(pending.log.front().time, t_refit);
   // The span says nothing about a condition that is not there.
   Stream quiet(configured());
   quiet.run(5.0);

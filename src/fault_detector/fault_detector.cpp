@@ -564,13 +564,14 @@ void FaultDetector::update(double t, const std::vector<ModalParameters>& value,
           timer = kNaN;
           continue;
         }
-        if (!s.pending) {
-          // The hold asks the deviation to persist, not its significance: where
-          // the estimate's covariance was wide (it follows a change with its
-          // covariance boosted, or the joint information is rebuilt after one)
-          // and the deviation stood past the relative threshold on this side
-          // all along, the hold counts from then.
-          const double start = std::min(now - span, std::isnan(beyond) ? now : beyond);
+        // The hold asks the deviation to persist, not its significance: where
+        // the estimate's covariance was wide (it follows a change with its
+        // covariance boosted, or the joint information is rebuilt after one)
+        // and the deviation stood past the relative threshold on this side
+        // all along, the hold counts from then. A fit's window counts also
+        // where the condition was already pending.
+        const double start = std::min(now - span, std::isnan(beyond) ? now : beyond);
+        if (!s.pending || start < timer) {
           s.pending = true;
           s.since = t - (now - start);
           timer = start;
